@@ -1,0 +1,40 @@
+"""tether-gym: explicit dynamics of tethered-satellite clusters as reinforcement-learning environments.
+
+The physics follows the lumped-mass, tension-only cable model integrated by explicit central
+differences with an element-by-element critical-step estimate.  Main entry points:
+
+* :class:`Cluster`, :func:`make_cluster`, :func:`load_cluster`, :func:`save_cluster`: describe a
+  cluster, or take a named preset.
+* :class:`Simulator` (one cluster) and :class:`BatchSimulator` (B clusters, one core).
+* :mod:`tether_gym.analysis`: tangent stiffness and normal modes for verification and control
+  design.
+"""
+
+from tether_gym.cluster import Cluster, ClusterError, load_cluster, save_cluster
+from tether_gym.presets import PRESETS, make_cluster, preset_names
+from tether_gym.simulator import (
+    DEFAULT_SAFETY_FACTOR,
+    AdvanceStats,
+    BatchSimulator,
+    EnergyReport,
+    SimulationDiverged,
+    Simulator,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "DEFAULT_SAFETY_FACTOR",
+    "PRESETS",
+    "AdvanceStats",
+    "BatchSimulator",
+    "Cluster",
+    "ClusterError",
+    "EnergyReport",
+    "SimulationDiverged",
+    "Simulator",
+    "load_cluster",
+    "make_cluster",
+    "preset_names",
+    "save_cluster",
+]

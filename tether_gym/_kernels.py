@@ -1,0 +1,288 @@
+"""Compiled kernels of the physics core: the only place where the dynamics is written.
+
+Every kernel works on one cluster at a time and is driven over a batch by a serial or a
+parallel loop.  Clusters never share data inside a kernel, so a cluster integrated in a batch
+follows exactly the same floating-point operations as the same cluster integrated alone
+(bit-identical results, whatever the batch size or the number of threads).
+
+Conventions (SI units throughout):
+
+* ``x`` (n, 3) node positions in m; ``v`` (n, 3) velocities in m/s.
+* ``cables`` (m, 2) node indices; per cable ``stiffness = EA / L0`` in N/m, ``L0`` in m,
+  ``N0`` (pretension) in N, ``inv_split_mass_sum = 1/m_i^e + 1/m_j^e`` in 1/kg, where the node
+  masses are split equally among the cables meeting at the node (so that the element masses sum to
+  the assembled mass and the Irons-Treharne bound holds).
+* ``f_int`` (n, 3) is the restoring force of the equation of motion ``M a + C v + f_int = p``:
+  a taut cable contributes ``-N e`` at node i and ``+N e`` at node j, with ``e`` the unit vector
+  from i to j.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# Status codes of a cluster in a batch.
+STATUS_OK = 0
+STATUS_NON_FINITE = 1
+STATUS_TOO_MANY_SUBSTEPS = 2
+
+
+@njit(cache=True, nogil=True)
+def cable_forces(
+    x: np.ndarray,
+    reference: np.ndarray,
+    cables: np.ndarray,
+    stiffness: np.ndarray,
+    L0: np.ndarray,
+    N0: np.ndarray,
+    inv_split_mass_sum: np.ndarray,
+    linearised: bool,
+    taut_branch: bool,
+    f_int: np.ndarray,
+    tension: np.ndarray,
+) -> tuple[float, bool]:
+    """Restoring forces and cable tensions of one cluster, plus its largest element frequency.
+
+    Writes ``f_int`` (n, 3) in N and ``tension`` (m,) in N (0 for slack cables).  Returns
+    ``(omega2_max, finite)``: the largest squared element frequency in (rad/s)^2, taken on the taut
+    branch ``max(EA/L0, N_taut/L) * (1/m_i^e + 1/m_j^e)`` so that a slack cable that can snap taut
+    within the next step still limits the step; and whether every cable length was finite.
+
+    ``taut_branch=True`` drops the tension-only cut-off (``N`` may go negative): the smooth law
+    that the finite-difference critical-step estimate perturbs.
+    """
+    f_int[:, :] = 0.0
+    omega2_max = 0.0
+    length_sum = 0.0
+    for c in range(cables.shape[0]):
+        i = cables[c, 0]
+        j = cables[c, 1]
+        dx = x[j, 0] - x[i, 0]
+        dy = x[j, 1] - x[i, 1]
+        dz = x[j, 2] - x[i, 2]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        length_sum += length
+        ex = dx / length
+        ey = dy / length
+        ez = dz / length
+        if linearised:
+            # The paper's eq. (11): end displacements projected on the current direction.
+            elongation = (
+                (dx - (reference[j, 0] - reference[i, 0])) * ex
+                + (dy - (reference[j, 1] - reference[i, 1])) * ey
+                + (dz - (reference[j, 2] - reference[i, 2])) * ez
+            )
+        else:
+            elongation = length - L0[c]
+        n_taut = N0[c] + stiffness[c] * elongation
+        n_cable = n_taut if (n_taut > 0.0 or taut_branch) else 0.0
+        tension[c] = n_cable
+        geometric = n_cable / length
+        k_max = stiffness[c] if stiffness[c] >= geometric else geometric
+        omega2 = k_max * inv_split_mass_sum[c]
+        if omega2 > omega2_max:
+            omega2_max = omega2
+        if n_cable != 0.0:
+            fx = n_cable * ex
+            fy = n_cable * ey
+            fz = n_cable * ez
+            f_int[i, 0] -= fx
+            f_int[i, 1] -= fy
+            f_int[i, 2] -= fz
+            f_int[j, 0] += fx
+            f_int[j, 1] += fy
+            f_int[j, 2] += fz
+    return omega2_max, math.isfinite(length_sum)
+
+
+@njit(cache=True, nogil=True)
+def _advance_one(
+    b: int,
+    duration: float,
+    x: np.ndarray,
+    v_half: np.ndarray,
+    v_sync: np.ndarray,
+    f_int: np.ndarray,
+    tension: np.ndarray,
+    h_prev: np.ndarray,
+    omega2: np.ndarray,
+    force: np.ndarray,
+    masses: np.ndarray,
+    damping: np.ndarray,
+    cables: np.ndarray,
+    stiffness: np.ndarray,
+    L0: np.ndarray,
+    N0: np.ndarray,
+    inv_split_mass_sum: np.ndarray,
+    reference: np.ndarray,
+    linearised: bool,
+    safety_factor: float,
+    max_step: float,
+    max_substeps: int,
+    work: np.ndarray,
+    dissipated: np.ndarray,
+    substeps: np.ndarray,
+    step_min: np.ndarray,
+    step_max: np.ndarray,
+    status: np.ndarray,
+    step_record: np.ndarray,
+) -> None:
+    """Integrate cluster ``b`` over ``duration`` seconds with its external force held constant.
+
+    Central differences in half-step (leapfrog) form, valid for variable steps::
+
+        h_n        = (h_{n-1/2} + h_{n+1/2}) / 2
+        v_{n+1/2}  = [(M/h_n - C/2) v_{n-1/2} + p - f_int(u_n)] / (M/h_n + C/2)
+        u_{n+1}    = u_n + h_{n+1/2} v_{n+1/2}
+
+    which at constant step is the paper's three-level scheme (eqs. 7-9).  ``h_prev[b] == 0`` marks
+    a fresh state (just reset): ``v_half`` then holds the initial velocity and the first interval
+    assumes uniformly accelerated motion, ``v_{1/2} = v_0 + h/2 a_0`` (paper, section 2).
+
+    Each sub-step is ``min(safety_factor * 2 / omega_est, max_step)``, re-estimated at every
+    configuration, then shortened so that the rest of the interval splits into equal steps; the
+    interval ends exactly at ``duration``.
+    """
+    n_nodes = x.shape[1]
+    xb = x[b]
+    vb = v_half[b]
+    fb = f_int[b]
+    pb = force[b]
+    mb = masses[b]
+    cb = damping[b]
+    n_record = step_record.shape[1]
+    elapsed = 0.0
+    count = 0
+    h_lo = math.inf
+    h_hi = 0.0
+    work_b = work[b]
+    dissipated_b = dissipated[b]
+    h_last = h_prev[b]
+    while True:
+        if count >= max_substeps:
+            status[b] = STATUS_TOO_MANY_SUBSTEPS
+            break
+        h_stable = safety_factor * 2.0 / math.sqrt(omega2[b]) if omega2[b] > 0.0 else math.inf
+        if h_stable > max_step:
+            h_stable = max_step
+        remaining = duration - elapsed
+        # Spread what remains evenly over the fewest steps no longer than h_stable: equal steps
+        # within an interval, and no sliver step before its end.
+        steps_left = math.ceil(remaining / h_stable - 1e-9)
+        if steps_left <= 1:
+            h = remaining
+            last = True
+        else:
+            h = remaining / steps_left
+            last = False
+        if h_last == 0.0:
+            for i in range(n_nodes):
+                for d in range(3):
+                    acceleration = (pb[i, d] - fb[i, d] - cb[i] * vb[i, d]) / mb[i]
+                    vb[i, d] = vb[i, d] + 0.5 * h * acceleration
+        else:
+            h_mid = 0.5 * (h_last + h)
+            for i in range(n_nodes):
+                lhs = mb[i] / h_mid + 0.5 * cb[i]
+                rhs_factor = mb[i] / h_mid - 0.5 * cb[i]
+                for d in range(3):
+                    vb[i, d] = (rhs_factor * vb[i, d] + pb[i, d] - fb[i, d]) / lhs
+        for i in range(n_nodes):
+            speed2 = 0.0
+            for d in range(3):
+                dx = h * vb[i, d]
+                work_b += pb[i, d] * dx
+                speed2 += vb[i, d] * vb[i, d]
+                xb[i, d] += dx
+            dissipated_b += h * cb[i] * speed2
+        if count < n_record:
+            step_record[b, count] = h
+        count += 1
+        h_last = h
+        if h < h_lo:
+            h_lo = h
+        if h > h_hi:
+            h_hi = h
+        omega2[b], finite = cable_forces(
+            xb, reference[b], cables, stiffness[b], L0[b], N0[b], inv_split_mass_sum[b],
+            linearised, False, fb, tension[b],
+        )
+        if not finite:
+            status[b] = STATUS_NON_FINITE
+            break
+        if last:
+            break
+        elapsed += h
+    h_prev[b] = h_last
+    work[b] = work_b
+    dissipated[b] = dissipated_b
+    substeps[b] = count
+    step_min[b] = h_lo
+    step_max[b] = h_hi
+    # Velocity at the end of the interval, consistent with the force just applied:
+    # (M + h/2 C) v_n = M v_{n-1/2} + h/2 (p - f_int(u_n)).
+    half = 0.5 * h_last
+    for i in range(n_nodes):
+        denominator = mb[i] + half * cb[i]
+        for d in range(3):
+            v_sync[b, i, d] = (mb[i] * vb[i, d] + half * (pb[i, d] - fb[i, d])) / denominator
+
+
+@njit(cache=True, nogil=True)
+def advance_serial(
+    active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, masses, damping,
+    cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
+    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+):  # pragma: no cover - compiled
+    for b in range(x.shape[0]):
+        if active[b] and status[b] == STATUS_OK:
+            _advance_one(
+                b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, masses,
+                damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised,
+                safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
+                step_max, status, step_record,
+            )
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def advance_parallel(
+    active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, masses, damping,
+    cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
+    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+):  # pragma: no cover - compiled
+    for b in prange(x.shape[0]):
+        if active[b] and status[b] == STATUS_OK:
+            _advance_one(
+                b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, masses,
+                damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised,
+                safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
+                step_max, status, step_record,
+            )
+
+
+@njit(cache=True, nogil=True)
+def evaluate_batch(
+    x: np.ndarray,
+    reference: np.ndarray,
+    cables: np.ndarray,
+    stiffness: np.ndarray,
+    L0: np.ndarray,
+    N0: np.ndarray,
+    inv_split_mass_sum: np.ndarray,
+    linearised: bool,
+    taut_branch: bool,
+    f_int: np.ndarray,
+    tension: np.ndarray,
+    omega2: np.ndarray,
+    finite: np.ndarray,
+) -> None:
+    """``cable_forces`` for every cluster of a batch: fills f_int (B, n, 3), tension (B, m),
+    omega2 (B,) and finite (B,)."""
+    for b in range(x.shape[0]):
+        omega2[b], finite[b] = cable_forces(
+            x[b], reference[b], cables, stiffness[b], L0[b], N0[b], inv_split_mass_sum[b],
+            linearised, taut_branch, f_int[b], tension[b],
+        )

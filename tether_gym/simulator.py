@@ -1,0 +1,554 @@
+"""The physics core: explicit central-difference integration of tether clusters, batched.
+
+:class:`BatchSimulator` integrates B clusters of the same topology at once, arrays shaped
+``(B, n, 3)``; each cluster sub-steps at its own estimated critical step, and a cluster that
+diverges is frozen and flagged without disturbing the others.  :class:`Simulator` is the same core
+seen as a single cluster, with ``(n, 3)`` arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from tether_gym import _kernels
+from tether_gym.cluster import Cluster
+
+__all__ = [
+    "DEFAULT_SAFETY_FACTOR",
+    "AdvanceStats",
+    "BatchSimulator",
+    "EnergyReport",
+    "SimulationDiverged",
+    "Simulator",
+]
+
+#: Fraction of the estimated critical step ``2 / omega_max`` used as the sub-step.  Chosen from the
+#: measured energy drift of repeatedly slackening and snapping clusters
+#: (``python benchmarks/safety_factor.py``; see the README).
+DEFAULT_SAFETY_FACTOR = 0.2
+
+#: Batches at least this large are integrated by the multi-threaded kernel; smaller ones by the
+#: serial kernel, whose start-up cost is lower.  Both give bit-identical results.
+PARALLEL_MIN_BATCH = 16
+
+Elongation = Literal["exact", "linearised"]
+CriticalStepMethod = Literal["closed-form", "finite-difference"]
+
+
+class SimulationDiverged(FloatingPointError):
+    """The integration produced a non-finite state or needed too many sub-steps."""
+
+
+@dataclass(frozen=True)
+class AdvanceStats:
+    """What one :meth:`BatchSimulator.advance` call did, per cluster.
+
+    Attributes:
+        substeps: (B,) number of sub-steps taken (0 for inactive or frozen clusters).
+        step_min: (B,) smallest sub-step, s (inf where none was taken).
+        step_max: (B,) largest sub-step, s.
+        status: (B,) 0 ok, 1 non-finite state, 2 sub-step limit reached.
+        step_sizes: (B, R) the first R sub-step sizes, s, when ``record_steps=R`` was asked
+            (NaN-padded), else shape (B, 0).
+    """
+
+    substeps: np.ndarray
+    step_min: np.ndarray
+    step_max: np.ndarray
+    status: np.ndarray
+    step_sizes: np.ndarray
+
+    @property
+    def diverged(self) -> np.ndarray:
+        """(B,) bool: clusters whose integration failed."""
+        return self.status != _kernels.STATUS_OK
+
+
+@dataclass(frozen=True)
+class EnergyReport:
+    """Energy accounting since the last reset, J; arrays of shape (B,) (scalars for a Simulator).
+
+    ``residual = kinetic + strain - initial + dissipated - work`` is zero for the exact solution;
+    for the integrator it is O(h^2) and bounded.
+    """
+
+    kinetic: np.ndarray
+    strain: np.ndarray
+    dissipated: np.ndarray
+    work: np.ndarray
+    initial: np.ndarray
+    residual: np.ndarray
+
+    @property
+    def total(self) -> np.ndarray:
+        """Mechanical energy kinetic + strain, J."""
+        return self.kinetic + self.strain
+
+
+def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str) -> np.ndarray:
+    """A float64 C-contiguous copy of ``value`` with exactly ``shape`` and finite entries."""
+    try:
+        array = np.array(value, dtype=np.float64, order="C")
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a numeric array of shape {shape} in {unit}: {error}") from None
+    if array.shape != shape:
+        raise ValueError(f"{name} must have shape {shape} ({unit}); got shape {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} contains NaN or inf; every entry must be finite ({unit})")
+    return array
+
+
+def _check_duration(duration: float) -> float:
+    try:
+        value = float(duration)
+    except (TypeError, ValueError):
+        raise ValueError(f"duration must be a number of seconds; got {duration!r}") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"duration must be a finite number of seconds > 0; got {duration!r}")
+    return value
+
+
+class BatchSimulator:
+    """B tether clusters of one topology, integrated together by explicit central differences.
+
+    Args:
+        clusters: one :class:`Cluster` (replicated ``num_clusters`` times) or a sequence of clusters
+            sharing the same number of satellites and the same cable list (their masses, damping,
+            EA, L0, N0 may differ: domain randomisation).
+        num_clusters: B when a single cluster is given.
+        safety_factor: sub-step as a fraction of the estimated critical step ``2 / omega_max``;
+            in (0, 1].
+        elongation: ``"exact"`` (``|x_j - x_i| - L0``, default) or ``"linearised"`` (the paper's
+            eq. 11: end displacements from the cluster's positions projected on the current cable
+            direction; it strains cables under large rigid rotations).
+        max_step: an upper bound on the sub-step, s (default: none).
+        max_substeps: sub-steps allowed in one :meth:`advance` per cluster before the cluster is
+            flagged as diverged.
+
+    The state after construction is every cluster at rest at its nominal positions.
+    """
+
+    def __init__(
+        self,
+        clusters: Cluster | Sequence[Cluster],
+        num_clusters: int | None = None,
+        *,
+        safety_factor: float = DEFAULT_SAFETY_FACTOR,
+        elongation: Elongation = "exact",
+        max_step: float = math.inf,
+        max_substeps: int = 10_000_000,
+    ) -> None:
+        if isinstance(clusters, Cluster):
+            count = 1 if num_clusters is None else num_clusters
+            if not isinstance(count, (int, np.integer)) or count < 1:
+                raise ValueError(f"num_clusters must be a positive integer; got {num_clusters!r}")
+            cluster_list = [clusters] * int(count)
+        else:
+            cluster_list = list(clusters)
+            if not cluster_list or not all(isinstance(c, Cluster) for c in cluster_list):
+                raise TypeError("clusters must be a Cluster or a non-empty sequence of Cluster objects")
+            if num_clusters is not None and num_clusters != len(cluster_list):
+                raise ValueError(
+                    f"num_clusters={num_clusters} disagrees with the {len(cluster_list)} clusters given"
+                )
+        if not (0.0 < float(safety_factor) <= 1.0):
+            raise ValueError(
+                f"safety_factor must be in (0, 1] (a fraction of the critical step); got {safety_factor!r}"
+            )
+        if elongation not in ("exact", "linearised"):
+            raise ValueError(f"elongation must be 'exact' or 'linearised'; got {elongation!r}")
+        if not (float(max_step) > 0.0):
+            raise ValueError(f"max_step must be > 0 s; got {max_step!r}")
+        if int(max_substeps) < 1:
+            raise ValueError(f"max_substeps must be >= 1; got {max_substeps!r}")
+        self.safety_factor = float(safety_factor)
+        self.elongation: Elongation = elongation
+        self.max_step = float(max_step)
+        self.max_substeps = int(max_substeps)
+
+        template = cluster_list[0]
+        self.template = template
+        self.num_clusters = len(cluster_list)
+        self.num_nodes = template.num_nodes
+        self.num_cables = template.num_cables
+        self.cables = np.ascontiguousarray(template.cables)
+        B, n, m = self.num_clusters, self.num_nodes, self.num_cables
+        self.masses = np.empty((B, n))
+        self.damping = np.empty((B, n))
+        self.stiffness = np.empty((B, m))
+        self.L0 = np.empty((B, m))
+        self.N0 = np.empty((B, m))
+        self.inv_split_mass_sum = np.empty((B, m))
+        self.breaking_load = np.empty((B, m))
+        self.reference = np.empty((B, n, 3))
+        self.clusters: list[Cluster] = [template] * B
+        for b, cluster in enumerate(cluster_list):
+            self.set_cluster(b, cluster, reset=False)
+
+        self.positions_ = np.empty((B, n, 3))
+        self._v_half = np.zeros((B, n, 3))
+        self.velocities_ = np.zeros((B, n, 3))
+        self._f_int = np.zeros((B, n, 3))
+        self.tension = np.zeros((B, m))
+        self._h_prev = np.zeros(B)
+        self._omega2 = np.zeros(B)
+        self.time = np.zeros(B)
+        self._work = np.zeros(B)
+        self._dissipated = np.zeros(B)
+        self._energy0 = np.zeros(B)
+        self.status = np.zeros(B, dtype=np.int64)
+        self._all_active = np.ones(B, dtype=np.bool_)
+        self.reset(self.reference)
+
+    # ------------------------------------------------------------------ parameters
+    def set_cluster(self, index: int, cluster: Cluster, *, reset: bool = True) -> None:
+        """Give cluster ``index`` new physical parameters (same topology), e.g. for randomisation.
+
+        With ``reset=True`` (default) it is also put at rest at its nominal positions.
+        """
+        if cluster.num_nodes != self.num_nodes or not np.array_equal(cluster.cables, self.cables):
+            raise ValueError(
+                f"cluster {cluster.name!r} has a different topology ({cluster.num_nodes} satellites, "
+                f"{cluster.num_cables} cables) from the batch's ({self.num_nodes} satellites, "
+                f"{self.num_cables} cables, same cable list required)"
+            )
+        self.clusters[index] = cluster
+        self.masses[index] = cluster.masses
+        self.damping[index] = cluster.damping
+        self.stiffness[index] = cluster.stiffness
+        self.L0[index] = cluster.L0
+        self.N0[index] = cluster.N0
+        self.inv_split_mass_sum[index] = cluster.inv_split_mass_sum
+        self.breaking_load[index] = cluster.breaking_load
+        self.reference[index] = cluster.positions
+        if reset:
+            self.reset(cluster.positions[None], indices=[index])
+
+    # ------------------------------------------------------------------ state
+    @property
+    def positions(self) -> np.ndarray:
+        """(B, n, 3) current node positions, m (a read-only view)."""
+        view = self.positions_.view()
+        view.flags.writeable = False
+        return view
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(B, n, 3) node velocities at the current time, m/s (a read-only view)."""
+        view = self.velocities_.view()
+        view.flags.writeable = False
+        return view
+
+    @property
+    def slack(self) -> np.ndarray:
+        """(B, m) bool: cables carrying no tension at the current positions."""
+        return self.tension <= 0.0
+
+    def _indices(self, indices: Sequence[int] | np.ndarray | None) -> np.ndarray:
+        if indices is None:
+            return np.arange(self.num_clusters)
+        idx = np.asarray(indices)
+        if idx.dtype == np.bool_:
+            if idx.shape != (self.num_clusters,):
+                raise ValueError(f"a boolean index must have shape ({self.num_clusters},)")
+            return np.flatnonzero(idx)
+        if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer):
+            raise ValueError("indices must be a 1-D sequence of cluster indices")
+        if idx.size and (idx.min() < 0 or idx.max() >= self.num_clusters):
+            raise ValueError(f"cluster indices must be in 0..{self.num_clusters - 1}; got {idx.tolist()}")
+        return idx
+
+    def reset(
+        self,
+        positions: ArrayLike,
+        velocities: ArrayLike | None = None,
+        indices: Sequence[int] | np.ndarray | None = None,
+    ) -> None:
+        """Set the state of some clusters (all by default) and restart their energy accounting.
+
+        Args:
+            positions: (k, n, 3) absolute node positions, m, for the k selected clusters.
+            velocities: (k, n, 3) node velocities, m/s (default: at rest).
+            indices: the k clusters to reset (default: all B, in order).
+
+        The next :meth:`advance` of these clusters starts with uniformly accelerated motion.
+        """
+        idx = self._indices(indices)
+        shape = (idx.size, self.num_nodes, 3)
+        x0 = _check_array("positions", positions, shape, "m")
+        v0 = np.zeros(shape) if velocities is None else _check_array("velocities", velocities, shape, "m/s")
+        self.positions_[idx] = x0
+        self._v_half[idx] = v0
+        self.velocities_[idx] = v0
+        self._h_prev[idx] = 0.0
+        self.time[idx] = 0.0
+        self._work[idx] = 0.0
+        self._dissipated[idx] = 0.0
+        self.status[idx] = _kernels.STATUS_OK
+        self._refresh(idx)
+        report = self.energy()
+        self._energy0[idx] = report.kinetic[idx] + report.strain[idx]
+
+    def _refresh(self, idx: np.ndarray) -> None:
+        """Recompute forces, tensions and frequency estimates of clusters ``idx`` at their positions."""
+        f_int, tension, omega2, finite = self._evaluate(self.positions_[idx], idx)
+        if not finite.all():
+            raise ValueError(
+                f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable; "
+                "two connected satellites may not occupy the same point"
+            )
+        self._f_int[idx] = f_int
+        self.tension[idx] = tension
+        self._omega2[idx] = omega2
+
+    def _evaluate(
+        self, x: np.ndarray, idx: np.ndarray, taut_branch: bool = False
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        k = idx.size
+        f_int = np.empty((k, self.num_nodes, 3))
+        tension = np.empty((k, self.num_cables))
+        omega2 = np.empty(k)
+        finite = np.empty(k, dtype=np.bool_)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            _kernels.evaluate_batch(
+                np.ascontiguousarray(x), self.reference[idx], self.cables, self.stiffness[idx],
+                self.L0[idx], self.N0[idx], self.inv_split_mass_sum[idx],
+                self.elongation == "linearised", taut_branch, f_int, tension, omega2, finite,
+            )
+        return f_int, tension, omega2, finite
+
+    # ------------------------------------------------------------------ integration
+    def advance(
+        self,
+        duration: float,
+        force: ArrayLike | None = None,
+        *,
+        active: ArrayLike | None = None,
+        record_steps: int = 0,
+    ) -> AdvanceStats:
+        """Integrate every active cluster over ``duration`` seconds with the external force held.
+
+        Args:
+            duration: interval length, s, > 0.  Each cluster lands exactly on its end.
+            force: (B, n, 3) external force p on each satellite (thrust, bias), N; default zero.
+            active: (B,) bool mask of clusters to integrate (default all); others are left as
+                they are, and so are clusters already flagged as diverged.
+            record_steps: record the first R sub-step sizes of each cluster in the result.
+
+        Returns:
+            :class:`AdvanceStats`.  A cluster whose state became non-finite or that needed more than
+            ``max_substeps`` sub-steps is flagged in ``status`` and frozen until reset.
+        """
+        duration = _check_duration(duration)
+        shape = (self.num_clusters, self.num_nodes, 3)
+        p = np.zeros(shape) if force is None else _check_array("force", force, shape, "N")
+        if active is None:
+            mask = self._all_active
+        else:
+            mask = np.asarray(active)
+            if mask.shape != (self.num_clusters,) or mask.dtype != np.bool_:
+                raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},)")
+        B = self.num_clusters
+        substeps = np.zeros(B, dtype=np.int64)
+        step_min = np.full(B, np.inf)
+        step_max = np.zeros(B)
+        record = np.full((B, int(record_steps)), np.nan)
+        kernel = _kernels.advance_parallel if B >= PARALLEL_MIN_BATCH else _kernels.advance_serial
+        kernel(
+            mask, duration, self.positions_, self._v_half, self.velocities_, self._f_int,
+            self.tension, self._h_prev, self._omega2, p, self.masses, self.damping, self.cables,
+            self.stiffness, self.L0, self.N0, self.inv_split_mass_sum, self.reference,
+            self.elongation == "linearised", self.safety_factor, self.max_step, self.max_substeps,
+            self._work, self._dissipated, substeps, step_min, step_max, self.status, record,
+        )
+        self.time[mask] += duration
+        return AdvanceStats(substeps, step_min, step_max, self.status.copy(), record)
+
+    # ------------------------------------------------------------------ queries
+    def internal_forces(self, positions: ArrayLike) -> np.ndarray:
+        """(B, n, 3) restoring forces f_int, N, at ``positions`` (B, n, 3), m.
+
+        ``f_int`` is the term of ``M a + C v + f_int = p``: a satellite held at ``positions``
+        needs the external force ``p = f_int`` to stay there.
+        """
+        x = _check_array("positions", positions, (self.num_clusters, self.num_nodes, 3), "m")
+        f_int, _, _, finite = self._evaluate(x, np.arange(self.num_clusters))
+        if not finite.all():
+            raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
+        return f_int
+
+    def critical_time_step(self, method: CriticalStepMethod = "closed-form") -> np.ndarray:
+        """(B,) estimated critical step ``2 / omega_max`` at the current positions, s.
+
+        ``omega_max`` is bounded by the largest element frequency (Irons-Treharne), with node masses
+        split equally among cables and every cable on its taut branch.  ``"closed-form"`` uses the
+        exact element eigenvalue ``max(EA/L0, N/L) (1/m_i^e + 1/m_j^e)``, the integrator's fast
+        path; ``"finite-difference"`` is the paper's reference method (section 4): the element
+        stiffness is built column by column from central differences of the element force (eq. 21)
+        and bounded by its largest mass-scaled column L1 norm (eqs. 19-20).  The reference is never
+        larger than the closed form's step.  The sub-step actually taken is
+        ``safety_factor`` times this.
+        """
+        if method == "closed-form":
+            omega2 = self._omega2
+        elif method == "finite-difference":
+            omega2 = self.element_omega2_finite_difference().max(axis=1)
+        else:
+            raise ValueError(f"method must be 'closed-form' or 'finite-difference'; got {method!r}")
+        with np.errstate(divide="ignore"):
+            return 2.0 / np.sqrt(omega2)
+
+    def element_omega2_finite_difference(self, relative_perturbation: float = 1e-6) -> np.ndarray:
+        """(B, m) the paper's finite-difference column-L1 bound on each cable's squared frequency.
+
+        Each cable is cut out as a two-node element with its split masses; each of its 6 degrees of
+        freedom is perturbed by ``+-h`` (``h = relative_perturbation * L``) and the element force
+        (taut branch) evaluated, giving the stiffness columns of eq. (21); the bound is the largest
+        L1 norm of a column of ``M_e^-1/2 K_e M_e^-1/2``, in (rad/s)^2.
+        """
+        B, m = self.num_clusters, self.num_cables
+        x = self.positions_
+        ends = np.stack([x[:, self.cables[:, 0]], x[:, self.cables[:, 1]]], axis=2)  # (B, m, 2, 3)
+        lengths = np.linalg.norm(ends[:, :, 1] - ends[:, :, 0], axis=-1)  # (B, m)
+        h = relative_perturbation * lengths
+        # 12 perturbed copies of each element: dof j = 0..5, sign +-.
+        dof_shift = np.eye(6).reshape(6, 2, 3)
+        perturbed = (
+            ends[:, :, None, None] + np.array([1.0, -1.0])[None, None, None, :, None, None]
+            * h[:, :, None, None, None, None] * dof_shift[None, None, :, None]
+        )  # (B, m, 6, 2, 2, 3)
+        E = B * m * 12
+        ref = self.reference
+        ref_ends = np.stack([ref[:, self.cables[:, 0]], ref[:, self.cables[:, 1]]], axis=2)
+        ref_elements = np.broadcast_to(ref_ends[:, :, None, None], perturbed.shape).reshape(E, 2, 3)
+
+        def per_element(values: np.ndarray) -> np.ndarray:
+            return np.ascontiguousarray(
+                np.broadcast_to(values[:, :, None, None], (B, m, 6, 2)).reshape(E, 1)
+            )
+
+        f_int = np.empty((E, 2, 3))
+        _kernels.evaluate_batch(
+            np.ascontiguousarray(perturbed.reshape(E, 2, 3)), np.ascontiguousarray(ref_elements),
+            np.array([[0, 1]], dtype=np.int64), per_element(self.stiffness), per_element(self.L0),
+            per_element(self.N0), per_element(self.inv_split_mass_sum),
+            self.elongation == "linearised", True, f_int, np.empty((E, 1)), np.empty(E),
+            np.empty(E, dtype=np.bool_),
+        )
+        f = f_int.reshape(B, m, 6, 2, 6)
+        columns = (f[:, :, :, 0] - f[:, :, :, 1]) / (2.0 * h[:, :, None, None])  # (B, m, j, i)
+        degree = np.bincount(self.cables.ravel(), minlength=self.num_nodes)
+        split = self.masses / degree  # (B, n)
+        dof_mass = np.repeat(
+            np.stack([split[:, self.cables[:, 0]], split[:, self.cables[:, 1]]], axis=2), 3, axis=2
+        )  # (B, m, 6)
+        scale = 1.0 / np.sqrt(dof_mass)
+        scaled = np.abs(columns) * scale[:, :, :, None] * scale[:, :, None, :]
+        return scaled.sum(axis=3).max(axis=2)
+
+    def energy(self) -> EnergyReport:
+        """Energy accounting of every cluster since its last reset (see :class:`EnergyReport`)."""
+        kinetic = 0.5 * np.einsum("bn,bnd,bnd->b", self.masses, self.velocities_, self.velocities_)
+        strain = (0.5 * self.tension**2 / self.stiffness).sum(axis=1)
+        residual = kinetic + strain - self._energy0 + self._dissipated - self._work
+        return EnergyReport(
+            kinetic=kinetic,
+            strain=strain,
+            dissipated=self._dissipated.copy(),
+            work=self._work.copy(),
+            initial=self._energy0.copy(),
+            residual=residual,
+        )
+
+
+class Simulator:
+    """One tether cluster, integrated by the batched core (a batch of one); arrays are (n, 3).
+
+    Args:
+        cluster: the :class:`Cluster` to simulate.
+        **options: ``safety_factor``, ``elongation``, ``max_step``, ``max_substeps`` as in
+            :class:`BatchSimulator`.
+
+    Unlike the batch, a single simulator raises :class:`SimulationDiverged` when the integration
+    fails, since there is no other cluster to carry on with.
+    """
+
+    def __init__(self, cluster: Cluster, **options: object) -> None:
+        if not isinstance(cluster, Cluster):
+            raise TypeError(
+                f"Simulator takes a Cluster (see tether_gym.make_cluster); got {type(cluster).__name__}"
+            )
+        self.cluster = cluster
+        self.batch = BatchSimulator(cluster, 1, **options)  # type: ignore[arg-type]
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(n, 3) current positions, m."""
+        return self.batch.positions[0]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(n, 3) current velocities, m/s."""
+        return self.batch.velocities[0]
+
+    @property
+    def time(self) -> float:
+        """Time since the last reset, s."""
+        return float(self.batch.time[0])
+
+    @property
+    def tension(self) -> np.ndarray:
+        """(m,) cable tensions at the current positions, N."""
+        return self.batch.tension[0].copy()
+
+    @property
+    def slack(self) -> np.ndarray:
+        """(m,) bool: slack cables at the current positions."""
+        return self.batch.slack[0]
+
+    def reset(self, positions: ArrayLike | None = None, velocities: ArrayLike | None = None) -> None:
+        """Set the state: positions (n, 3) in m (default nominal), velocities (n, 3) in m/s (default 0)."""
+        n = self.cluster.num_nodes
+        x0 = self.cluster.positions if positions is None else _check_array("positions", positions, (n, 3), "m")
+        v0 = None if velocities is None else _check_array("velocities", velocities, (n, 3), "m/s")[None]
+        self.batch.reset(x0[None], v0)
+
+    def advance(self, duration: float, force: ArrayLike | None = None, *, record_steps: int = 0) -> AdvanceStats:
+        """Integrate over ``duration`` s with the external force (n, 3), N, held constant.
+
+        Returns the :class:`AdvanceStats` of the batch of one (arrays of shape (1,)).  Raises
+        :class:`SimulationDiverged` if the state became non-finite or the sub-step limit was hit.
+        """
+        p = None if force is None else _check_array("force", force, (self.cluster.num_nodes, 3), "N")[None]
+        stats = self.batch.advance(duration, p, record_steps=record_steps)
+        if stats.status[0] == _kernels.STATUS_NON_FINITE:
+            raise SimulationDiverged(
+                "the state became non-finite (a cable reached zero length or the motion blew up); "
+                "reduce safety_factor or the initial conditions, then reset()"
+            )
+        if stats.status[0] == _kernels.STATUS_TOO_MANY_SUBSTEPS:
+            raise SimulationDiverged(
+                f"more than max_substeps={self.batch.max_substeps} sub-steps were needed; advance over "
+                "shorter intervals or raise max_substeps"
+            )
+        return stats
+
+    def internal_forces(self, positions: ArrayLike) -> np.ndarray:
+        """(n, 3) restoring forces f_int at ``positions`` (n, 3), N (see BatchSimulator)."""
+        x = _check_array("positions", positions, (self.cluster.num_nodes, 3), "m")
+        return self.batch.internal_forces(x[None])[0]
+
+    def critical_time_step(self, method: CriticalStepMethod = "closed-form") -> float:
+        """Estimated critical step at the current state, s (see BatchSimulator.critical_time_step)."""
+        return float(self.batch.critical_time_step(method)[0])
+
+    def energy(self) -> EnergyReport:
+        """Energy accounting since the last reset, as floats (see :class:`EnergyReport`)."""
+        report = self.batch.energy()
+        return EnergyReport(**{k: float(getattr(report, k)[0]) for k in report.__dataclass_fields__})
