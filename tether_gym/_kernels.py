@@ -26,11 +26,11 @@ from numba import njit, prange
 
 # Status codes of a cluster in a batch.
 STATUS_OK = 0
-STATUS_NON_FINITE = 1
+STATUS_NON_FINITE = 1  # a non-finite state, or a cable of zero length
 STATUS_TOO_MANY_SUBSTEPS = 2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def cable_forces(
     x: np.ndarray,
     reference: np.ndarray,
@@ -49,7 +49,8 @@ def cable_forces(
     Writes ``f_int`` (n, 3) in N and ``tension`` (m,) in N (0 for slack cables).  Returns
     ``(omega2_max, finite)``: the largest squared element frequency in (rad/s)^2, taken on the taut
     branch ``max(EA/L0, N_taut/L) * (1/m_i^e + 1/m_j^e)`` so that a slack cable that can snap taut
-    within the next step still limits the step; and whether every cable length was finite.
+    within the next step still limits the step; and whether every cable length was finite and
+    non-zero (two tethered satellites meeting is a collision the model cannot represent).
 
     ``taut_branch=True`` drops the tension-only cut-off (``N`` may go negative): the smooth law
     that the finite-difference critical-step estimate perturbs.
@@ -57,6 +58,7 @@ def cable_forces(
     f_int[:, :] = 0.0
     omega2_max = 0.0
     length_sum = 0.0
+    shortest = math.inf
     for c in range(cables.shape[0]):
         i = cables[c, 0]
         j = cables[c, 1]
@@ -65,6 +67,8 @@ def cable_forces(
         dz = x[j, 2] - x[i, 2]
         length = math.sqrt(dx * dx + dy * dy + dz * dz)
         length_sum += length
+        if length < shortest:
+            shortest = length
         ex = dx / length
         ey = dy / length
         ez = dz / length
@@ -95,10 +99,10 @@ def cable_forces(
             f_int[j, 0] += fx
             f_int[j, 1] += fy
             f_int[j, 2] += fz
-    return omega2_max, math.isfinite(length_sum)
+    return omega2_max, math.isfinite(length_sum) and shortest > 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _advance_one(
     b: int,
     duration: float,
@@ -231,7 +235,7 @@ def _advance_one(
             v_sync[b, i, d] = (mb[i] * vb[i, d] + half * (pb[i, d] - fb[i, d])) / denominator
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def advance_serial(
     active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, masses, damping,
     cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
@@ -247,7 +251,7 @@ def advance_serial(
             )
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def advance_parallel(
     active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, masses, damping,
     cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
@@ -263,7 +267,7 @@ def advance_parallel(
             )
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def evaluate_batch(
     x: np.ndarray,
     reference: np.ndarray,

@@ -135,7 +135,7 @@ class Cluster:
         if not np.all(np.isfinite(cables)) or np.any(cables != np.round(cables)):
             raise ClusterError("cables must hold whole node indices (integers)")
         cables = cables.astype(np.int64)
-        for c, (i, j) in enumerate(cables):
+        for c, (i, j) in enumerate(cables.tolist()):
             if not (0 <= i < n_nodes and 0 <= j < n_nodes):
                 raise ClusterError(
                     f"cable {c} joins nodes ({i}, {j}), but node indices must be in 0..{n_nodes - 1} "
@@ -144,7 +144,7 @@ class Cluster:
             if i == j:
                 raise ClusterError(f"cable {c} joins node {i} to itself; a cable needs two distinct nodes")
         seen: dict[tuple[int, int], int] = {}
-        for c, (i, j) in enumerate(cables):
+        for c, (i, j) in enumerate(cables.tolist()):
             key = (min(i, j), max(i, j))
             if key in seen:
                 raise ClusterError(

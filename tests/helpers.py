@@ -1,0 +1,47 @@
+"""Test helpers: small clusters with closed-form answers, and an independent numpy force oracle."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import tether_gym as tg
+
+
+def pair(
+    m1: float = 10.0,
+    m2: float = 30.0,
+    length: float = 100.0,
+    EA: float = 5e4,
+    N0: float = 0.0,
+    damping: float | tuple[float, float] = 0.0,
+    L0: float | None = None,
+) -> tg.Cluster:
+    """Two satellites on the x axis joined by one cable (stiffness EA / L0)."""
+    return tg.Cluster(
+        positions=[[-length / 2, 0.0, 0.0], [length / 2, 0.0, 0.0]],
+        masses=[m1, m2],
+        cables=[(0, 1)],
+        EA=EA,
+        N0=N0,
+        damping=damping,
+        L0=L0,
+        name="pair",
+    )
+
+
+def reference_internal_forces(cluster: tg.Cluster, x: np.ndarray) -> np.ndarray:
+    """f_int (n, 3) from the model's definition, written independently of the compiled kernels."""
+    i, j = cluster.cables[:, 0], cluster.cables[:, 1]
+    delta = x[j] - x[i]
+    length = np.linalg.norm(delta, axis=1)
+    tension = np.maximum(cluster.N0 + cluster.EA / cluster.L0 * (length - cluster.L0), 0.0)
+    pull = (tension / length)[:, None] * delta
+    f_int = np.zeros_like(x)
+    np.add.at(f_int, i, -pull)
+    np.add.at(f_int, j, pull)
+    return f_int
+
+
+def separation(x: np.ndarray) -> float:
+    """Distance between the first two satellites, m."""
+    return float(np.linalg.norm(x[1] - x[0]))
