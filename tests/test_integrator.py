@@ -392,3 +392,21 @@ def test_bad_simulator_arguments() -> None:
         batch.reset(c.positions[None], indices=[2])
     with pytest.raises(ValueError, match="active must be a boolean array"):
         batch.advance(0.1, active=[1, 0])
+
+
+@pytest.mark.parametrize("safety_factor", [0.05, 0.2, 0.7])
+def test_every_force_switch_delivers_its_exact_impulse(safety_factor: float) -> None:
+    """Zero-order hold: a thrust held for an interval gives exactly force x duration of momentum.
+
+    A slack cable (L0 longer than the satellites' separation) leaves the satellites free, so the
+    velocity after a sequence of thrust pulses has a closed form, whatever the sub-steps.
+    """
+    c = tg.Cluster(positions=[[0, 0, 0], [100, 0, 0]], masses=[10.0, 4.0], cables=[(0, 1)], EA=1e3, L0=300.0)
+    sim = tg.Simulator(c, safety_factor=safety_factor)
+    pulses = [(0.1, 1.0), (0.07, 0.0), (0.1, -2.5), (0.3, 0.5), (0.1, 0.0)]
+    expected = 0.0
+    for duration, thrust in pulses:
+        sim.advance(duration, [[thrust, 0, 0], [0, 0, 0]])
+        expected += thrust * duration / 10.0
+        assert sim.velocities[0, 0] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+    assert sim.slack.all()
