@@ -1,0 +1,39 @@
+"""The examples and benchmarks run end to end (short settings) and write what they promise."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(script: str, *args: str) -> str:
+    result = subprocess.run(
+        [sys.executable, str(ROOT / script), *args], capture_output=True, text=True, timeout=600, cwd=ROOT
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_paper_example_writes_its_figures(tmp_path: Path) -> None:
+    out = run("examples/paper_tetrahedron.py", "--out", str(tmp_path), "--duration", "5")
+    for name in ("paper_fig3.png", "substeps.png", "energy.png"):
+        assert (tmp_path / name).stat().st_size > 10_000
+    assert "fraction of time with at least one slack cable" in out
+
+
+def test_critical_step_example_reports_safe_estimates(tmp_path: Path) -> None:
+    out = run("examples/critical_step.py", "--out", str(tmp_path), "--cases", "20")
+    assert (tmp_path / "critical_step.png").stat().st_size > 10_000
+    assert "closed form" in out and "-> safe" in out
+
+
+@pytest.mark.parametrize("script", ["benchmarks/core_speed.py", "benchmarks/safety_factor.py"])
+def test_benchmarks_run_in_quick_mode(script: str, tmp_path: Path) -> None:
+    args = ["--quick"] + (["--plot", str(tmp_path / "sf.png")] if "safety" in script else [])
+    out = run(script, *args)
+    assert "substeps/s" in out or "drift" in out
