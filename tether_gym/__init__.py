@@ -6,6 +6,8 @@ differences with an element-by-element critical-step estimate.  Main entry point
 * :class:`Cluster`, :func:`make_cluster`, :func:`load_cluster`, :func:`save_cluster`: describe a
   cluster, or take a named preset.
 * :class:`Simulator` (one cluster) and :class:`BatchSimulator` (B clusters, one core).
+* Gymnasium ids ``TetherTetrahedron-v0`` (default), ``TetherChain-v0``, ``TetherTriangle-v0``,
+  ``TetherOctahedron-v0``, ``TetherHub-v0``: :class:`tether_gym.envs.TetherClusterEnv`.
 * :mod:`tether_gym.analysis`: tangent stiffness and normal modes for verification and control
   design.
 """
@@ -21,10 +23,16 @@ from tether_gym.simulator import (
     Simulator,
 )
 
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS, register_envs
+
 __version__ = "0.1.0"
 
+register_envs()
+
 __all__ = [
+    "DEFAULT_ENV_ID",
     "DEFAULT_SAFETY_FACTOR",
+    "ENV_IDS",
     "PRESETS",
     "AdvanceStats",
     "BatchSimulator",

@@ -134,6 +134,7 @@ def _advance_one(
     step_max: np.ndarray,
     status: np.ndarray,
     step_record: np.ndarray,
+    peak_tension: np.ndarray,
 ) -> None:
     """Integrate cluster ``b`` over ``duration`` seconds with its external force held constant.
 
@@ -154,7 +155,8 @@ def _advance_one(
 
     Each sub-step is ``min(safety_factor * 2 / omega_est, max_step)``, re-estimated at every
     configuration, then shortened so that the rest of the interval splits into equal steps; the
-    interval ends exactly at ``duration``.
+    interval ends exactly at ``duration``.  ``peak_tension[b]`` receives each cable's largest
+    tension over the interval, N.
     """
     n_nodes = x.shape[1]
     xb = x[b]
@@ -171,6 +173,10 @@ def _advance_one(
     work_b = work[b]
     dissipated_b = dissipated[b]
     h_last = h_prev[b]
+    peak = peak_tension[b]
+    tension_b = tension[b]
+    for c in range(tension_b.shape[0]):
+        peak[c] = tension_b[c]
     while True:
         if count >= max_substeps:
             status[b] = STATUS_TOO_MANY_SUBSTEPS
@@ -225,6 +231,9 @@ def _advance_one(
         if not finite:
             status[b] = STATUS_NON_FINITE
             break
+        for c in range(tension_b.shape[0]):
+            if tension_b[c] > peak[c]:
+                peak[c] = tension_b[c]
         if last:
             break
         elapsed += h
@@ -249,7 +258,7 @@ def advance_serial(
     active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
     masses, damping,
     cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
-    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record, peak_tension,
 ):  # pragma: no cover - compiled
     for b in range(x.shape[0]):
         if active[b] and status[b] == STATUS_OK:
@@ -257,7 +266,7 @@ def advance_serial(
                 b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
                 previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised,
                 safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-                step_max, status, step_record,
+                step_max, status, step_record, peak_tension,
             )
 
 
@@ -266,7 +275,7 @@ def advance_parallel(
     active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
     masses, damping,
     cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
-    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record, peak_tension,
 ):  # pragma: no cover - compiled
     for b in prange(x.shape[0]):
         if active[b] and status[b] == STATUS_OK:
@@ -274,7 +283,7 @@ def advance_parallel(
                 b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
                 previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised,
                 safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-                step_max, status, step_record,
+                step_max, status, step_record, peak_tension,
             )
 
 

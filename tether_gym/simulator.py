@@ -59,6 +59,7 @@ class AdvanceStats:
         status: (B,) 0 ok, 1 non-finite state, 2 sub-step limit reached.
         step_sizes: (B, R) the first R sub-step sizes, s, when ``record_steps=R`` was asked
             (NaN-padded), else shape (B, 0).
+        peak_tension: (B, m) each cable's largest tension over the interval (sub-step ends), N.
     """
 
     substeps: np.ndarray
@@ -66,6 +67,7 @@ class AdvanceStats:
     step_max: np.ndarray
     status: np.ndarray
     step_sizes: np.ndarray
+    peak_tension: np.ndarray
 
     @property
     def diverged(self) -> np.ndarray:
@@ -363,16 +365,17 @@ class BatchSimulator:
         step_min = np.full(B, np.inf)
         step_max = np.zeros(B)
         record = np.full((B, int(record_steps)), np.nan)
+        peak_tension = self.tension.copy()
         kernel = _kernels.advance_parallel if B >= PARALLEL_MIN_BATCH else _kernels.advance_serial
         kernel(
             mask, duration, self.positions_, self._v_half, self.velocities_, self._f_int,
             self.tension, self._h_prev, self._omega2, p, self._previous_force, self.masses,
             self.damping, self.cables, self.stiffness, self.L0, self.N0, self.inv_split_mass_sum, self.reference,
             self.elongation == "linearised", self.safety_factor, self.max_step, self.max_substeps,
-            self._work, self._dissipated, substeps, step_min, step_max, self.status, record,
+            self._work, self._dissipated, substeps, step_min, step_max, self.status, record, peak_tension,
         )
         self.time[mask & (self.status == _kernels.STATUS_OK)] += duration
-        return AdvanceStats(substeps, step_min, step_max, self.status.copy(), record)
+        return AdvanceStats(substeps, step_min, step_max, self.status.copy(), record, peak_tension)
 
     # ------------------------------------------------------------------ queries
     def internal_forces(self, positions: ArrayLike) -> np.ndarray:

@@ -1,0 +1,6 @@
+"""Gymnasium environments over the batched physics core."""
+
+from tether_gym.envs.cluster_env import TetherClusterEnv
+from tether_gym.envs.task import END_REASONS, DampingTask, TaskConfig
+
+__all__ = ["END_REASONS", "DampingTask", "TaskConfig", "TetherClusterEnv"]

@@ -1,0 +1,228 @@
+"""The single-cluster Gymnasium environment."""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from tether_gym.cluster import Cluster
+from tether_gym.envs.task import OBSERVATION_LIMIT, DampingTask, TaskConfig
+from tether_gym.presets import make_cluster
+
+__all__ = ["TetherClusterEnv"]
+
+RESET_OPTION_KEYS = ("positions", "velocities")
+
+
+class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
+    """Damp the vibrations of a cluster of tethered satellites with thrusters.
+
+    ## Description
+
+    Satellites (point masses) are joined by tension-only elastic cables with pretension. Their
+    motion is integrated by the explicit central-difference method of the source paper, with
+    automatic sub-stepping at the estimated critical time step (several sub-steps per control
+    interval). Each satellite is held in its nominal shape by a constant **bias thrust**
+    ``p_bias = f_int(nominal)``. Without it, pretension would pull the cluster together. The
+    agent's thrust is added on top of the bias. Each episode starts from large random initial
+    conditions: a cluster whose cables keep going slack and snapping taut. The task is to damp
+    that vibration quickly, with little propellant, and without losing the formation.
+
+    ## Action Space
+
+    ``Box(-1, 1, (3 k,), float32)``, where k is the number of thrusters. Entry ``3 j + d`` is
+    the thrust command of thruster j along axis d (x, y, z). It is multiplied by that
+    thruster's ``max_thrust`` (N) and held constant over the control interval. With
+    ``thrust_limit="per_axis"`` (the default), each component lies within ``+-max_thrust``.
+    With ``"magnitude"``, a command longer than 1 is scaled back to length 1, which bounds the
+    force's norm. Commands outside [-1, 1] are clipped. A NaN or infinite command, or one of the
+    wrong shape, raises ``ValueError``.
+
+    ## Observation Space
+
+    ``Box(-1e4, 1e4, (6 s + c [+ c],), float32)``, where s is the number of observed satellites
+    and c the number of cables. Everything is in the **cluster frame**: the origin is at the
+    centre of mass, and the axes keep the nominal orientation. ``D`` is
+    ``initial_displacement`` and ``V`` is ``initial_velocity``.
+
+    | index | observation | unit |
+    |---|---|---|
+    | 0 .. 3s-1 | displacement of each observed satellite from its nominal place | D |
+    | 3s .. 6s-1 | velocity of each observed satellite relative to the centre of mass | V |
+    | 6s .. 6s+c-1 | cable elongation ``L - L0`` | D |
+    | 6s+c .. 6s+2c-1 | cable tension / breaking load (only with ``observe_tensions``) | 1 |
+
+    At reset every entry is of order 1; values are clipped to +-1e4. ``observation_noise`` adds Gaussian noise with that
+    standard deviation, in these units.
+
+    ## Rewards
+
+    ``reward = reward_vibration + reward_propellant + reward_slack + reward_failure``, and every
+    term is reported in ``info``.
+
+    - ``reward_vibration = -vibration_weight * E_vib / E_scale``.
+      - ``E_vib`` is the vibration energy: kinetic energy relative to the rigid translation and
+        rotation, plus strain energy, plus the bias-thrust potential ``-p_bias . (x - X)``,
+        measured from the nominal state.
+      - ``E_scale`` is the mean ``E_vib`` of the reset distribution (64 fixed-seed draws).
+    - ``reward_propellant = -propellant_weight * sum_j |F_j| dt / (F_full dt)``: the thrust
+      impulse of the interval, as a fraction of full thrust on every thruster.
+    - ``reward_slack = -slack_weight * (fraction of cables slack)``.
+    - ``reward_failure = -failure_penalty`` on the step that ends in a failure, else 0.
+
+    ## Starting State
+
+    The cluster starts from its nominal shape, plus Gaussian displacements of standard
+    deviation ``initial_displacement`` (m) and velocities of standard deviation
+    ``initial_velocity`` (m/s) per component. The rigid part is removed: the centre of mass
+    stays in place, and the linear and angular momentum are zero. All draws come from
+    ``self.np_random``. ``randomize={"masses": 0.2, ...}`` also draws the masses, EA, damping or
+    N0 within ``+-spread`` of nominal at each reset, and the bias is recomputed to match.
+    ``reset(options={"positions": X0, "velocities": V0})`` sets exact (n, 3) initial conditions
+    instead.
+
+    ## Episode End
+
+    - ``terminated``: the formation is lost (a satellite farther than ``max_deviation`` from its
+      nominal place), a cable's tension passes its breaking load at any sub-step of the interval,
+      or the numerics diverge.
+      ``info["end_reason"]`` says which.
+    - ``truncated``: the registered time limit (``max_episode_steps``) is reached. A failure is
+      never reported as truncation.
+
+    ## Info
+
+    ``info`` holds the following:
+    - the reward terms;
+    - ``substeps``, ``step_min`` and ``step_max`` (s) of the interval, and ``peak_tension``
+      ((c,) N, each cable's largest tension within it);
+    - ``vibration_energy``, ``kinetic_energy``, ``strain_energy``, ``dissipated_energy``,
+      ``external_work`` and ``energy_residual`` (J);
+    - ``tensions`` (N), ``slack_count``, and ``propellant_used`` (N*s, cumulative);
+    - ``thrust`` ((n, 3) N, the agent's part);
+    - ``time`` (s) and ``end_reason``.
+
+    ## Arguments
+
+    | argument | default | meaning |
+    |---|---|---|
+    | ``preset`` | ``"tetrahedron"`` | a preset name (see ``tether_gym.preset_names()``) |
+    | ``preset_kwargs`` | ``None`` | overrides of the preset's parameters, e.g. ``{"N0": 1.0}`` |
+    | ``cluster`` | ``None`` | a :class:`~tether_gym.Cluster` to use instead of a preset |
+    | ``render_mode`` | ``None`` | ``"rgb_array"`` or ``"human"`` |
+    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.5 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor`` |
+
+    ## Version History
+
+    - v0: initial release.
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
+
+    def __init__(
+        self,
+        preset: str = "tetrahedron",
+        preset_kwargs: Mapping[str, Any] | None = None,
+        cluster: Cluster | None = None,
+        render_mode: str | None = None,
+        **task: Any,
+    ) -> None:
+        super().__init__()
+        if cluster is None:
+            cluster = make_cluster(preset, **dict(preset_kwargs or {}))
+        elif not isinstance(cluster, Cluster):
+            raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None; got {render_mode!r}")
+        fields = {f for f in TaskConfig.__dataclass_fields__}
+        unknown = sorted(set(task) - fields)
+        if unknown:
+            raise TypeError(f"unknown argument(s) {unknown}; task arguments are {sorted(fields)}")
+        for key in ("thrusters", "observed_satellites"):
+            if task.get(key) is not None:
+                task[key] = tuple(task[key])
+        if isinstance(task.get("max_thrust"), Sequence):
+            task["max_thrust"] = tuple(float(v) for v in task["max_thrust"])
+        self.config = TaskConfig(**task)
+        self.task = DampingTask(cluster, 1, self.config)
+        self.cluster = cluster
+        self.render_mode = render_mode
+        self.action_space = spaces.Box(-1.0, 1.0, (self.task.action_size,), np.float32)
+        self.observation_space = spaces.Box(
+            -OBSERVATION_LIMIT, OBSERVATION_LIMIT, (self.task.observation_size,), np.float32
+        )
+        self._index = np.zeros(1, dtype=np.int64)
+        self._viewer: Any = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTION_KEYS))
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; accepted options are {list(RESET_OPTION_KEYS)}")
+        positions, velocities = (self._option_array(options, key) for key in RESET_OPTION_KEYS)
+        self.task.reset(self.np_random, self._index, positions, velocities)
+        if self.render_mode == "human":
+            self.render()
+        return self.task.observe(self.np_random)[0], self.task.info(0, None, None)
+
+    def _option_array(self, options: Mapping[str, Any], key: str) -> np.ndarray | None:
+        """A reset option as a (1, n, 3) array (None if absent); finiteness is checked downstream."""
+        if options.get(key) is None:
+            return None
+        value = np.asarray(options[key], dtype=np.float64)
+        if value.shape != (self.cluster.num_nodes, 3):
+            raise ValueError(
+                f"reset option {key!r} must be an ({self.cluster.num_nodes}, 3) array; got shape {value.shape}"
+            )
+        return value[None]
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (self.task.action_size,):
+            raise ValueError(
+                f"action must have shape ({self.task.action_size},) (3 per thruster); got shape {a.shape}"
+            )
+        if not np.isfinite(a).all():
+            raise ValueError("action contains NaN or inf; thrust commands must be finite numbers in [-1, 1]")
+        stats = self.task.step(a[None])
+        outcome = self.task.outcome(stats)
+        observation = self.task.observe(self.np_random)[0]
+        info = self.task.info(0, stats, outcome)
+        if self.render_mode == "human":
+            self.render()
+        return observation, float(outcome["reward"][0]), bool(outcome["terminated"][0]), False, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() was called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        from tether_gym.envs.rendering import ClusterRenderer
+
+        if self._viewer is None:
+            self._viewer = ClusterRenderer(self.cluster, self.task.max_thrust.max(), human=self.render_mode == "human")
+        return self._viewer.draw(
+            self.task.sim.positions_[0], self.task.sim.slack[0], self.task.last_thrust[0], float(self.task.sim.time[0])
+        )
+
+    def close(self) -> None:
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_viewer"] = None  # figures do not pickle; a copy draws its own
+        return state
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> TetherClusterEnv:
+        clone = self.__class__.__new__(self.__class__)
+        memo[id(self)] = clone
+        for key, value in self.__getstate__().items():
+            setattr(clone, key, copy.deepcopy(value, memo))
+        return clone
