@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import math
 import pickle
 import subprocess
 import sys
@@ -201,17 +202,24 @@ def test_a_cable_past_its_breaking_load_terminates() -> None:
     assert info["peak_tension"].max() > 20.0 > info["tensions"].max()  # the peak came mid-interval
 
 
+def commanded_thrust(env: TetherClusterEnv, action: list[float]) -> np.ndarray:
+    env.reset(seed=0)
+    env.step(np.array(action))
+    return env.task.thrust[0]
+
+
 def test_thrust_limits() -> None:
     env = TetherClusterEnv(max_thrust=2.0, thrust_limit="magnitude")
-    forces = env.task.thrust(np.array([[0.6, 0.8, 0.0, 0.9, 0.9, 0.0, 5.0, 0.0, 0.0, 0.1, 0.0, 0.0]]))
-    assert np.allclose(forces[0, 0], [1.2, 1.6, 0.0])  # unit length: kept
-    assert np.allclose(forces[0, 1], [np.sqrt(2), np.sqrt(2), 0.0])  # too long: scaled to unit length
-    assert np.allclose(forces[0, 2], [2.0, 0.0, 0.0])  # clipped to [-1, 1] first
-    assert np.allclose(forces[0, 3], [0.2, 0.0, 0.0])
-    env = TetherClusterEnv(max_thrust=2.0, thrusters=[1, 3])
-    forces = env.task.thrust(np.array([[5.0, -0.5, 0.25, -7.0, 0.0, 1.0]]))
-    assert np.allclose(forces[0, 1], [2.0, -1.0, 0.5]) and np.allclose(forces[0, 3], [-2.0, 0.0, 2.0])
-    assert np.all(forces[0, [0, 2]] == 0)
+    forces = commanded_thrust(env, [0.6, 0.8, 0.0, 0.9, 0.9, 0.0, 5.0, 0.0, 0.0, 0.1, 0.0, 0.0])
+    assert np.allclose(forces[0], [1.2, 1.6, 0.0])  # unit length: kept
+    assert np.allclose(forces[1], [np.sqrt(2), np.sqrt(2), 0.0])  # too long: scaled to unit length
+    assert np.allclose(forces[2], [2.0, 0.0, 0.0])  # clipped to [-1, 1] first
+    assert np.allclose(forces[3], [0.2, 0.0, 0.0])
+    env = TetherClusterEnv(max_thrust=[2.0, 0.5], thrusters=[1, 3])
+    forces = commanded_thrust(env, [5.0, -0.5, 0.25, -7.0, 0.0, 1.0])
+    assert np.allclose(forces[1], [2.0, -1.0, 0.5]) and np.allclose(forces[3], [-0.5, 0.0, 0.5])
+    assert np.all(forces[[0, 2]] == 0)
+    assert env.task.propellant[0] == pytest.approx(0.1 * (math.sqrt(4 + 1 + 0.25) + math.sqrt(0.5)))
 
 
 def test_observation_is_order_one_at_reset() -> None:

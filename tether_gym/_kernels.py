@@ -254,37 +254,61 @@ def _advance_one(
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _advance_or_skip(
+    b, active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
+    masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
+    max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+    peak_tension, status_out,
+):  # pragma: no cover - compiled
+    """Advance cluster ``b`` if it is active and healthy (adding ``duration`` to its time), else
+    report that it took no step; either way copy its status to ``status_out``."""
+    if active[b] and status[b] == STATUS_OK:
+        _advance_one(
+            b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force, masses,
+            damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
+            max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+            peak_tension,
+        )
+        if status[b] == STATUS_OK:
+            time[b] += duration
+    else:
+        substeps[b] = 0
+        step_min[b] = math.inf
+        step_max[b] = 0.0
+        peak_tension[b, :] = tension[b, :]
+    status_out[b] = status[b]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def advance_serial(
-    active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
-    masses, damping,
-    cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
-    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record, peak_tension,
+    active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
+    masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
+    max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+    peak_tension, status_out,
 ):  # pragma: no cover - compiled
     for b in range(x.shape[0]):
-        if active[b] and status[b] == STATUS_OK:
-            _advance_one(
-                b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
-                previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised,
-                safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-                step_max, status, step_record, peak_tension,
-            )
+        _advance_or_skip(
+            b, active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
+            previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference,
+            linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
+            step_max, status, step_record, peak_tension, status_out,
+        )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def advance_parallel(
-    active, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
-    masses, damping,
-    cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor, max_step,
-    max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record, peak_tension,
+    active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
+    masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
+    max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
+    peak_tension, status_out,
 ):  # pragma: no cover - compiled
     for b in prange(x.shape[0]):
-        if active[b] and status[b] == STATUS_OK:
-            _advance_one(
-                b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
-                previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised,
-                safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-                step_max, status, step_record, peak_tension,
-            )
+        _advance_or_skip(
+            b, active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
+            previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference,
+            linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
+            step_max, status, step_record, peak_tension, status_out,
+        )
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -361,21 +361,30 @@ class BatchSimulator:
             if mask.shape != (self.num_clusters,) or mask.dtype != np.bool_:
                 raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},)")
         B = self.num_clusters
-        substeps = np.zeros(B, dtype=np.int64)
-        step_min = np.full(B, np.inf)
-        step_max = np.zeros(B)
-        record = np.full((B, int(record_steps)), np.nan)
-        peak_tension = self.tension.copy()
-        kernel = _kernels.advance_parallel if B >= PARALLEL_MIN_BATCH else _kernels.advance_serial
+        stats = AdvanceStats(
+            substeps=np.zeros(B, dtype=np.int64), step_min=np.full(B, np.inf), step_max=np.zeros(B),
+            status=np.zeros(B, dtype=np.int64), step_sizes=np.full((B, int(record_steps)), np.nan),
+            peak_tension=np.empty((B, self.num_cables)),
+        )
+        self.advance_unchecked(duration, p, mask, stats)
+        return stats
+
+    def advance_unchecked(self, duration: float, force: np.ndarray, active: np.ndarray, stats: AdvanceStats) -> None:
+        """:meth:`advance` without argument checks, writing into the arrays of ``stats``.
+
+        For callers that validated their inputs and reuse one :class:`AdvanceStats` per step
+        (the environments): ``duration`` > 0, ``force`` a C-contiguous finite float64 (B, n, 3)
+        array, ``active`` a (B,) bool array.
+        """
+        kernel = _kernels.advance_parallel if self.num_clusters >= PARALLEL_MIN_BATCH else _kernels.advance_serial
         kernel(
-            mask, duration, self.positions_, self._v_half, self.velocities_, self._f_int,
-            self.tension, self._h_prev, self._omega2, p, self._previous_force, self.masses,
+            active, duration, self.time, self.positions_, self._v_half, self.velocities_, self._f_int,
+            self.tension, self._h_prev, self._omega2, force, self._previous_force, self.masses,
             self.damping, self.cables, self.stiffness, self.L0, self.N0, self.inv_split_mass_sum, self.reference,
             self.elongation == "linearised", self.safety_factor, self.max_step, self.max_substeps,
-            self._work, self._dissipated, substeps, step_min, step_max, self.status, record, peak_tension,
+            self._work, self._dissipated, stats.substeps, stats.step_min, stats.step_max, self.status,
+            stats.step_sizes, stats.peak_tension, stats.status,
         )
-        self.time[mask & (self.status == _kernels.STATUS_OK)] += duration
-        return AdvanceStats(substeps, step_min, step_max, self.status.copy(), record, peak_tension)
 
     # ------------------------------------------------------------------ queries
     def internal_forces(self, positions: ArrayLike) -> np.ndarray:

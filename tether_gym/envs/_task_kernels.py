@@ -86,15 +86,68 @@ def remove_rigid_velocity(x: np.ndarray, v: np.ndarray, masses: np.ndarray) -> N
             v[b, i, 2] -= motion[1, 2] + motion[2, 0] * ry - motion[2, 1] * rx
 
 
+#: Observations are clipped to +-this (it is reached only far beyond a lost formation).
+OBSERVATION_LIMIT = 1e4
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def measure(
+def _bounded(value: float) -> float:
+    """An observation entry: NaN as 0, clipped to +-OBSERVATION_LIMIT."""
+    if value != value:
+        return 0.0
+    return min(max(value, -OBSERVATION_LIMIT), OBSERVATION_LIMIT)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def command_forces(
+    actions: np.ndarray,
+    thrusters: np.ndarray,
+    max_thrust: np.ndarray,
+    magnitude_limit: bool,
+    bias: np.ndarray,
+    duration: float,
+    active: np.ndarray,
+    force: np.ndarray,
+    thrust: np.ndarray,
+    impulse: np.ndarray,
+) -> None:
+    """Thruster forces from normalised actions (B, 3k): each command clipped to [-1, 1] (and, with
+    ``magnitude_limit``, scaled back to unit length when longer), times ``max_thrust`` (k,) N.
+    Writes the thrust (B, n, 3), the total external force ``bias + thrust`` and the thrust impulse
+    of the interval ``sum_j |F_j| duration`` (B,) in N*s, for active clusters only."""
+    for b in range(actions.shape[0]):
+        if not active[b]:
+            continue
+        thrust[b, :, :] = 0.0
+        total = 0.0
+        for k in range(thrusters.shape[0]):
+            a0 = min(max(actions[b, 3 * k], -1.0), 1.0)
+            a1 = min(max(actions[b, 3 * k + 1], -1.0), 1.0)
+            a2 = min(max(actions[b, 3 * k + 2], -1.0), 1.0)
+            norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+            scale = max_thrust[k]
+            if magnitude_limit and norm > 1.0:
+                scale /= norm
+            i = thrusters[k]
+            thrust[b, i, 0] = a0 * scale
+            thrust[b, i, 1] = a1 * scale
+            thrust[b, i, 2] = a2 * scale
+            total += norm * scale
+        impulse[b] = total * duration
+        for i in range(force.shape[1]):
+            for d in range(3):
+                force[b, i, d] = bias[b, i, d] + thrust[b, i, d]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def evaluate(
     x: np.ndarray,
     v: np.ndarray,
     masses: np.ndarray,
     tension: np.ndarray,
     stiffness: np.ndarray,
     L0: np.ndarray,
-    tension_scale: np.ndarray,
+    breaking_load: np.ndarray,
     bias: np.ndarray,
     nominal: np.ndarray,
     nominal_strain_energy: np.ndarray,
@@ -103,14 +156,24 @@ def measure(
     length_scale: float,
     speed_scale: float,
     observe_tensions: bool,
+    status: np.ndarray,
+    peak_tension: np.ndarray,
+    impulse: np.ndarray,
+    deviation_limit: float,
+    weights: np.ndarray,
     observation: np.ndarray,
-    vibration_energy: np.ndarray,
-    max_deviation: np.ndarray,
-    slack_fraction: np.ndarray,
+    scalars: np.ndarray,
+    end_reason: np.ndarray,
 ) -> None:
-    """Per cluster: the observation row, vibration energy (J), largest deviation from the
-    nominal place in the cluster frame (m) and the fraction of slack cables.  See :class:`~tether_gym.envs.TetherClusterEnv` for the
-    observation layout and the vibration-energy definition."""
+    """Everything the task reads off each cluster after a step (or a reset), in one pass.
+
+    Writes the observation row (NaN as 0, clipped to +-OBSERVATION_LIMIT; see :class:`~tether_gym.envs.TetherClusterEnv`), ``end_reason``
+    (0 running, 1 formation lost, 2 cable broken, 3 numerics diverged) and ``scalars[b]``:
+    ``[reward, reward_vibration, reward_propellant, reward_slack, reward_failure,
+    vibration_energy (J), max_deviation (m), slack_fraction, kinetic_energy (J),
+    strain_energy (J)]``.  ``weights`` = ``[vibration_weight / energy_scale,
+    propellant_weight / full_impulse, slack_weight, failure_penalty]``.
+    """
     n = x.shape[1]
     m = cables.shape[0]
     motion = np.empty((3, 3))
@@ -125,6 +188,7 @@ def measure(
             for d in range(3):
                 nominal_com[d] += mb[i] * nominal[b, i, d]
         nominal_com /= total
+        kinetic_deformation = 0.0
         kinetic = 0.0
         bias_potential = 0.0
         worst = 0.0
@@ -135,7 +199,8 @@ def measure(
             ux = vb[i, 0] - motion[1, 0] - (motion[2, 1] * rz - motion[2, 2] * ry)
             uy = vb[i, 1] - motion[1, 1] - (motion[2, 2] * rx - motion[2, 0] * rz)
             uz = vb[i, 2] - motion[1, 2] - (motion[2, 0] * ry - motion[2, 1] * rx)
-            kinetic += 0.5 * mb[i] * (ux * ux + uy * uy + uz * uz)
+            kinetic_deformation += 0.5 * mb[i] * (ux * ux + uy * uy + uz * uz)
+            kinetic += 0.5 * mb[i] * (vb[i, 0] * vb[i, 0] + vb[i, 1] * vb[i, 1] + vb[i, 2] * vb[i, 2])
             deviation2 = 0.0
             for d in range(3):
                 bias_potential -= bias[b, i, d] * (xb[i, d] - nominal[b, i, d])
@@ -148,22 +213,48 @@ def measure(
             i = observed[k]
             for d in range(3):
                 deviation = (xb[i, d] - motion[0, d]) - (nominal[b, i, d] - nominal_com[d])
-                observation[b, 3 * k + d] = deviation / length_scale
-                observation[b, 3 * (observed.shape[0] + k) + d] = (vb[i, d] - motion[1, d]) / speed_scale
+                observation[b, 3 * k + d] = _bounded(deviation / length_scale)
+                observation[b, 3 * (observed.shape[0] + k) + d] = _bounded((vb[i, d] - motion[1, d]) / speed_scale)
         strain = 0.0
         slack = 0
+        broken = False
         offset = 6 * observed.shape[0]
         for c in range(m):
             i, j = cables[c, 0], cables[c, 1]
             dx = xb[j, 0] - xb[i, 0]
             dy = xb[j, 1] - xb[i, 1]
             dz = xb[j, 2] - xb[i, 2]
-            observation[b, offset + c] = (math.sqrt(dx * dx + dy * dy + dz * dz) - L0[b, c]) / length_scale
+            observation[b, offset + c] = _bounded((math.sqrt(dx * dx + dy * dy + dz * dz) - L0[b, c]) / length_scale)
             strain += 0.5 * tension[b, c] * tension[b, c] / stiffness[b, c]
             if tension[b, c] <= 0.0:
                 slack += 1
+            if peak_tension[b, c] > breaking_load[b, c]:
+                broken = True
             if observe_tensions:
-                observation[b, offset + m + c] = tension[b, c] / tension_scale[b, c]
-        vibration_energy[b] = kinetic + strain - nominal_strain_energy[b] + bias_potential
-        max_deviation[b] = worst
-        slack_fraction[b] = slack / m
+                observation[b, offset + m + c] = _bounded(tension[b, c] / breaking_load[b, c])
+        vibration = kinetic_deformation + strain - nominal_strain_energy[b] + bias_potential
+        if status[b] != 0:
+            reason = 3
+            vibration = 0.0
+        elif broken:
+            reason = 2
+        elif not worst <= deviation_limit:
+            reason = 1
+        else:
+            reason = 0
+        end_reason[b] = reason
+        slack_fraction = slack / m
+        terms_vibration = -weights[0] * vibration
+        terms_propellant = -weights[1] * impulse[b]
+        terms_slack = -weights[2] * slack_fraction
+        terms_failure = -weights[3] if reason > 0 else 0.0
+        scalars[b, 0] = terms_vibration + terms_propellant + terms_slack + terms_failure
+        scalars[b, 1] = terms_vibration
+        scalars[b, 2] = terms_propellant
+        scalars[b, 3] = terms_slack
+        scalars[b, 4] = terms_failure
+        scalars[b, 5] = vibration
+        scalars[b, 6] = worst
+        scalars[b, 7] = slack_fraction
+        scalars[b, 8] = kinetic
+        scalars[b, 9] = strain

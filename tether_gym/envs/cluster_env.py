@@ -157,6 +157,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
             -OBSERVATION_LIMIT, OBSERVATION_LIMIT, (self.task.observation_size,), np.float32
         )
         self._index = np.zeros(1, dtype=np.int64)
+        self._action_shape = (self.task.action_size,)
         self._viewer: Any = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
@@ -169,7 +170,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         self.task.reset(self.np_random, self._index, positions, velocities)
         if self.render_mode == "human":
             self.render()
-        return self.task.observe(self.np_random)[0], self.task.info(0, None, None)
+        return self.task.observe(self.np_random)[0], self.task.info(0, stepped=False)
 
     def _option_array(self, options: Mapping[str, Any], key: str) -> np.ndarray | None:
         """A reset option as a (1, n, 3) array (None if absent); finiteness is checked downstream."""
@@ -184,19 +185,18 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         a = np.asarray(action, dtype=np.float64)
-        if a.shape != (self.task.action_size,):
+        if a.shape != self._action_shape:
             raise ValueError(
                 f"action must have shape ({self.task.action_size},) (3 per thruster); got shape {a.shape}"
             )
         if not np.isfinite(a).all():
             raise ValueError("action contains NaN or inf; thrust commands must be finite numbers in [-1, 1]")
-        stats = self.task.step(a[None])
-        outcome = self.task.outcome(stats)
+        self.task.step(a.reshape(1, -1))
         observation = self.task.observe(self.np_random)[0]
-        info = self.task.info(0, stats, outcome)
+        info = self.task.info(0)
         if self.render_mode == "human":
             self.render()
-        return observation, float(outcome["reward"][0]), bool(outcome["terminated"][0]), False, info
+        return observation, float(self.task.scalars[0, 0]), bool(self.task.end_reason[0] > 0), False, info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
@@ -207,7 +207,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._viewer is None:
             self._viewer = ClusterRenderer(self.cluster, self.task.max_thrust.max(), human=self.render_mode == "human")
         return self._viewer.draw(
-            self.task.sim.positions_[0], self.task.sim.slack[0], self.task.last_thrust[0], float(self.task.sim.time[0])
+            self.task.sim.positions_[0], self.task.sim.slack[0], self.task.thrust[0], float(self.task.sim.time[0])
         )
 
     def close(self) -> None:

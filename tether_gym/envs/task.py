@@ -20,7 +20,7 @@ from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
 from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, AdvanceStats, BatchSimulator
 
-__all__ = ["END_REASONS", "OBSERVATION_LIMIT", "DampingTask", "Measurements", "TaskConfig"]
+__all__ = ["END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "DampingTask", "TaskConfig"]
 
 ThrustLimit = Literal["per_axis", "magnitude"]
 
@@ -29,44 +29,12 @@ END_REASONS = ("running", "formation_lost", "cable_broken", "numerics_diverged")
 
 RANDOMISABLE = ("masses", "EA", "damping", "N0")
 
-#: Observations are clipped to +-this (it is reached only far beyond a lost formation).
-OBSERVATION_LIMIT = 1e4
+#: Per-cluster quantities the task kernel writes after each step, in this column order.
+SCALARS = ("reward", "reward_vibration", "reward_propellant", "reward_slack", "reward_failure",
+           "vibration_energy", "max_deviation", "slack_fraction", "kinetic_energy", "strain_energy")
+_COLUMN = {name: k for k, name in enumerate(SCALARS)}
 
-
-@dataclasses.dataclass
-class Measurements:
-    """What the task reads off a batch after each reset or step; arrays over the B clusters.
-
-    Attributes:
-        observation: (B, observation_size) float64, before noise.
-        vibration_energy: (B,) J.
-        max_deviation: (B,) largest distance of a satellite from its nominal place in the cluster
-            frame, m.
-        slack_fraction: (B,) fraction of cables slack.
-    """
-
-    observation: np.ndarray
-    vibration_energy: np.ndarray
-    max_deviation: np.ndarray
-    slack_fraction: np.ndarray
-
-    @classmethod
-    def empty(cls, batch: int, observation_size: int) -> Measurements:
-        return cls(np.zeros((batch, observation_size)), np.zeros(batch), np.zeros(batch), np.zeros(batch))
-
-
-def measure(
-    sim: BatchSimulator, bias: np.ndarray, nominal: np.ndarray, nominal_strain_energy: np.ndarray,
-    observed: np.ndarray, length_scale: float, speed_scale: float, observe_tensions: bool,
-    out: Measurements,
-) -> Measurements:
-    """Fill ``out`` from the simulator's current state (one compiled pass over the batch)."""
-    _task_kernels.measure(
-        sim.positions_, sim.velocities_, sim.masses, sim.tension, sim.stiffness, sim.L0, sim.breaking_load,
-        bias, nominal, nominal_strain_energy, sim.cables, observed, length_scale, speed_scale, observe_tensions,
-        out.observation, out.vibration_energy, out.max_deviation, out.slack_fraction,
-    )
-    return out
+OBSERVATION_LIMIT = _task_kernels.OBSERVATION_LIMIT
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,6 +122,12 @@ class TaskConfig:
 class DampingTask:
     """The damping task over a batch of B clusters of one topology.
 
+    After every :meth:`reset` or :meth:`step` the results sit in preallocated arrays:
+    ``observation`` (B, observation_size) float64 (before noise), ``scalars`` (B, len(SCALARS))
+    (reward and its terms, vibration energy in J, largest deviation in m, slack fraction, kinetic
+    and strain energy in J) and ``end_reason`` (B,) (index into ``END_REASONS``; > 0 means
+    terminated).  Read them before the next call.
+
     Args:
         cluster: the nominal cluster (its positions are the nominal shape).
         num_clusters: B.
@@ -188,12 +162,23 @@ class DampingTask:
         self.full_impulse = float(self.max_thrust.sum()) * config.control_interval * (
             math.sqrt(3.0) if config.thrust_limit == "per_axis" else 1.0
         )
+        self.weights = np.array([config.vibration_weight, config.propellant_weight / self.full_impulse,
+                                 config.slack_weight, config.failure_penalty])
         self.energy_scale = self._energy_scale()
-        self.propellant = np.zeros(B)
+        self.weights[0] = config.vibration_weight / self.energy_scale
+        self.force = np.zeros((B, n, 3))
+        self.thrust = np.zeros((B, n, 3))
         self.impulse = np.zeros(B)
-        self.last_thrust = np.zeros((B, n, 3))
-        self.measurements = Measurements.empty(B, self.observation_size)
-        self._measure()
+        self.propellant = np.zeros(B)
+        self.stats = AdvanceStats(
+            substeps=np.zeros(B, dtype=np.int64), step_min=np.full(B, np.inf), step_max=np.zeros(B),
+            status=np.zeros(B, dtype=np.int64), step_sizes=np.zeros((B, 0)), peak_tension=np.zeros((B, m)),
+        )
+        self.observation = np.zeros((B, self.observation_size))
+        self.scalars = np.zeros((B, len(SCALARS)))
+        self.end_reason = np.zeros(B, dtype=np.int64)
+        self._all = np.ones(B, dtype=np.bool_)
+        self._evaluate()
 
     # ------------------------------------------------------------------ nominal state
     def _set_nominal(self, index: int, cluster: Cluster) -> None:
@@ -213,23 +198,33 @@ class DampingTask:
         probe = BatchSimulator(self.cluster, count, safety_factor=self.config.safety_factor)
         probe.reset(x0, v0)
         shape = (count,) + self.cluster.positions.shape
-        result = self._measure_batch(
+        scalars = np.zeros((count, len(SCALARS)))
+        self._evaluate_batch(
             probe, np.ascontiguousarray(np.broadcast_to(self.bias[0], shape)),
             np.ascontiguousarray(np.broadcast_to(self.cluster.positions, shape)),
-            np.full(count, self.nominal_strain_energy[0]), Measurements.empty(count, self.observation_size),
+            np.full(count, self.nominal_strain_energy[0]), np.zeros(count, dtype=np.int64), probe.tension,
+            np.zeros(count), np.zeros((count, self.observation_size)), scalars, np.zeros(count, dtype=np.int64),
         )
-        scale = float(np.mean(result.vibration_energy))
+        scale = float(np.mean(scalars[:, _COLUMN["vibration_energy"]]))
         return scale if scale > 0 else 1.0
 
-    def _measure_batch(
+    def _evaluate_batch(
         self, sim: BatchSimulator, bias: np.ndarray, nominal: np.ndarray, nominal_strain_energy: np.ndarray,
-        out: Measurements,
-    ) -> Measurements:
-        return measure(sim, bias, nominal, nominal_strain_energy, self.observed, self.length_scale,
-                       self.speed_scale, self.config.observe_tensions, out)
+        status: np.ndarray, peak_tension: np.ndarray, impulse: np.ndarray, observation: np.ndarray,
+        scalars: np.ndarray, end_reason: np.ndarray,
+    ) -> None:
+        _task_kernels.evaluate(
+            sim.positions_, sim.velocities_, sim.masses, sim.tension, sim.stiffness, sim.L0, sim.breaking_load,
+            bias, nominal, nominal_strain_energy, sim.cables, self.observed, self.length_scale, self.speed_scale,
+            self.config.observe_tensions, status, peak_tension, impulse, self.max_deviation, self.weights,
+            observation, scalars, end_reason,
+        )
 
-    def _measure(self) -> None:
-        self._measure_batch(self.sim, self.bias, self.nominal, self.nominal_strain_energy, self.measurements)
+    def _evaluate(self) -> None:
+        self._evaluate_batch(
+            self.sim, self.bias, self.nominal, self.nominal_strain_energy, self.stats.status,
+            self.stats.peak_tension, self.impulse, self.observation, self.scalars, self.end_reason,
+        )
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(self, rng: np.random.Generator, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -267,9 +262,12 @@ class DampingTask:
             v0 = velocities
         self.sim.reset(x0, v0, indices=indices)
         self.propellant[indices] = 0.0
-        self.last_thrust[indices] = 0.0
+        self.thrust[indices] = 0.0
         self.impulse[indices] = 0.0
-        self._measure()
+        self.stats.status[indices] = self.sim.status[indices]
+        self.stats.peak_tension[indices] = self.sim.tension[indices]
+        self.stats.substeps[indices] = 0
+        self._evaluate()
 
     def _randomised_cluster(self, rng: np.random.Generator) -> Cluster:
         changes: dict[str, Any] = {}
@@ -283,85 +281,58 @@ class DampingTask:
         return self.cluster.replace(**changes)
 
     # ------------------------------------------------------------------ step
-    def thrust(self, actions: np.ndarray) -> np.ndarray:
-        """(B, n, 3) thruster forces, N, from (B, action_size) normalised actions (clipped to
-        [-1, 1]; with the magnitude limit a command longer than 1 is scaled back to length 1)."""
-        a = np.clip(actions, -1.0, 1.0).reshape(self.num_clusters, self.thrusters.size, 3)
-        if self.config.thrust_limit == "magnitude":
-            norm = np.sqrt((a * a).sum(axis=2, keepdims=True))
-            a = a / np.maximum(norm, 1.0)
-        forces = np.zeros((self.num_clusters, self.cluster.num_nodes, 3))
-        forces[:, self.thrusters] = a * self.max_thrust[None, :, None]
-        return forces
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> None:
+        """Apply (B, action_size) float64 actions for one control interval (bias thrust added) to
+        the ``active`` clusters (default all), then evaluate observation, reward and end flags.
 
-    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> AdvanceStats:
-        """Apply (B, action_size) actions for one control interval (bias thrust added), then
-        measure the new state."""
-        thrust = self.thrust(actions)
-        stats = self.sim.advance(self.config.control_interval, self.bias + thrust, active=active)
-        impulse = np.sqrt((thrust * thrust).sum(axis=2)).sum(axis=1) * self.config.control_interval
-        mask = slice(None) if active is None else active
-        self.propellant[mask] += impulse[mask]
-        self.impulse[mask] = impulse[mask]
-        self.last_thrust[mask] = thrust[mask]
-        self._measure()
-        return stats
+        Commands are clipped to [-1, 1]; with the magnitude limit a command longer than 1 is
+        scaled back to length 1; then they are multiplied by each thruster's ``max_thrust``.
+        """
+        mask = self._all if active is None else active
+        interval = self.config.control_interval
+        _task_kernels.command_forces(
+            actions, self.thrusters, self.max_thrust, self.config.thrust_limit == "magnitude", self.bias,
+            interval, mask, self.force, self.thrust, self.impulse,
+        )
+        self.sim.advance_unchecked(interval, self.force, mask, self.stats)
+        self.propellant[mask] += self.impulse[mask]
+        self._evaluate()
 
     # ------------------------------------------------------------------ results
     def observe(self, rng: np.random.Generator) -> np.ndarray:
-        """(B, observation_size) float32 observation (see the env's documentation)."""
-        observation = self.measurements.observation
-        if self.config.observation_noise > 0:
-            observation = observation + self.config.observation_noise * rng.standard_normal(observation.shape)
-        clipped = np.clip(np.nan_to_num(observation, nan=0.0), -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
-        return clipped.astype(np.float32)
+        """(B, observation_size) float32 observation, with noise if configured."""
+        if self.config.observation_noise == 0:
+            return self.observation.astype(np.float32)
+        noisy = self.observation + self.config.observation_noise * rng.standard_normal(self.observation.shape)
+        return np.clip(noisy, -OBSERVATION_LIMIT, OBSERVATION_LIMIT).astype(np.float32)
 
-    def outcome(self, stats: AdvanceStats) -> dict[str, np.ndarray]:
-        """Reward terms, reward and end flags of the interval just stepped, as (B,) arrays."""
-        cfg = self.config
-        measured = self.measurements
-        diverged = stats.diverged
-        broken = np.any(stats.peak_tension > self.sim.breaking_load, axis=1)
-        lost = ~(measured.max_deviation <= self.max_deviation)  # NaN counts as lost
-        end_reason = np.where(diverged, 3, np.where(broken, 2, np.where(lost, 1, 0)))
-        terminated = end_reason > 0
-        vibration = np.where(diverged, 0.0, measured.vibration_energy)
-        terms = {
-            "reward_vibration": -cfg.vibration_weight * vibration / self.energy_scale,
-            "reward_propellant": -cfg.propellant_weight * self.impulse / self.full_impulse,
-            "reward_slack": -cfg.slack_weight * measured.slack_fraction,
-            "reward_failure": -cfg.failure_penalty * terminated,
-        }
-        reward = terms["reward_vibration"] + terms["reward_propellant"] + terms["reward_slack"] + terms["reward_failure"]
-        return dict(terms, reward=reward, terminated=terminated, end_reason=end_reason)
-
-    def info(self, index: int, stats: AdvanceStats | None, outcome: Mapping[str, np.ndarray] | None) -> dict[str, Any]:
-        """The ``info`` dict of cluster ``index``."""
+    def info(self, index: int, stepped: bool = True) -> dict[str, Any]:
+        """The ``info`` dict of cluster ``index`` (``stepped=False`` after a reset: no step fields)."""
         sim = self.sim
-        energy = sim.energy()
+        row = self.scalars[index].tolist()
+        kinetic, strain = row[_COLUMN["kinetic_energy"]], row[_COLUMN["strain_energy"]]
+        dissipated, work = float(sim._dissipated[index]), float(sim._work[index])
         info: dict[str, Any] = {
             "time": float(sim.time[index]),
-            "vibration_energy": float(self.measurements.vibration_energy[index]),
-            "kinetic_energy": float(energy.kinetic[index]),
-            "strain_energy": float(energy.strain[index]),
-            "dissipated_energy": float(energy.dissipated[index]),
-            "external_work": float(energy.work[index]),
-            "energy_residual": float(energy.residual[index]),
+            "vibration_energy": row[_COLUMN["vibration_energy"]],
+            "kinetic_energy": kinetic,
+            "strain_energy": strain,
+            "dissipated_energy": dissipated,
+            "external_work": work,
+            "energy_residual": kinetic + strain - float(sim._energy0[index]) + dissipated - work,
             "tensions": sim.tension[index].copy(),
-            "slack_count": int(round(self.measurements.slack_fraction[index] * self.cluster.num_cables)),
-            "max_deviation": float(self.measurements.max_deviation[index]),
+            "slack_count": round(row[_COLUMN["slack_fraction"]] * self.cluster.num_cables),
+            "max_deviation": row[_COLUMN["max_deviation"]],
             "propellant_used": float(self.propellant[index]),
-            "thrust": self.last_thrust[index].copy(),
+            "thrust": self.thrust[index].copy(),
         }
-        if stats is not None:
-            info.update(
-                substeps=int(stats.substeps[index]),
-                step_min=float(stats.step_min[index]),
-                step_max=float(stats.step_max[index]),
-                peak_tension=stats.peak_tension[index].copy(),
-            )
-        if outcome is not None:
+        if stepped:
+            stats = self.stats
+            info["substeps"] = int(stats.substeps[index])
+            info["step_min"] = float(stats.step_min[index])
+            info["step_max"] = float(stats.step_max[index])
+            info["peak_tension"] = stats.peak_tension[index].copy()
             for key in ("reward_vibration", "reward_propellant", "reward_slack", "reward_failure"):
-                info[key] = float(outcome[key][index])
-            info["end_reason"] = END_REASONS[int(outcome["end_reason"][index])]
+                info[key] = row[_COLUMN[key]]
+            info["end_reason"] = END_REASONS[int(self.end_reason[index])]
         return info
