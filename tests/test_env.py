@@ -275,3 +275,19 @@ def test_bad_actions_and_reset_options_get_clear_errors() -> None:
         env.reset(options={"speed": 1})
     with pytest.raises(ValueError, match=r"reset option 'positions' must be an \(4, 3\) array"):
         env.reset(options={"positions": np.zeros(3)})
+
+
+def test_domain_randomisation_redraws_parameters_and_keeps_the_equilibrium() -> None:
+    env = TetherClusterEnv(preset="hub", randomize={"masses": 0.3, "EA": 0.2, "damping": 0.5, "N0": 0.5})
+    drawn = []
+    for seed in range(3):
+        env.reset(seed=seed)
+        task = env.task
+        drawn.append(task.sim.masses[0].copy())
+        nominal = env.cluster.masses
+        assert np.all(np.abs(task.sim.masses[0] / nominal - 1) <= 0.3)
+        residual = task.bias[0] - task.sim.internal_forces(task.nominal)[0]
+        assert np.abs(residual).max() < 1e-12
+    assert not np.array_equal(drawn[0], drawn[1])
+    env.reset(seed=0)
+    assert np.array_equal(env.task.sim.masses[0], drawn[0])  # reproducible from the seed

@@ -37,3 +37,19 @@ def test_benchmarks_run_in_quick_mode(script: str, tmp_path: Path) -> None:
     args = ["--quick"] + (["--plot", str(tmp_path / "sf.png")] if "safety" in script else [])
     out = run(script, *args)
     assert "substeps/s" in out or "drift" in out
+
+
+def test_env_benchmark_runs() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "tether_gym.bench", "--steps", "300", "--repeats", "1"],
+        capture_output=True, text=True, timeout=600, cwd=ROOT,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "TetherTetrahedron-v0" in result.stdout and "steps/s" in result.stdout
+
+
+def test_env_demo_runs(tmp_path: Path) -> None:
+    out = run("examples/env_demo.py", "--out", str(tmp_path), "--seeds", "1", "--gif-steps", "5")
+    assert (tmp_path / "env_energy.png").stat().st_size > 10_000
+    assert (tmp_path / "env_demo.gif").stat().st_size > 1_000
+    assert "velocity feedback" in out

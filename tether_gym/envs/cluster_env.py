@@ -97,7 +97,8 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Info
 
-    ``info`` holds the following:
+    After a step, ``info`` holds everything below; after a reset it holds the state quantities
+    only (no reward terms, sub-step figures, ``peak_tension`` or ``end_reason``). It holds:
     - the reward terms;
     - ``substeps``, ``step_min`` and ``step_max`` (s) of the interval, and ``peak_tension``
       ((c,) N, each cable's largest tension within it);
@@ -115,7 +116,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     | ``preset_kwargs`` | ``None`` | overrides of the preset's parameters, e.g. ``{"N0": 1.0}`` |
     | ``cluster`` | ``None`` | a :class:`~tether_gym.Cluster` to use instead of a preset |
     | ``render_mode`` | ``None`` | ``"rgb_array"`` or ``"human"`` |
-    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.5 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor`` |
+    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor`` |
 
     ## Version History
 

@@ -149,10 +149,10 @@ class DampingTask:
             0.3 * float(cluster.L0.min()) if config.max_deviation is None else float(config.max_deviation)
         )
         # Observation scales: displacements and elongations in units of the initial displacement,
-        # velocities in units of the initial velocity (each at least a small floor, so exact
-        # resets with zero scales still give finite observations).
-        self.length_scale = max(config.initial_displacement, 1e-3 * float(cluster.L0.min()))
-        self.speed_scale = max(config.initial_velocity, 1e-3)
+        # velocities in units of the initial velocity; a zero scale (exact resets only) falls back
+        # to 0.1 % of the shortest cable and 1 mm/s.
+        self.length_scale = config.initial_displacement or 1e-3 * float(cluster.L0.min())
+        self.speed_scale = config.initial_velocity or 1e-3
         self.observation_size = 6 * self.observed.size + m + (m if config.observe_tensions else 0)
         self.nominal = np.broadcast_to(cluster.positions, (B, n, 3)).copy()
         self.bias = np.zeros((B, n, 3))
