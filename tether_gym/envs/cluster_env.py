@@ -116,6 +116,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     | ``preset_kwargs`` | ``None`` | overrides of the preset's parameters, e.g. ``{"N0": 1.0}`` |
     | ``cluster`` | ``None`` | a :class:`~tether_gym.Cluster` to use instead of a preset |
     | ``render_mode`` | ``None`` | ``"rgb_array"`` or ``"human"`` |
+    | ``render_exaggeration`` | 100 | displacements from nominal are drawn this many times larger |
     | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor`` |
 
     ## Version History
@@ -131,6 +132,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         preset_kwargs: Mapping[str, Any] | None = None,
         cluster: Cluster | None = None,
         render_mode: str | None = None,
+        render_exaggeration: float = 100.0,
         **task: Any,
     ) -> None:
         super().__init__()
@@ -160,6 +162,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         self._index = np.zeros(1, dtype=np.int64)
         self._action_shape = (self.task.action_size,)
         self._viewer: Any = None
+        self.render_exaggeration = float(render_exaggeration)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
@@ -206,7 +209,10 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         from tether_gym.envs.rendering import ClusterRenderer
 
         if self._viewer is None:
-            self._viewer = ClusterRenderer(self.cluster, self.task.max_thrust.max(), human=self.render_mode == "human")
+            self._viewer = ClusterRenderer(
+                self.cluster, self.task.max_thrust.max(), human=self.render_mode == "human",
+                exaggeration=self.render_exaggeration,
+            )
         return self._viewer.draw(
             self.task.sim.positions_[0], self.task.sim.slack[0], self.task.thrust[0], float(self.task.sim.time[0])
         )

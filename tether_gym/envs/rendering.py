@@ -14,9 +14,11 @@ class ClusterRenderer:
         cluster: the cluster (for its cables and nominal size).
         max_thrust: thrust drawn as a full-length arrow, N.
         human: open a window (``plt.show`` mode) instead of drawing off-screen.
+        exaggeration: factor applied to each satellite's displacement from its nominal place
+            (in the centre-of-mass frame) so that centimetre vibrations of 100 m cables show.
     """
 
-    def __init__(self, cluster: Cluster, max_thrust: float, human: bool = False) -> None:
+    def __init__(self, cluster: Cluster, max_thrust: float, human: bool = False, exaggeration: float = 1.0) -> None:
         import matplotlib
 
         if not human:
@@ -28,6 +30,8 @@ class ClusterRenderer:
         self.cluster = cluster
         self.max_thrust = max_thrust
         self.human = human
+        self.exaggeration = exaggeration
+        self.nominal = cluster.positions - cluster.positions.mean(axis=0)
         self.figure = plt.figure(figsize=(5, 5), dpi=96) if human else matplotlib.figure.Figure(figsize=(5, 5), dpi=96)
         if not human:
             FigureCanvasAgg(self.figure)
@@ -41,6 +45,7 @@ class ClusterRenderer:
         ax = self.axes
         ax.cla()
         centre = positions.mean(axis=0)
+        positions = centre + self.nominal + self.exaggeration * (positions - centre - self.nominal)
         for c, (i, j) in enumerate(self.cluster.cables):
             segment = positions[[i, j]]
             if slack[c]:
@@ -58,7 +63,8 @@ class ClusterRenderer:
         ax.set_ylabel("y (m)")
         ax.set_zlabel("z (m)")
         ax.set_title(
-            f"{self.cluster.name}  t = {time:6.2f} s   slack {int(slack.sum())}/{slack.size}\n"
+            f"{self.cluster.name}  t = {time:6.2f} s   slack {int(slack.sum())}/{slack.size}"
+            f"   displacements x{self.exaggeration:g}\n"
             "blue: taut, orange dashed: slack, red: thrust", fontsize=9,
         )
         self.figure.canvas.draw()
