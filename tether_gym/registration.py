@@ -28,6 +28,7 @@ def register_envs() -> None:
         gym.register(
             id=env_id,
             entry_point="tether_gym.envs.cluster_env:TetherClusterEnv",
+            vector_entry_point="tether_gym.envs.vector_env:TetherClusterVectorEnv",
             max_episode_steps=steps,
             kwargs={"preset": preset},
         )

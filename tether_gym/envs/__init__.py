@@ -2,5 +2,6 @@
 
 from tether_gym.envs.cluster_env import TetherClusterEnv
 from tether_gym.envs.task import END_REASONS, DampingTask, TaskConfig
+from tether_gym.envs.vector_env import TetherClusterVectorEnv
 
-__all__ = ["END_REASONS", "DampingTask", "TaskConfig", "TetherClusterEnv"]
+__all__ = ["END_REASONS", "DampingTask", "TaskConfig", "TetherClusterEnv", "TetherClusterVectorEnv"]

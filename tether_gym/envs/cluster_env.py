@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -11,8 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from tether_gym.cluster import Cluster
-from tether_gym.envs.task import OBSERVATION_LIMIT, DampingTask, TaskConfig
-from tether_gym.presets import make_cluster
+from tether_gym.envs.task import OBSERVATION_LIMIT, task_from_arguments
 
 __all__ = ["TetherClusterEnv"]
 
@@ -136,23 +135,11 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         **task: Any,
     ) -> None:
         super().__init__()
-        if cluster is None:
-            cluster = make_cluster(preset, **dict(preset_kwargs or {}))
-        elif not isinstance(cluster, Cluster):
-            raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None; got {render_mode!r}")
-        fields = {f for f in TaskConfig.__dataclass_fields__}
-        unknown = sorted(set(task) - fields)
-        if unknown:
-            raise TypeError(f"unknown argument(s) {unknown}; task arguments are {sorted(fields)}")
-        for key in ("thrusters", "observed_satellites"):
-            if task.get(key) is not None:
-                task[key] = tuple(task[key])
-        if isinstance(task.get("max_thrust"), Sequence):
-            task["max_thrust"] = tuple(float(v) for v in task["max_thrust"])
-        self.config = TaskConfig(**task)
-        self.task = DampingTask(cluster, 1, self.config)
+        self.task = task_from_arguments(1, preset, preset_kwargs, cluster, **task)
+        self.config = self.task.config
+        cluster = self.task.cluster
         self.cluster = cluster
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, (self.task.action_size,), np.float32)
@@ -171,10 +158,10 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; accepted options are {list(RESET_OPTION_KEYS)}")
         positions, velocities = (self._option_array(options, key) for key in RESET_OPTION_KEYS)
-        self.task.reset(self.np_random, self._index, positions, velocities)
+        self.task.reset([self.np_random], self._index, positions, velocities)
         if self.render_mode == "human":
             self.render()
-        return self.task.observe(self.np_random)[0], self.task.info(0, stepped=False)
+        return self.task.observe([self.np_random])[0], self.task.info(0, stepped=False)
 
     def _option_array(self, options: Mapping[str, Any], key: str) -> np.ndarray | None:
         """A reset option as a (1, n, 3) array (None if absent); finiteness is checked downstream."""
@@ -196,7 +183,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         if not np.isfinite(a).all():
             raise ValueError("action contains NaN or inf; thrust commands must be finite numbers in [-1, 1]")
         self.task.step(a.reshape(1, -1))
-        observation = self.task.observe(self.np_random)[0]
+        observation = self.task.observe([self.np_random])[0]
         info = self.task.info(0)
         if self.render_mode == "human":
             self.render()

@@ -18,9 +18,9 @@ from numpy.typing import ArrayLike
 
 from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
-from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, AdvanceStats, BatchSimulator
+from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, PARALLEL_MIN_BATCH, AdvanceStats, BatchSimulator
 
-__all__ = ["END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "DampingTask", "TaskConfig"]
+__all__ = ["END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "DampingTask", "TaskConfig", "task_from_arguments"]
 
 ThrustLimit = Literal["per_axis", "magnitude"]
 
@@ -119,6 +119,33 @@ class TaskConfig:
                 raise ValueError(f"randomize[{key!r}] must be a relative spread in [0, 1); got {spread!r}")
 
 
+def task_from_arguments(
+    num_clusters: int,
+    preset: str = "tetrahedron",
+    preset_kwargs: Mapping[str, Any] | None = None,
+    cluster: Cluster | None = None,
+    **task: Any,
+) -> DampingTask:
+    """A :class:`DampingTask` from the environments' keyword arguments (see the env docstring):
+    a preset name with overrides, or a cluster, plus :class:`TaskConfig` fields."""
+    from tether_gym.presets import make_cluster
+
+    if cluster is None:
+        cluster = make_cluster(preset, **dict(preset_kwargs or {}))
+    elif not isinstance(cluster, Cluster):
+        raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
+    fields = set(TaskConfig.__dataclass_fields__)
+    unknown = sorted(set(task) - fields)
+    if unknown:
+        raise TypeError(f"unknown argument(s) {unknown}; task arguments are {sorted(fields)}")
+    for key in ("thrusters", "observed_satellites"):
+        if task.get(key) is not None:
+            task[key] = tuple(task[key])
+    if isinstance(task.get("max_thrust"), Sequence):
+        task["max_thrust"] = tuple(float(v) for v in task["max_thrust"])
+    return DampingTask(cluster, num_clusters, TaskConfig(**task))
+
+
 class DampingTask:
     """The damping task over a batch of B clusters of one topology.
 
@@ -213,7 +240,8 @@ class DampingTask:
         status: np.ndarray, peak_tension: np.ndarray, impulse: np.ndarray, observation: np.ndarray,
         scalars: np.ndarray, end_reason: np.ndarray,
     ) -> None:
-        _task_kernels.evaluate(
+        kernel = _task_kernels.evaluate_parallel if sim.num_clusters >= PARALLEL_MIN_BATCH else _task_kernels.evaluate_serial
+        kernel(
             sim.positions_, sim.velocities_, sim.masses, sim.tension, sim.stiffness, sim.L0, sim.breaking_load,
             bias, nominal, nominal_strain_energy, sim.cables, self.observed, self.length_scale, self.speed_scale,
             self.config.observe_tensions, status, peak_tension, impulse, self.max_deviation, self.weights,
@@ -243,20 +271,24 @@ class DampingTask:
 
     def reset(
         self,
-        rng: np.random.Generator,
+        rngs: Sequence[np.random.Generator],
         indices: np.ndarray,
         positions: ArrayLike | None = None,
         velocities: ArrayLike | None = None,
     ) -> None:
-        """Start new episodes for clusters ``indices``: randomise parameters (if configured) and
-        draw initial conditions from ``rng``, or use the given (k, n, 3) positions/velocities."""
-        for b in indices:
+        """Start new episodes for clusters ``indices``, cluster ``indices[k]`` drawing from
+        ``rngs[k]``: randomise its parameters (if configured), then draw its initial conditions,
+        or use the given (k, n, 3) positions/velocities.  Each cluster draws only from its own
+        generator, so a cluster reset in a batch matches the same cluster reset alone."""
+        for rng, b in zip(rngs, indices):
             if self.config.randomize:
                 self._set_nominal(int(b), self._randomised_cluster(rng))
             elif self.sim.clusters[b] is not self.cluster:
                 self._set_nominal(int(b), self.cluster)
         if positions is None and velocities is None:
-            x0, v0 = self.sample_initial_state(rng, len(indices))
+            states = [self.sample_initial_state(rng, 1) for rng in rngs]
+            x0 = np.concatenate([x for x, _ in states])
+            v0 = np.concatenate([v for _, v in states])
         else:
             x0 = self.nominal[indices] if positions is None else positions
             v0 = velocities
@@ -299,15 +331,52 @@ class DampingTask:
         self._evaluate()
 
     # ------------------------------------------------------------------ results
-    def observe(self, rng: np.random.Generator) -> np.ndarray:
-        """(B, observation_size) float32 observation, with noise if configured."""
+    def observe(self, rngs: Sequence[np.random.Generator], indices: np.ndarray | None = None) -> np.ndarray:
+        """(k, observation_size) float32 observation of clusters ``indices`` (default all B);
+        with noise configured, the noise of ``indices[k]`` comes from ``rngs[k]``."""
+        observation = self.observation if indices is None else self.observation[indices]
         if self.config.observation_noise == 0:
-            return self.observation.astype(np.float32)
-        noisy = self.observation + self.config.observation_noise * rng.standard_normal(self.observation.shape)
+            return observation.astype(np.float32)
+        noise = np.stack([rng.standard_normal(self.observation_size) for rng in rngs])
+        noisy = observation + self.config.observation_noise * noise
         return np.clip(noisy, -OBSERVATION_LIMIT, OBSERVATION_LIMIT).astype(np.float32)
 
+    def info_arrays(self, stepped: bool = True) -> dict[str, np.ndarray]:
+        """Every ``info`` quantity for the whole batch: (B,) or (B, ...) arrays, some of them views
+        of the task's buffers (copy what you keep).  ``stepped=False`` (after a reset) leaves out
+        the per-step quantities.  ``end_reason`` is the code; see ``END_REASONS``."""
+        sim = self.sim
+        column = self.scalars.T
+        kinetic, strain = column[_COLUMN["kinetic_energy"]], column[_COLUMN["strain_energy"]]
+        arrays: dict[str, np.ndarray] = {
+            "time": sim.time,
+            "vibration_energy": column[_COLUMN["vibration_energy"]],
+            "kinetic_energy": kinetic,
+            "strain_energy": strain,
+            "dissipated_energy": sim._dissipated,
+            "external_work": sim._work,
+            "energy_residual": kinetic + strain - sim._energy0 + sim._dissipated - sim._work,
+            "tensions": sim.tension,
+            "slack_count": np.rint(column[_COLUMN["slack_fraction"]] * self.cluster.num_cables).astype(np.int64),
+            "max_deviation": column[_COLUMN["max_deviation"]],
+            "propellant_used": self.propellant,
+            "thrust": self.thrust,
+        }
+        if stepped:
+            arrays.update(
+                substeps=self.stats.substeps, step_min=self.stats.step_min, step_max=self.stats.step_max,
+                peak_tension=self.stats.peak_tension,
+                **{key: column[_COLUMN[key]] for key in ("reward_vibration", "reward_propellant", "reward_slack",
+                                                          "reward_failure")},
+                end_reason=self.end_reason,
+            )
+        return arrays
+
     def info(self, index: int, stepped: bool = True) -> dict[str, Any]:
-        """The ``info`` dict of cluster ``index`` (``stepped=False`` after a reset: no step fields)."""
+        """The ``info`` dict of cluster ``index``: the values of :meth:`info_arrays` at that index
+        as Python scalars and array copies, with ``end_reason`` as its name.  Built directly
+        (not through info_arrays) because the single env's step rate depends on it; a test keeps
+        the two identical."""
         sim = self.sim
         row = self.scalars[index].tolist()
         kinetic, strain = row[_COLUMN["kinetic_energy"]], row[_COLUMN["strain_energy"]]

@@ -1,0 +1,169 @@
+"""The native vector environment: N clusters stepped together by the batched core."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from tether_gym.cluster import Cluster
+from tether_gym.envs.task import END_REASONS, OBSERVATION_LIMIT, task_from_arguments
+
+__all__ = ["TetherClusterVectorEnv"]
+
+#: Info keys that exist only after a step (a reset's info lacks them, as in the single env).
+STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", "reward_vibration", "reward_propellant",
+             "reward_slack", "reward_failure", "end_reason")
+
+
+class TetherClusterVectorEnv(VectorEnv):
+    """N independent :class:`~tether_gym.envs.TetherClusterEnv` tasks, stepped as one batch.
+
+    This is what ``gym.make_vec(id, num_envs=N)`` returns for every tether-gym id. The dynamics,
+    observation, reward and end flags are those of the single env: each sub-env gives the same
+    bits as a single env seeded the same way. The sub-envs differ from each other in these ways:
+    - **Seeds.** Sub-env i is seeded with ``seed + i`` (or with ``seed[i]`` for a list).
+    - **Sub-steps.** Each sub-env sub-steps at its own critical step.
+    - **Divergence.** A sub-env that diverges or ends leaves the others untouched.
+
+    **Autoreset** is same-step (``metadata["autoreset_mode"]``). When a sub-env terminates or is
+    truncated, it is reset within the same ``step``:
+    - the returned observation is the new episode's first observation;
+    - ``infos["final_obs"]`` (an object array) holds the last observation of the old episode;
+    - ``infos["final_info"]`` (a dict of arrays) holds its last info;
+    - ``infos["_final_obs"]`` and ``infos["_final_info"]`` mark which sub-envs ended.
+
+    Infos follow Gymnasium's vector layout: every key holds an (N, ...) array, and a boolean
+    ``"_key"`` array marks the sub-envs that have it. A sub-env that was just reset has only the
+    keys of a reset's info. ``end_reason`` is a string array.
+
+    Args:
+        num_envs: N.
+        max_episode_steps: truncation after this many steps (``gym.make_vec`` passes the id's).
+        preset, preset_kwargs, cluster, **task: as for :class:`~tether_gym.envs.TetherClusterEnv`.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        preset: str = "tetrahedron",
+        preset_kwargs: Mapping[str, Any] | None = None,
+        cluster: Cluster | None = None,
+        max_episode_steps: int | None = None,
+        **task: Any,
+    ) -> None:
+        if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer; got {num_envs!r}")
+        if max_episode_steps is not None and (not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1):
+            raise ValueError(f"max_episode_steps must be a positive integer or None; got {max_episode_steps!r}")
+        self.num_envs = int(num_envs)
+        self.task = task_from_arguments(self.num_envs, preset, preset_kwargs, cluster, **task)
+        self.cluster = self.task.cluster
+        self.max_episode_steps = max_episode_steps
+        self.render_mode = None
+        self.single_action_space = spaces.Box(-1.0, 1.0, (self.task.action_size,), np.float32)
+        self.single_observation_space = spaces.Box(
+            -OBSERVATION_LIMIT, OBSERVATION_LIMIT, (self.task.observation_size,), np.float32
+        )
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(self.num_envs)]
+        self._all = np.arange(self.num_envs)
+        self._episode_steps = np.zeros(self.num_envs, dtype=np.int64)
+        self._action_shape = (self.num_envs, self.task.action_size)
+        self._reason_names = np.array(END_REASONS)
+
+    # ------------------------------------------------------------------ API
+    def reset(
+        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every sub-env. ``seed``: an int (sub-env i gets ``seed + i``), a list of N seeds
+        or Nones, or None (keep the generators). ``options``: ``positions`` and/or ``velocities``,
+        (N, n, 3) arrays, for exact initial conditions."""
+        if seed is not None:
+            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, (int, np.integer)) else list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds; got {len(seeds)} seeds")
+            for i, value in enumerate(seeds):
+                if value is not None:
+                    self._rngs[i] = seeding.np_random(int(value))[0]
+        options = dict(options or {})
+        unknown = sorted(set(options) - {"positions", "velocities"})
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; accepted options are ['positions', 'velocities']")
+        shape = (self.num_envs, self.cluster.num_nodes, 3)
+        arrays = {}
+        for key in ("positions", "velocities"):
+            if options.get(key) is not None:
+                arrays[key] = np.asarray(options[key], dtype=np.float64)
+                if arrays[key].shape != shape:
+                    raise ValueError(f"reset option {key!r} must have shape {shape}; got {arrays[key].shape}")
+        self.task.reset(self._rngs, self._all, arrays.get("positions"), arrays.get("velocities"))
+        self._episode_steps[:] = 0
+        observation = self.task.observe(self._rngs)
+        return observation, self._infos(stepped=None)
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != self._action_shape:
+            raise ValueError(f"actions must have shape {self._action_shape} (num_envs, 3 per thruster); got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError("actions contain NaN or inf; thrust commands must be finite numbers in [-1, 1]")
+        task = self.task
+        task.step(np.ascontiguousarray(a))
+        self._episode_steps += 1
+        rewards = task.scalars[:, 0].copy()
+        terminated = task.end_reason > 0
+        truncated = (
+            self._episode_steps >= self.max_episode_steps
+            if self.max_episode_steps is not None
+            else np.zeros(self.num_envs, dtype=np.bool_)
+        )
+        observation = task.observe(self._rngs)
+        done = terminated | truncated
+        if not done.any():
+            return observation, rewards, terminated, truncated, self._infos(stepped=np.ones(self.num_envs, bool))
+        ended = np.flatnonzero(done)
+        final_info = self._infos(stepped=np.ones(self.num_envs, bool), rows=done)
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        for i in ended:
+            final_obs[i] = observation[i].copy()
+        task.reset([self._rngs[i] for i in ended], ended)
+        self._episode_steps[ended] = 0
+        observation[ended] = task.observe([self._rngs[i] for i in ended], ended)
+        infos = self._infos(stepped=~done)
+        infos.update(final_obs=final_obs, _final_obs=done.copy(), final_info=final_info, _final_info=done.copy())
+        return observation, rewards, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Nothing to release: the batch lives in this process."""
+
+    # ------------------------------------------------------------------ infos
+    def _infos(self, stepped: np.ndarray | None, rows: np.ndarray | None = None) -> dict[str, Any]:
+        """Vector infos: copies of the task's info arrays, each with its ``_key`` mask.
+
+        ``stepped`` marks the sub-envs whose info includes the per-step keys (None: a reset, no
+        step keys at all); ``rows`` restricts every key to those sub-envs (for ``final_info``);
+        entries outside a mask are zero, as Gymnasium's vector envs leave them."""
+        arrays = self.task.info_arrays(stepped is not None)
+        present_all = np.ones(self.num_envs, dtype=np.bool_) if rows is None else rows
+        infos: dict[str, Any] = {}
+        for key, array in arrays.items():
+            present = present_all & stepped if (key in STEP_KEYS and stepped is not None) else present_all
+            if key == "end_reason":
+                array = self._reason_names[array]
+            if present.all():
+                values = array.copy()
+            else:
+                mask = present.reshape((-1,) + (1,) * (array.ndim - 1))
+                values = np.where(mask, array, np.zeros((), dtype=array.dtype))
+            infos[key] = values
+            infos["_" + key] = present.copy()
+        return infos
