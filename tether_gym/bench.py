@@ -63,6 +63,60 @@ def vector_env_steps_per_second(env_id: str, num_envs: int, steps: int, sync: bo
     return num_envs * steps / elapsed
 
 
+def ppo_env_share(env_id: str, num_envs: int, timesteps: int) -> tuple[float, float, float]:
+    """(seconds with the env, seconds with a zero-cost env of the same spaces, env share) of PPO
+    training on the native vector env through the SB3 adapter.  PPO uses SB3's default
+    hyperparameters (batch 64, 10 epochs) but for a rollout of 128 steps per env."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecEnv
+
+    from tether_gym.sb3 import make_sb3_vec_env
+
+    class ZeroCostVecEnv(VecEnv):
+        """Same spaces, no work: what PPO costs by itself."""
+
+        def __init__(self, like: VecEnv) -> None:
+            super().__init__(like.num_envs, like.observation_space, like.action_space)
+            self._obs = np.zeros((like.num_envs,) + like.observation_space.shape, dtype=np.float32)
+            self._rewards = np.zeros(like.num_envs, dtype=np.float32)
+            self._dones = np.zeros(like.num_envs, dtype=bool)
+
+        def reset(self) -> np.ndarray:
+            return self._obs.copy()
+
+        def step_async(self, actions: np.ndarray) -> None:
+            pass
+
+        def step_wait(self) -> tuple:
+            return self._obs.copy(), self._rewards.copy(), self._dones.copy(), [{} for _ in range(self.num_envs)]
+
+        def close(self) -> None:
+            pass
+
+        def get_attr(self, attr_name: str, indices: object = None) -> list:
+            return [None] * self.num_envs
+
+        def set_attr(self, attr_name: str, value: object, indices: object = None) -> None:
+            pass
+
+        def env_method(self, method_name: str, *args: object, indices: object = None, **kwargs: object) -> list:
+            return [None] * self.num_envs
+
+        def env_is_wrapped(self, wrapper_class: type, indices: object = None) -> list:
+            return [False] * self.num_envs
+
+    real = make_sb3_vec_env(env_id, num_envs, seed=0)
+    times = []
+    for venv in (real, ZeroCostVecEnv(real)):
+        model = PPO("MlpPolicy", venv, n_steps=128, seed=0, device="cpu")
+        model.learn(total_timesteps=num_envs * 128)  # warm-up (compilation, torch)
+        start = time.perf_counter()
+        model.learn(total_timesteps=timesteps, reset_num_timesteps=False)
+        times.append(time.perf_counter() - start)
+    real.close()
+    return times[0], times[1], (times[0] - times[1]) / times[0]
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=30_000, help="timed steps per measurement")
@@ -90,6 +144,16 @@ def main(argv: list[str] | None = None) -> None:
                 for _ in range(args.repeats)
             )
             print(f"{env_id:<24}{label:<34}{n:>6}{best:>14,.0f}")
+    try:
+        import stable_baselines3  # noqa: F401
+    except ImportError:
+        print("\nPPO share: stable-baselines3 is not installed (pip install -e '.[train]')")
+        return
+    num_envs, timesteps = 16, 16 * 128 * 4
+    with_env, zero_cost, share = ppo_env_share(DEFAULT_ENV_ID, num_envs, timesteps)
+    print(f"\nPPO (MlpPolicy, SB3 defaults but n_steps 128), {timesteps} steps on "
+          f"{num_envs} envs of {DEFAULT_ENV_ID}:")
+    print(f"  with the env {with_env:.2f} s, with a zero-cost env {zero_cost:.2f} s -> env share {100 * share:.1f} %")
 
 
 if __name__ == "__main__":

@@ -91,8 +91,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
       nominal place), a cable's tension passes its breaking load at any sub-step of the interval,
       or the numerics diverge.
       ``info["end_reason"]`` says which.
-    - ``truncated``: the registered time limit (``max_episode_steps``) is reached. A failure is
-      never reported as truncation.
+    - ``truncated``: the registered time limit (``max_episode_steps``) is reached. A failure always
+      sets ``terminated``, never ``truncated`` alone; one on the very last step sets both, as
+      Gymnasium's ``TimeLimit`` does.
 
     ## Info
 
