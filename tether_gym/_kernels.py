@@ -69,9 +69,10 @@ def cable_forces(
         length_sum += length
         if length < shortest:
             shortest = length
-        ex = dx / length
-        ey = dy / length
-        ez = dz / length
+        inverse_length = 1.0 / length
+        ex = dx * inverse_length
+        ey = dy * inverse_length
+        ez = dz * inverse_length
         if linearised:
             # The paper's eq. (11): end displacements projected on the current direction.
             elongation = (
@@ -84,7 +85,7 @@ def cable_forces(
         n_taut = N0[c] + stiffness[c] * elongation
         n_cable = n_taut if (n_taut > 0.0 or taut_branch) else 0.0
         tension[c] = n_cable
-        geometric = n_cable / length
+        geometric = n_cable * inverse_length
         k_max = stiffness[c] if stiffness[c] >= geometric else geometric
         omega2 = k_max * inv_split_mass_sum[c]
         if omega2 > omega2_max:
@@ -202,12 +203,14 @@ def _advance_one(
         else:
             h_mid = 0.5 * (h_last + h)
             blend = h_last / (h_last + h) if count == 0 else 0.0
+            inverse_h_mid = 1.0 / h_mid
             for i in range(n_nodes):
-                lhs = mb[i] / h_mid + 0.5 * cb[i]
-                rhs_factor = mb[i] / h_mid - 0.5 * cb[i]
+                inertia = mb[i] * inverse_h_mid
+                inverse_lhs = 1.0 / (inertia + 0.5 * cb[i])
+                rhs_factor = inertia - 0.5 * cb[i]
                 for d in range(3):
                     p_dual = pb[i, d] + blend * (previous_force[b, i, d] - pb[i, d])
-                    vb[i, d] = (rhs_factor * vb[i, d] + p_dual - fb[i, d]) / lhs
+                    vb[i, d] = (rhs_factor * vb[i, d] + p_dual - fb[i, d]) * inverse_lhs
         for i in range(n_nodes):
             speed2 = 0.0
             for d in range(3):

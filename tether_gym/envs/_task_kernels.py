@@ -29,33 +29,30 @@ def _rigid_motion(x: np.ndarray, v: np.ndarray, masses: np.ndarray, out: np.ndar
     for d in range(3):
         out[0, d] /= total
         out[1, d] /= total
-    inertia = np.zeros((3, 3))
-    momentum = np.zeros(3)
+    i00 = i11 = i22 = i01 = i02 = i12 = 0.0
+    l0 = l1 = l2 = 0.0
     r2_total = 0.0
     for i in range(n):
         rx, ry, rz = x[i, 0] - out[0, 0], x[i, 1] - out[0, 1], x[i, 2] - out[0, 2]
         ux, uy, uz = v[i, 0] - out[1, 0], v[i, 1] - out[1, 1], v[i, 2] - out[1, 2]
         m = masses[i]
-        momentum[0] += m * (ry * uz - rz * uy)
-        momentum[1] += m * (rz * ux - rx * uz)
-        momentum[2] += m * (rx * uy - ry * ux)
+        l0 += m * (ry * uz - rz * uy)
+        l1 += m * (rz * ux - rx * uz)
+        l2 += m * (rx * uy - ry * ux)
         r2 = rx * rx + ry * ry + rz * rz
         r2_total += m * r2
-        inertia[0, 0] += m * (r2 - rx * rx)
-        inertia[1, 1] += m * (r2 - ry * ry)
-        inertia[2, 2] += m * (r2 - rz * rz)
-        inertia[0, 1] -= m * rx * ry
-        inertia[0, 2] -= m * rx * rz
-        inertia[1, 2] -= m * ry * rz
+        i00 += m * (r2 - rx * rx)
+        i11 += m * (r2 - ry * ry)
+        i22 += m * (r2 - rz * rz)
+        i01 -= m * rx * ry
+        i02 -= m * rx * rz
+        i12 -= m * ry * rz
     # A collinear cluster has no inertia about its axis; the small regularisation keeps the solve
     # defined and leaves the other axes untouched.
-    for d in range(3):
-        inertia[d, d] += 1e-9 * r2_total
-    inertia[1, 0] = inertia[0, 1]
-    inertia[2, 0] = inertia[0, 2]
-    inertia[2, 1] = inertia[1, 2]
-    a, b, c = inertia[0, 0], inertia[0, 1], inertia[0, 2]
-    e, f, i_ = inertia[1, 1], inertia[1, 2], inertia[2, 2]
+    a = i00 + 1e-9 * r2_total
+    e = i11 + 1e-9 * r2_total
+    i_ = i22 + 1e-9 * r2_total
+    b, c, f = i01, i02, i12
     c00 = e * i_ - f * f
     c01 = c * f - b * i_
     c02 = b * f - c * e
@@ -64,9 +61,9 @@ def _rigid_motion(x: np.ndarray, v: np.ndarray, masses: np.ndarray, out: np.ndar
     c22 = a * e - b * b
     det = a * c00 + b * c01 + c * c02
     if det > 0.0:
-        out[2, 0] = (c00 * momentum[0] + c01 * momentum[1] + c02 * momentum[2]) / det
-        out[2, 1] = (c01 * momentum[0] + c11 * momentum[1] + c12 * momentum[2]) / det
-        out[2, 2] = (c02 * momentum[0] + c12 * momentum[1] + c22 * momentum[2]) / det
+        out[2, 0] = (c00 * l0 + c01 * l1 + c02 * l2) / det
+        out[2, 1] = (c01 * l0 + c11 * l1 + c12 * l2) / det
+        out[2, 2] = (c02 * l0 + c12 * l1 + c22 * l2) / det
     else:
         out[2, :] = 0.0
 
@@ -142,6 +139,7 @@ def command_forces(
 @njit(cache=True, nogil=True, error_model="numpy")
 def _evaluate_one(
     b: int,
+    scratch: np.ndarray,
     x: np.ndarray,
     v: np.ndarray,
     masses: np.ndarray,
@@ -177,8 +175,8 @@ def _evaluate_one(
     """
     n = x.shape[1]
     m = cables.shape[0]
-    motion = np.empty((3, 3))
-    nominal_com = np.empty(3)
+    motion = scratch[b, :3]
+    nominal_com = scratch[b, 3]
     xb, vb, mb = x[b], v[b], masses[b]
     _rigid_motion(xb, vb, mb, motion)
     total = 0.0
@@ -267,9 +265,10 @@ def evaluate_serial(
     observation, scalars, end_reason,
 ):  # pragma: no cover - compiled
     """:func:`_evaluate_one` for every cluster of the batch, one thread."""
+    scratch = np.empty((x.shape[0], 4, 3))
     for b in range(x.shape[0]):
         _evaluate_one(
-            b, x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables,
+            b, scratch, x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables,
             observed, length_scale, speed_scale, observe_tensions, status, peak_tension, impulse,
             deviation_limit, weights, observation, scalars, end_reason,
         )
@@ -282,9 +281,10 @@ def evaluate_parallel(
     observation, scalars, end_reason,
 ):  # pragma: no cover - compiled
     """:func:`_evaluate_one` for every cluster of the batch, on all threads (same bits)."""
+    scratch = np.empty((x.shape[0], 4, 3))
     for b in prange(x.shape[0]):
         _evaluate_one(
-            b, x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables,
+            b, scratch, x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables,
             observed, length_scale, speed_scale, observe_tensions, status, peak_tension, impulse,
             deviation_limit, weights, observation, scalars, end_reason,
         )
