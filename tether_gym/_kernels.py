@@ -21,8 +21,18 @@ from __future__ import annotations
 
 import math
 
+import os
+
+import numba
 import numpy as np
 from numba import njit, prange
+
+# The OpenMP layer scheduled the batched kernels 1.5-2x faster than numba's default
+# "workqueue" layer on a busy 2-core machine (N = 1024 vector env: ~0.8 M against 0.4-0.58 M
+# env steps/s); results are the same bits either way.  Users keep control through numba's own
+# environment variables.
+if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY" not in os.environ:
+    numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
 
 # Status codes of a cluster in a batch.
 STATUS_OK = 0
