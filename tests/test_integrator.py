@@ -410,3 +410,14 @@ def test_every_force_switch_delivers_its_exact_impulse(safety_factor: float) -> 
         expected += thrust * duration / 10.0
         assert sim.velocities[0, 0] == pytest.approx(expected, rel=1e-12, abs=1e-15)
     assert sim.slack.all()
+
+
+def test_internal_forces_of_selected_clusters_use_their_own_parameters() -> None:
+    base = tg.make_cluster("triangle")
+    clusters = [base, base.replace(EA=base.EA * 3), base.replace(N0=5.0)]
+    batch = tg.BatchSimulator(clusters)
+    x = np.stack([c.positions * 1.001 for c in clusters])
+    everything = batch.internal_forces(x)
+    chosen = batch.internal_forces(x[[2, 1]], indices=[2, 1])
+    assert np.array_equal(chosen, everything[[2, 1]])
+    assert not np.allclose(everything[0], everything[1])

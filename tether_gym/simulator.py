@@ -387,14 +387,18 @@ class BatchSimulator:
         )
 
     # ------------------------------------------------------------------ queries
-    def internal_forces(self, positions: ArrayLike) -> np.ndarray:
-        """(B, n, 3) restoring forces f_int, N, at ``positions`` (B, n, 3), m.
+    def internal_forces(
+        self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None
+    ) -> np.ndarray:
+        """(k, n, 3) restoring forces f_int, N, at ``positions`` (k, n, 3), m, of clusters
+        ``indices`` (default all B, in order), with each cluster's own cable parameters.
 
         ``f_int`` is the term of ``M a + C v + f_int = p``: a satellite held at ``positions``
         needs the external force ``p = f_int`` to stay there.
         """
-        x = _check_array("positions", positions, (self.num_clusters, self.num_nodes, 3), "m")
-        f_int, _, _, finite = self._evaluate(x, np.arange(self.num_clusters))
+        idx = self._indices(indices)
+        x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
+        f_int, _, _, finite = self._evaluate(x, idx)
         if not finite.all():
             raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
         return f_int

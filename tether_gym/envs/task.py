@@ -211,9 +211,7 @@ class DampingTask:
     def _set_nominal(self, index: int, cluster: Cluster) -> None:
         """Cluster ``index`` gets ``cluster``'s parameters, and the bias thrust holding its shape."""
         self.sim.set_cluster(index, cluster, reset=False)
-        self.bias[index] = self.sim.internal_forces(
-            np.broadcast_to(cluster.positions, self.sim.positions.shape)
-        )[index]
+        self.bias[index] = self.sim.internal_forces(cluster.positions[None], indices=[index])[0]
         tension = np.maximum(cluster.N0, 0.0)
         self.nominal_strain_energy[index] = float((0.5 * tension**2 / cluster.stiffness).sum())
 
