@@ -114,9 +114,12 @@ def cable_forces(
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _advance_one(
-    b: int,
+def _advance_clusters(
+    first: int,
+    stop: int,
+    active: np.ndarray,
     duration: float,
+    time: np.ndarray,
     x: np.ndarray,
     v_half: np.ndarray,
     v_sync: np.ndarray,
@@ -146,8 +149,10 @@ def _advance_one(
     status: np.ndarray,
     step_record: np.ndarray,
     peak_tension: np.ndarray,
+    status_out: np.ndarray,
 ) -> None:
-    """Integrate cluster ``b`` over ``duration`` seconds with its external force held constant.
+    """Integrate clusters ``first..stop-1`` over ``duration`` seconds, each with its external force
+    held constant.  A cluster that is inactive or unhealthy takes no step (zero sub-steps).
 
     Central differences in half-step (leapfrog) form, valid for variable steps::
 
@@ -167,129 +172,124 @@ def _advance_one(
     Each sub-step is ``min(safety_factor * 2 / omega_est, max_step)``, re-estimated at every
     configuration, then shortened so that the rest of the interval splits into equal steps; the
     interval ends exactly at ``duration``.  ``peak_tension[b]`` receives each cable's largest
-    tension over the interval, N.
+    tension over the interval, N.  ``status_out[b]`` receives the cluster's status, and a cluster
+    that stays healthy has ``duration`` added to its ``time[b]``.
+
+    The loop over clusters lives inside this function (the drivers hand it a range) because a
+    call per cluster with this many array arguments cost more than the whole sub-stepping of a
+    short interval.
     """
-    n_nodes = x.shape[1]
-    xb = x[b]
-    vb = v_half[b]
-    fb = f_int[b]
-    pb = force[b]
-    mb = masses[b]
-    cb = damping[b]
-    n_record = step_record.shape[1]
-    elapsed = 0.0
-    count = 0
-    h_lo = math.inf
-    h_hi = 0.0
-    work_b = work[b]
-    dissipated_b = dissipated[b]
-    h_last = h_prev[b]
-    peak = peak_tension[b]
-    tension_b = tension[b]
-    for c in range(tension_b.shape[0]):
-        peak[c] = tension_b[c]
-    while True:
-        if count >= max_substeps:
-            status[b] = STATUS_TOO_MANY_SUBSTEPS
-            break
-        h_stable = safety_factor * 2.0 / math.sqrt(omega2[b]) if omega2[b] > 0.0 else math.inf
-        if h_stable > max_step:
-            h_stable = max_step
-        remaining = duration - elapsed
-        # Spread what remains evenly over the fewest steps no longer than h_stable: equal steps
-        # within an interval, and no sliver step before its end.
-        steps_left = math.ceil(remaining / h_stable - 1e-9)
-        if steps_left <= 1:
-            h = remaining
-            last = True
-        else:
-            h = remaining / steps_left
-            last = False
-        if h_last == 0.0:
-            for i in range(n_nodes):
-                for d in range(3):
-                    acceleration = (pb[i, d] - fb[i, d] - cb[i] * vb[i, d]) / mb[i]
-                    vb[i, d] = vb[i, d] + 0.5 * h * acceleration
-        else:
-            h_mid = 0.5 * (h_last + h)
-            blend = h_last / (h_last + h) if count == 0 else 0.0
-            inverse_h_mid = 1.0 / h_mid
-            for i in range(n_nodes):
-                inertia = mb[i] * inverse_h_mid
-                inverse_lhs = 1.0 / (inertia + 0.5 * cb[i])
-                rhs_factor = inertia - 0.5 * cb[i]
-                for d in range(3):
-                    p_dual = pb[i, d] + blend * (previous_force[b, i, d] - pb[i, d])
-                    vb[i, d] = (rhs_factor * vb[i, d] + p_dual - fb[i, d]) * inverse_lhs
-        for i in range(n_nodes):
-            speed2 = 0.0
-            for d in range(3):
-                dx = h * vb[i, d]
-                work_b += pb[i, d] * dx
-                speed2 += vb[i, d] * vb[i, d]
-                xb[i, d] += dx
-            dissipated_b += h * cb[i] * speed2
-        if count < n_record:
-            step_record[b, count] = h
-        count += 1
-        h_last = h
-        if h < h_lo:
-            h_lo = h
-        if h > h_hi:
-            h_hi = h
-        omega2[b], finite = cable_forces(
-            xb, reference[b], cables, stiffness[b], L0[b], N0[b], inv_split_mass_sum[b],
-            linearised, False, fb, tension[b],
-        )
-        if not finite:
-            status[b] = STATUS_NON_FINITE
-            break
+    for b in range(first, stop):
+        if not (active[b] and status[b] == STATUS_OK):
+            substeps[b] = 0
+            step_min[b] = math.inf
+            step_max[b] = 0.0
+            peak_tension[b, :] = tension[b, :]
+            status_out[b] = status[b]
+            continue
+        n_nodes = x.shape[1]
+        xb = x[b]
+        vb = v_half[b]
+        fb = f_int[b]
+        pb = force[b]
+        mb = masses[b]
+        cb = damping[b]
+        n_record = step_record.shape[1]
+        elapsed = 0.0
+        count = 0
+        h_lo = math.inf
+        h_hi = 0.0
+        work_b = work[b]
+        dissipated_b = dissipated[b]
+        h_last = h_prev[b]
+        peak = peak_tension[b]
+        tension_b = tension[b]
         for c in range(tension_b.shape[0]):
-            if tension_b[c] > peak[c]:
-                peak[c] = tension_b[c]
-        if last:
-            break
-        elapsed += h
-    h_prev[b] = h_last
-    previous_force[b, :, :] = pb
-    work[b] = work_b
-    dissipated[b] = dissipated_b
-    substeps[b] = count
-    step_min[b] = h_lo
-    step_max[b] = h_hi
-    # Velocity at the end of the interval, consistent with the force just applied:
-    # (M + h/2 C) v_n = M v_{n-1/2} + h/2 (p - f_int(u_n)).
-    half = 0.5 * h_last
-    for i in range(n_nodes):
-        denominator = mb[i] + half * cb[i]
-        for d in range(3):
-            v_sync[b, i, d] = (mb[i] * vb[i, d] + half * (pb[i, d] - fb[i, d])) / denominator
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _advance_or_skip(
-    b, active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
-    masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
-    max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
-    peak_tension, status_out,
-):  # pragma: no cover - compiled
-    """Advance cluster ``b`` if it is active and healthy (adding ``duration`` to its time), else
-    report that it took no step; either way copy its status to ``status_out``."""
-    if active[b] and status[b] == STATUS_OK:
-        _advance_one(
-            b, duration, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force, masses,
-            damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
-            max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
-            peak_tension,
-        )
+            peak[c] = tension_b[c]
+        while True:
+            if count >= max_substeps:
+                status[b] = STATUS_TOO_MANY_SUBSTEPS
+                break
+            h_stable = safety_factor * 2.0 / math.sqrt(omega2[b]) if omega2[b] > 0.0 else math.inf
+            if h_stable > max_step:
+                h_stable = max_step
+            remaining = duration - elapsed
+            # Spread what remains evenly over the fewest steps no longer than h_stable: equal steps
+            # within an interval, and no sliver step before its end.
+            steps_left = math.ceil(remaining / h_stable - 1e-9)
+            if steps_left <= 1:
+                h = remaining
+                last = True
+            else:
+                h = remaining / steps_left
+                last = False
+            if h_last == 0.0:
+                for i in range(n_nodes):
+                    for d in range(3):
+                        acceleration = (pb[i, d] - fb[i, d] - cb[i] * vb[i, d]) / mb[i]
+                        vb[i, d] = vb[i, d] + 0.5 * h * acceleration
+            else:
+                h_mid = 0.5 * (h_last + h)
+                blend = h_last / (h_last + h) if count == 0 else 0.0
+                inverse_h_mid = 1.0 / h_mid
+                for i in range(n_nodes):
+                    inertia = mb[i] * inverse_h_mid
+                    inverse_lhs = 1.0 / (inertia + 0.5 * cb[i])
+                    rhs_factor = inertia - 0.5 * cb[i]
+                    for d in range(3):
+                        p_dual = pb[i, d] + blend * (previous_force[b, i, d] - pb[i, d])
+                        vb[i, d] = (rhs_factor * vb[i, d] + p_dual - fb[i, d]) * inverse_lhs
+            for i in range(n_nodes):
+                speed2 = 0.0
+                for d in range(3):
+                    dx = h * vb[i, d]
+                    work_b += pb[i, d] * dx
+                    speed2 += vb[i, d] * vb[i, d]
+                    xb[i, d] += dx
+                dissipated_b += h * cb[i] * speed2
+            if count < n_record:
+                step_record[b, count] = h
+            count += 1
+            h_last = h
+            if h < h_lo:
+                h_lo = h
+            if h > h_hi:
+                h_hi = h
+            omega2[b], finite = cable_forces(
+                xb, reference[b], cables, stiffness[b], L0[b], N0[b], inv_split_mass_sum[b],
+                linearised, False, fb, tension[b],
+            )
+            if not finite:
+                status[b] = STATUS_NON_FINITE
+                break
+            for c in range(tension_b.shape[0]):
+                if tension_b[c] > peak[c]:
+                    peak[c] = tension_b[c]
+            if last:
+                break
+            elapsed += h
+        h_prev[b] = h_last
+        previous_force[b, :, :] = pb
+        work[b] = work_b
+        dissipated[b] = dissipated_b
+        substeps[b] = count
+        step_min[b] = h_lo
+        step_max[b] = h_hi
+        # Velocity at the end of the interval, consistent with the force just applied:
+        # (M + h/2 C) v_n = M v_{n-1/2} + h/2 (p - f_int(u_n)).
+        half = 0.5 * h_last
+        for i in range(n_nodes):
+            denominator = mb[i] + half * cb[i]
+            for d in range(3):
+                v_sync[b, i, d] = (mb[i] * vb[i, d] + half * (pb[i, d] - fb[i, d])) / denominator
         if status[b] == STATUS_OK:
             time[b] += duration
-    else:
-        substeps[b] = 0
-        step_min[b] = math.inf
-        step_max[b] = 0.0
-        peak_tension[b, :] = tension[b, :]
-    status_out[b] = status[b]
+        status_out[b] = status[b]
+
+
+#: Chunks the parallel driver splits a batch into: enough to even out clusters that sub-step more
+#: over any likely number of threads, few enough that the per-chunk call costs nothing.
+PARALLEL_CHUNKS = 64
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -299,13 +299,12 @@ def advance_serial(
     max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
     peak_tension, status_out,
 ):  # pragma: no cover - compiled
-    for b in range(x.shape[0]):
-        _advance_or_skip(
-            b, active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
-            previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference,
-            linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-            step_max, status, step_record, peak_tension, status_out,
-        )
+    _advance_clusters(
+        0, x.shape[0], active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
+        previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference,
+        linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
+        step_max, status, step_record, peak_tension, status_out,
+    )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
@@ -315,12 +314,14 @@ def advance_parallel(
     max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
     peak_tension, status_out,
 ):  # pragma: no cover - compiled
-    for b in prange(x.shape[0]):
-        _advance_or_skip(
-            b, active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
-            previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference,
-            linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-            step_max, status, step_record, peak_tension, status_out,
+    batch = x.shape[0]
+    chunks = min(batch, PARALLEL_CHUNKS)
+    for k in prange(chunks):
+        _advance_clusters(
+            k * batch // chunks, (k + 1) * batch // chunks, active, duration, time, x, v_half, v_sync, f_int,
+            tension, h_prev, omega2, force, previous_force, masses, damping, cables, stiffness, L0, N0,
+            inv_split_mass_sum, reference, linearised, safety_factor, max_step, max_substeps, work,
+            dissipated, substeps, step_min, step_max, status, step_record, peak_tension, status_out,
         )
 
 

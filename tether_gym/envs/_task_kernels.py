@@ -137,9 +137,9 @@ def command_forces(
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _evaluate_one(
-    b: int,
-    scratch: np.ndarray,
+def _evaluate_clusters(
+    first: int,
+    stop: int,
     x: np.ndarray,
     v: np.ndarray,
     masses: np.ndarray,
@@ -164,7 +164,9 @@ def _evaluate_one(
     scalars: np.ndarray,
     end_reason: np.ndarray,
 ) -> None:
-    """Everything the task reads off cluster ``b`` after a step (or a reset), in one pass.
+    """Everything the task reads off clusters ``first..stop-1`` after a step (or a reset), one pass
+    per cluster.  (The loop lives here, not in the drivers: a call per cluster with this many
+    array arguments would cost as much as the work.)
 
     Writes the observation row (NaN as 0, clipped to +-OBSERVATION_LIMIT; see :class:`~tether_gym.envs.TetherClusterEnv`), ``end_reason``
     (0 running, 1 formation lost, 2 cable broken, 3 numerics diverged) and ``scalars[b]``:
@@ -175,87 +177,93 @@ def _evaluate_one(
     """
     n = x.shape[1]
     m = cables.shape[0]
-    motion = scratch[b, :3]
-    nominal_com = scratch[b, 3]
-    xb, vb, mb = x[b], v[b], masses[b]
-    _rigid_motion(xb, vb, mb, motion)
-    total = 0.0
-    nominal_com[:] = 0.0
-    for i in range(n):
-        total += mb[i]
-        for d in range(3):
-            nominal_com[d] += mb[i] * nominal[b, i, d]
-    nominal_com /= total
-    kinetic_deformation = 0.0
-    kinetic = 0.0
-    bias_potential = 0.0
-    worst = 0.0
-    for i in range(n):
-        rx = xb[i, 0] - motion[0, 0]
-        ry = xb[i, 1] - motion[0, 1]
-        rz = xb[i, 2] - motion[0, 2]
-        ux = vb[i, 0] - motion[1, 0] - (motion[2, 1] * rz - motion[2, 2] * ry)
-        uy = vb[i, 1] - motion[1, 1] - (motion[2, 2] * rx - motion[2, 0] * rz)
-        uz = vb[i, 2] - motion[1, 2] - (motion[2, 0] * ry - motion[2, 1] * rx)
-        kinetic_deformation += 0.5 * mb[i] * (ux * ux + uy * uy + uz * uz)
-        kinetic += 0.5 * mb[i] * (vb[i, 0] * vb[i, 0] + vb[i, 1] * vb[i, 1] + vb[i, 2] * vb[i, 2])
-        deviation2 = 0.0
-        for d in range(3):
-            bias_potential -= bias[b, i, d] * (xb[i, d] - nominal[b, i, d])
-            deviation = (xb[i, d] - motion[0, d]) - (nominal[b, i, d] - nominal_com[d])
-            deviation2 += deviation * deviation
-        deviation_norm = math.sqrt(deviation2)
-        if deviation_norm > worst or not math.isfinite(deviation_norm):
-            worst = deviation_norm
-    for k in range(observed.shape[0]):
-        i = observed[k]
-        for d in range(3):
-            deviation = (xb[i, d] - motion[0, d]) - (nominal[b, i, d] - nominal_com[d])
-            observation[b, 3 * k + d] = _bounded(deviation / length_scale)
-            observation[b, 3 * (observed.shape[0] + k) + d] = _bounded((vb[i, d] - motion[1, d]) / speed_scale)
-    strain = 0.0
-    slack = 0
-    broken = False
-    offset = 6 * observed.shape[0]
-    for c in range(m):
-        i, j = cables[c, 0], cables[c, 1]
-        dx = xb[j, 0] - xb[i, 0]
-        dy = xb[j, 1] - xb[i, 1]
-        dz = xb[j, 2] - xb[i, 2]
-        observation[b, offset + c] = _bounded((math.sqrt(dx * dx + dy * dy + dz * dz) - L0[b, c]) / length_scale)
-        strain += 0.5 * tension[b, c] * tension[b, c] / stiffness[b, c]
-        if tension[b, c] <= 0.0:
-            slack += 1
-        if peak_tension[b, c] > breaking_load[b, c]:
-            broken = True
-        if observe_tensions:
-            observation[b, offset + m + c] = _bounded(tension[b, c] / breaking_load[b, c])
-    vibration = kinetic_deformation + strain - nominal_strain_energy[b] + bias_potential
-    if status[b] != 0:
-        reason = 3
-        vibration = 0.0
-    elif broken:
-        reason = 2
-    elif not worst <= deviation_limit:
-        reason = 1
-    else:
-        reason = 0
-    end_reason[b] = reason
-    slack_fraction = slack / m
-    terms_vibration = -weights[0] * vibration
-    terms_propellant = -weights[1] * impulse[b]
-    terms_slack = -weights[2] * slack_fraction
-    terms_failure = -weights[3] if reason > 0 else 0.0
-    scalars[b, 0] = terms_vibration + terms_propellant + terms_slack + terms_failure
-    scalars[b, 1] = terms_vibration
-    scalars[b, 2] = terms_propellant
-    scalars[b, 3] = terms_slack
-    scalars[b, 4] = terms_failure
-    scalars[b, 5] = vibration
-    scalars[b, 6] = worst
-    scalars[b, 7] = slack_fraction
-    scalars[b, 8] = kinetic
-    scalars[b, 9] = strain
+    scratch = np.empty((4, 3))
+    motion = scratch[:3]
+    nominal_com = scratch[3]
+    for b in range(first, stop):
+        xb, vb, mb = x[b], v[b], masses[b]
+        _rigid_motion(xb, vb, mb, motion)
+        total = 0.0
+        nominal_com[:] = 0.0
+        for i in range(n):
+            total += mb[i]
+            for d in range(3):
+                nominal_com[d] += mb[i] * nominal[b, i, d]
+        nominal_com /= total
+        kinetic_deformation = 0.0
+        kinetic = 0.0
+        bias_potential = 0.0
+        worst = 0.0
+        for i in range(n):
+            rx = xb[i, 0] - motion[0, 0]
+            ry = xb[i, 1] - motion[0, 1]
+            rz = xb[i, 2] - motion[0, 2]
+            ux = vb[i, 0] - motion[1, 0] - (motion[2, 1] * rz - motion[2, 2] * ry)
+            uy = vb[i, 1] - motion[1, 1] - (motion[2, 2] * rx - motion[2, 0] * rz)
+            uz = vb[i, 2] - motion[1, 2] - (motion[2, 0] * ry - motion[2, 1] * rx)
+            kinetic_deformation += 0.5 * mb[i] * (ux * ux + uy * uy + uz * uz)
+            kinetic += 0.5 * mb[i] * (vb[i, 0] * vb[i, 0] + vb[i, 1] * vb[i, 1] + vb[i, 2] * vb[i, 2])
+            deviation2 = 0.0
+            for d in range(3):
+                bias_potential -= bias[b, i, d] * (xb[i, d] - nominal[b, i, d])
+                deviation = (xb[i, d] - motion[0, d]) - (nominal[b, i, d] - nominal_com[d])
+                deviation2 += deviation * deviation
+            deviation_norm = math.sqrt(deviation2)
+            if deviation_norm > worst or not math.isfinite(deviation_norm):
+                worst = deviation_norm
+        for k in range(observed.shape[0]):
+            i = observed[k]
+            for d in range(3):
+                deviation = (xb[i, d] - motion[0, d]) - (nominal[b, i, d] - nominal_com[d])
+                observation[b, 3 * k + d] = _bounded(deviation / length_scale)
+                observation[b, 3 * (observed.shape[0] + k) + d] = _bounded((vb[i, d] - motion[1, d]) / speed_scale)
+        strain = 0.0
+        slack = 0
+        broken = False
+        offset = 6 * observed.shape[0]
+        for c in range(m):
+            i, j = cables[c, 0], cables[c, 1]
+            dx = xb[j, 0] - xb[i, 0]
+            dy = xb[j, 1] - xb[i, 1]
+            dz = xb[j, 2] - xb[i, 2]
+            observation[b, offset + c] = _bounded((math.sqrt(dx * dx + dy * dy + dz * dz) - L0[b, c]) / length_scale)
+            strain += 0.5 * tension[b, c] * tension[b, c] / stiffness[b, c]
+            if tension[b, c] <= 0.0:
+                slack += 1
+            if peak_tension[b, c] > breaking_load[b, c]:
+                broken = True
+            if observe_tensions:
+                observation[b, offset + m + c] = _bounded(tension[b, c] / breaking_load[b, c])
+        vibration = kinetic_deformation + strain - nominal_strain_energy[b] + bias_potential
+        if status[b] != 0:
+            reason = 3
+            vibration = 0.0
+        elif broken:
+            reason = 2
+        elif not worst <= deviation_limit:
+            reason = 1
+        else:
+            reason = 0
+        end_reason[b] = reason
+        slack_fraction = slack / m
+        terms_vibration = -weights[0] * vibration
+        terms_propellant = -weights[1] * impulse[b]
+        terms_slack = -weights[2] * slack_fraction
+        terms_failure = -weights[3] if reason > 0 else 0.0
+        scalars[b, 0] = terms_vibration + terms_propellant + terms_slack + terms_failure
+        scalars[b, 1] = terms_vibration
+        scalars[b, 2] = terms_propellant
+        scalars[b, 3] = terms_slack
+        scalars[b, 4] = terms_failure
+        scalars[b, 5] = vibration
+        scalars[b, 6] = worst
+        scalars[b, 7] = slack_fraction
+        scalars[b, 8] = kinetic
+        scalars[b, 9] = strain
+
+
+#: Chunks the parallel driver splits a batch into (see ``tether_gym._kernels.PARALLEL_CHUNKS``).
+PARALLEL_CHUNKS = 64
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -264,14 +272,12 @@ def evaluate_serial(
     length_scale, speed_scale, observe_tensions, status, peak_tension, impulse, deviation_limit, weights,
     observation, scalars, end_reason,
 ):  # pragma: no cover - compiled
-    """:func:`_evaluate_one` for every cluster of the batch, one thread."""
-    scratch = np.empty((x.shape[0], 4, 3))
-    for b in range(x.shape[0]):
-        _evaluate_one(
-            b, scratch, x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables,
-            observed, length_scale, speed_scale, observe_tensions, status, peak_tension, impulse,
-            deviation_limit, weights, observation, scalars, end_reason,
-        )
+    """:func:`_evaluate_clusters` for every cluster of the batch, one thread."""
+    _evaluate_clusters(
+        0, x.shape[0], x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy,
+        cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension, impulse,
+        deviation_limit, weights, observation, scalars, end_reason,
+    )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
@@ -280,11 +286,12 @@ def evaluate_parallel(
     length_scale, speed_scale, observe_tensions, status, peak_tension, impulse, deviation_limit, weights,
     observation, scalars, end_reason,
 ):  # pragma: no cover - compiled
-    """:func:`_evaluate_one` for every cluster of the batch, on all threads (same bits)."""
-    scratch = np.empty((x.shape[0], 4, 3))
-    for b in prange(x.shape[0]):
-        _evaluate_one(
-            b, scratch, x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables,
-            observed, length_scale, speed_scale, observe_tensions, status, peak_tension, impulse,
-            deviation_limit, weights, observation, scalars, end_reason,
+    """:func:`_evaluate_clusters` for every cluster of the batch, on all threads (same bits)."""
+    batch = x.shape[0]
+    chunks = min(batch, PARALLEL_CHUNKS)
+    for k in prange(chunks):
+        _evaluate_clusters(
+            k * batch // chunks, (k + 1) * batch // chunks, x, v, masses, tension, stiffness, L0, breaking_load,
+            bias, nominal, nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions,
+            status, peak_tension, impulse, deviation_limit, weights, observation, scalars, end_reason,
         )

@@ -154,16 +154,20 @@ class TetherClusterVectorEnv(VectorEnv):
         entries outside a mask are zero, as Gymnasium's vector envs leave them."""
         arrays = self.task.info_arrays(stepped is not None)
         present_all = np.ones(self.num_envs, dtype=np.bool_) if rows is None else rows
+        present_step = present_all if stepped is None or stepped.all() else present_all & stepped
+        # One allocation for all the masks (each key gets its own row, so they stay independent).
+        masks = np.empty((len(arrays), self.num_envs), dtype=np.bool_)
         infos: dict[str, Any] = {}
-        for key, array in arrays.items():
-            present = present_all & stepped if (key in STEP_KEYS and stepped is not None) else present_all
+        for row, (key, array) in enumerate(arrays.items()):
+            present = present_step if key in STEP_KEYS else present_all
+            masks[row] = present
             if key == "end_reason":
                 array = self._reason_names[array]
-            if present.all():
+            if rows is None and present is present_all:
                 values = array.copy()
             else:
                 mask = present.reshape((-1,) + (1,) * (array.ndim - 1))
                 values = np.where(mask, array, np.zeros((), dtype=array.dtype))
             infos[key] = values
-            infos["_" + key] = present.copy()
+            infos["_" + key] = masks[row]
         return infos
