@@ -1,0 +1,455 @@
+"""Scripted baseline controllers: what a control engineer would try before reinforcement learning.
+
+Every controller is built from an env (a single env from ``gym.make``, or a vector env from
+``gym.make_vec``), reads only the env's observation, and answers Stable-Baselines3's
+``predict(observation, deterministic=True) -> (actions, None)``. ``observation`` may be one
+observation ``(obs_size,)`` or a batch ``(N, obs_size)``, and the actions have the matching
+shape ``(3k,)`` or ``(N, 3k)``, float32 in [-1, 1].
+
+The controllers are designed on the env's **nominal** cluster (domain randomisation is not
+seen) and need every satellite to be observed. They reconstruct the state from the observation:
+- satellite positions relative to the centre of mass, ``r_i = X_i - X_com + d_i`` (m), from the
+  displacements ``d_i``;
+- velocities relative to the centre of mass ``u_i`` (m/s);
+- cable elongations (m).
+
+Thrust commands beyond the limit are clipped, as the env would do anyway. Each controller counts
+how often that happens (:attr:`Controller.saturation_fraction`): a linear design that saturates
+most of the time is no longer the design that was analysed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from tether_gym.analysis import tangent_stiffness
+from tether_gym.envs.task import DampingTask
+
+__all__ = [
+    "BASELINES",
+    "Controller",
+    "LinearModel",
+    "LQRController",
+    "PassiveController",
+    "TensionAwareController",
+    "VelocityFeedbackController",
+    "make_baseline",
+]
+
+
+def task_of(env: Any) -> DampingTask:
+    """The :class:`~tether_gym.envs.task.DampingTask` behind a tether-gym env (single, vector, or
+    wrapped in Gymnasium or SB3 wrappers)."""
+    candidate = env
+    for _ in range(16):
+        task = getattr(getattr(candidate, "unwrapped", candidate), "task", None)
+        if isinstance(task, DampingTask):
+            return task
+        inner = getattr(candidate, "venv", None) or getattr(candidate, "env", None)
+        if inner is None:
+            break
+        candidate = inner
+    raise TypeError(
+        f"{type(env).__name__} is not a tether-gym environment: pass an env made by gym.make or "
+        "gym.make_vec with a tether-gym id (or tether_gym.sb3.make_sb3_vec_env)"
+    )
+
+
+class Controller:
+    """Base class: observation decoding, the ``predict`` interface and saturation counting.
+
+    Subclasses implement :meth:`thrust`, which maps decoded states to thruster forces in N.
+
+    Args:
+        env: a tether-gym env (single or vector); only its configuration is read.
+    """
+
+    #: Short name used in tables and on the command line.
+    name = "controller"
+
+    def __init__(self, env: Any) -> None:
+        task = task_of(env)
+        self.task = task
+        self.cluster = task.cluster
+        n = self.cluster.num_nodes
+        if task.observed.size != n:
+            raise ValueError(
+                f"{type(self).__name__} needs every satellite observed; this env observes "
+                f"{task.observed.tolist()} of {n}. Make the env with observed_satellites=None."
+            )
+        self.num_nodes = n
+        self.thrusters = task.thrusters
+        self.max_thrust = task.max_thrust
+        self.masses = self.cluster.masses
+        self.nominal_relative = self.cluster.positions - (
+            self.masses[:, None] * self.cluster.positions
+        ).sum(axis=0) / self.masses.sum()
+        self.control_interval = task.config.control_interval
+        self.action_size = task.action_size
+        self.observation_size = task.observation_size
+        self.magnitude_limit = task.config.thrust_limit == "magnitude"
+        self.commands = 0
+        self.saturated = 0
+
+    # ------------------------------------------------------------------ interface
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, None]:
+        """Actions for ``observation`` ((obs_size,) or (N, obs_size)), as SB3's ``predict``.
+
+        Returns ``(actions, None)``: (3k,) or (N, 3k) float32 commands in [-1, 1]. The scripted
+        controllers are deterministic and stateless, so ``state``, ``episode_start`` and
+        ``deterministic`` are accepted and ignored."""
+        obs = np.asarray(observation, dtype=np.float64)
+        single = obs.ndim == 1
+        batch = obs[None] if single else obs
+        if batch.ndim != 2 or batch.shape[1] != self.observation_size:
+            raise ValueError(
+                f"observation must have shape ({self.observation_size},) or (N, {self.observation_size}) "
+                f"for this env; got {obs.shape}"
+            )
+        if not np.isfinite(batch).all():
+            raise ValueError("observation contains NaN or inf")
+        positions, velocities, elongations = self.decode(batch)
+        force = self.thrust(positions, velocities, elongations)  # (N, k, 3) N
+        commands = force / self.max_thrust[None, :, None]
+        if self.magnitude_limit:
+            norms = np.linalg.norm(commands, axis=2, keepdims=True)
+            over = norms > 1.0
+            self.saturated += int(over.sum())
+            self.commands += over.size
+            commands = np.where(over, commands / np.maximum(norms, 1e-300), commands)
+        else:
+            over = np.abs(commands) > 1.0
+            self.saturated += int(over.sum())
+            self.commands += over.size
+            commands = np.clip(commands, -1.0, 1.0)
+        actions = commands.reshape(batch.shape[0], self.action_size).astype(np.float32)
+        return (actions[0] if single else actions), None
+
+    @property
+    def saturation_fraction(self) -> float:
+        """Fraction of thrust commands (per axis, or per thruster with the magnitude limit) that
+        were beyond the limit and clipped, since construction or :meth:`reset_statistics`."""
+        return self.saturated / self.commands if self.commands else 0.0
+
+    def reset_statistics(self) -> None:
+        """Restart the saturation count."""
+        self.commands = 0
+        self.saturated = 0
+
+    # ------------------------------------------------------------------ decoding
+    def decode(self, observation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N, n, 3) positions relative to the centre of mass (m), (N, n, 3) velocities relative
+        to the centre of mass (m/s) and (N, c) cable elongations (m) from (N, obs_size)
+        observations."""
+        n = self.num_nodes
+        task = self.task
+        displacement = observation[:, : 3 * n].reshape(-1, n, 3) * task.length_scale
+        velocity = observation[:, 3 * n : 6 * n].reshape(-1, n, 3) * task.speed_scale
+        elongation = observation[:, 6 * n : 6 * n + self.cluster.num_cables] * task.length_scale
+        return self.nominal_relative[None] + displacement, velocity, elongation
+
+    def deformation_velocity(self, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+        """(N, n, 3) velocities with the rigid rotation removed as well: ``u - omega x r``, where
+        ``I omega`` is the angular momentum about the centre of mass."""
+        m = self.masses[None, :, None]
+        momentum = (m * np.cross(positions, velocities)).sum(axis=1)  # (N, 3)
+        r2 = (positions**2).sum(axis=2)  # (N, n)
+        inertia = (self.masses[None, :, None, None] * (
+            r2[:, :, None, None] * np.eye(3) - positions[:, :, :, None] * positions[:, :, None, :]
+        )).sum(axis=1)  # (N, 3, 3)
+        # A collinear cluster has no inertia about its axis: regularise as the task does.
+        inertia += 1e-9 * (self.masses[None, :] * r2).sum(axis=1)[:, None, None] * np.eye(3)
+        omega = np.linalg.solve(inertia, momentum[:, :, None])[:, :, 0]
+        return velocities - np.cross(omega[:, None, :], positions)
+
+    def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
+        """(N, k, 3) thruster forces in N (before the thrust limit)."""
+        raise NotImplementedError
+
+
+class PassiveController(Controller):
+    """Zero thrust: the cluster rings down under its own damping (the bias thrust still holds the
+    nominal shape)."""
+
+    name = "passive"
+
+    def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
+        return np.zeros((positions.shape[0], self.thrusters.size, 3))
+
+
+def elastic_modes(cluster: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Elastic normal modes at the nominal state: ``(omega2, modes)``, (r,) in (rad/s)^2 and
+    (3n, r) mass-normalised shapes, r = 3n - 6 (3n - 5 for a collinear cluster).
+
+    The modes span the M-orthogonal complement of the rigid-body motions (translations and
+    rotations about the centre of mass). Plain normal modes would not separate them: with
+    pretension and a fixed bias thrust, rigid rotations carry a small geometric stiffness
+    (about 0.03 rad/s for the default tetrahedron). Those motions are not vibration, the
+    observation's vibration energy excludes them, and the controllers do not act on them.
+    """
+    positions = cluster.positions - (cluster.masses[:, None] * cluster.positions).sum(axis=0) / cluster.masses.sum()
+    n = cluster.num_nodes
+    rigid = np.zeros((3 * n, 6))
+    for axis in range(3):
+        rigid[axis::3, axis] = 1.0
+        unit = np.zeros(3)
+        unit[axis] = 1.0
+        rigid[:, 3 + axis] = np.cross(unit, positions).ravel()
+    sqrt_mass = np.sqrt(np.repeat(cluster.masses, 3))
+    scaled_rigid = sqrt_mass[:, None] * rigid
+    complement = scipy.linalg.null_space(scaled_rigid.T, rcond=1e-9)  # orthonormal, (3n, r)
+    stiffness = tangent_stiffness(cluster) / sqrt_mass[:, None] / sqrt_mass[None, :]
+    reduced = complement.T @ (0.5 * (stiffness + stiffness.T)) @ complement
+    omega2, vectors = np.linalg.eigh(reduced)
+    return omega2, (complement @ vectors) / sqrt_mass[:, None]
+
+
+class LinearModel:
+    """The cluster linearised about its nominal state, in elastic modal coordinates, sampled with
+    the env's zero-order hold.
+
+    ``M q'' + C q' + K q = S F``, with ``K`` the tangent stiffness at nominal (every cable taut,
+    with its pretension's geometric stiffness), is projected on the r mass-normalised elastic
+    modes ``Phi`` (``Phi^T M Phi = I``; the six rigid modes are dropped: thrust that moves the
+    cluster as a rigid body does not damp anything, and the rigid modes would make the Riccati
+    equation singular; see :func:`elastic_modes`). State ``z = [q, q']`` (2r), input ``F`` (3k) N. ``A, B`` are
+    continuous; ``Ad, Bd`` are exact for a force held over one control interval.
+
+    Args:
+        task: the env's task (its nominal cluster, thrusters and control interval).
+    """
+
+    def __init__(self, task: DampingTask) -> None:
+        cluster = task.cluster
+        n = cluster.num_nodes
+        self.omega2, self.modes = elastic_modes(cluster)
+        r = self.omega2.size
+        self.num_modes = r
+        mass = np.repeat(cluster.masses, 3)
+        damping = np.repeat(cluster.damping, 3)
+        selection = np.zeros((3 * n, 3 * task.thrusters.size))
+        for k, node in enumerate(task.thrusters):
+            selection[3 * node : 3 * node + 3, 3 * k : 3 * k + 3] = np.eye(3)
+        self.modal_damping = self.modes.T @ (damping[:, None] * self.modes)
+        self.modal_input = self.modes.T @ selection  # (r, 3k)
+        self.A = np.block([[np.zeros((r, r)), np.eye(r)], [-np.diag(self.omega2), -self.modal_damping]])
+        self.B = np.vstack([np.zeros((r, selection.shape[1])), self.modal_input])
+        self.interval = task.config.control_interval
+        augmented = np.zeros((2 * r + self.B.shape[1],) * 2)
+        augmented[: 2 * r, : 2 * r] = self.A
+        augmented[: 2 * r, 2 * r :] = self.B
+        exponential = scipy.linalg.expm(augmented * self.interval)
+        self.Ad = exponential[: 2 * r, : 2 * r]
+        self.Bd = exponential[: 2 * r, 2 * r :]
+        # q = Phi^T M d projects any displacement on the elastic modes (rigid parts drop out).
+        self.projection = self.modes.T * mass[None, :]  # (r, 3n)
+
+    def modal_state(self, displacement: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """(N, 2r) modal state ``[q, q']`` from (N, n, 3) displacements (m) and velocities
+        (m/s)."""
+        count = displacement.shape[0]
+        q = displacement.reshape(count, -1) @ self.projection.T
+        dq = velocity.reshape(count, -1) @ self.projection.T
+        return np.hstack([q, dq])
+
+    def energy_weight(self) -> np.ndarray:
+        """(2r, 2r) matrix of the vibration energy ``z^T W z = q^T Omega^2 q / 2 + q'^T q' / 2``,
+        J."""
+        return 0.5 * np.diag(np.concatenate([self.omega2, np.ones(self.num_modes)]))
+
+    def slowest_decay_rate(self, gain: np.ndarray) -> float:
+        """Slowest decay rate (1/s) of the sampled closed loop ``z+ = (Ad - Bd G) z`` under state
+        feedback ``F = -G z``: ``-ln(max |eigenvalue|) / interval``. Negative means unstable."""
+        radius = float(np.abs(np.linalg.eigvals(self.Ad - self.Bd @ gain)).max())
+        return -math.log(max(radius, 1e-300)) / self.interval
+
+
+class VelocityFeedbackController(Controller):
+    """Direct velocity feedback: each thruster pushes against its satellite's velocity relative to
+    the cluster's rigid motion, ``F_i = -g m_i (v_i - v_com - omega x r_i)``.
+
+    The gain rate ``g`` (1/s) is chosen by a rule, not by hand: it is the value that maximises
+    the slowest decay rate of the closed loop of the linearised, sampled model
+    (:class:`LinearModel`, zero-order hold at the env's control interval), found by a
+    golden-section search over ``log g`` after a coarse scan. Too low a gain damps slowly, and
+    too high a gain overshoots because the thrust is held for a whole interval. The rule ignores
+    the thrust limit. With large initial conditions the commands saturate, and the law becomes
+    bang-bang in the saturated axes.
+
+    Args:
+        env: a tether-gym env.
+        gain: the gain rate ``g`` in 1/s; None applies the rule.
+    """
+
+    name = "velocity_feedback"
+
+    def __init__(self, env: Any, gain: float | None = None) -> None:
+        super().__init__(env)
+        self.model = LinearModel(self.task)
+        if gain is None:
+            gain = self.best_gain()
+        if not (math.isfinite(gain) and gain >= 0):
+            raise ValueError(f"gain must be a finite rate >= 0 in 1/s; got {gain!r}")
+        self.gain = float(gain)
+
+    def feedback_matrix(self, gain: float) -> np.ndarray:
+        """(3k, 2r) modal state feedback equivalent to gain rate ``gain``: ``F = -g M_k q'``
+        mapped through the modes (velocities of the thruster satellites, elastic part)."""
+        model = self.model
+        masses = np.repeat(self.masses[self.thrusters], 3)
+        modal_velocity = model.modes.reshape(self.num_nodes, 3, -1)[self.thrusters].reshape(-1, model.num_modes)
+        return np.hstack([np.zeros_like(modal_velocity), gain * masses[:, None] * modal_velocity])
+
+    def best_gain(self) -> float:
+        """The gain rate (1/s) maximising :meth:`LinearModel.slowest_decay_rate`."""
+        rate = lambda log_gain: self.model.slowest_decay_rate(self.feedback_matrix(math.exp(log_gain)))
+        grid = np.linspace(math.log(1e-3), math.log(10.0 / self.control_interval), 60)
+        values = [rate(x) for x in grid]
+        best = int(np.argmax(values))
+        low, high = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
+        ratio = (math.sqrt(5.0) - 1.0) / 2.0
+        for _ in range(40):
+            a, b = high - ratio * (high - low), low + ratio * (high - low)
+            if rate(a) > rate(b):
+                high = b
+            else:
+                low = a
+        return math.exp(0.5 * (low + high))
+
+    def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
+        relative = self.deformation_velocity(positions, velocities)[:, self.thrusters]
+        return -self.gain * self.masses[self.thrusters][None, :, None] * relative
+
+
+class LQRController(Controller):
+    """Discrete-time LQR on the linearised model, with the thrust clipped to the limit.
+
+    The model is :class:`LinearModel`: the tangent stiffness at the nominal state (every cable
+    taut), the env's mass and damping, its thrusters and its zero-order hold. The cost weights
+    follow Bryson's rule in the task's own units:
+
+        J = sum_k  E_vib(z_k) / E_scale + thrust_weight * sum_j (F_j,k / F_max,j)^2
+
+    with ``E_vib`` the modal vibration energy, ``E_scale`` the env's reward normaliser, and
+    ``F_max`` each thruster's limit. The gain comes from scipy's discrete algebraic Riccati
+    solver. The law is ``F = -G [q, q']``, where ``q = Phi^T M d`` projects the observed
+    displacements and velocities on the elastic modes.
+
+    What it gets wrong on the real task: cables are tension-only, and with the default initial
+    conditions most of them are slack most of the time, where the linear model assumes a stiff
+    bilateral spring. The thrust is also clipped: :attr:`saturation_fraction` reports how often.
+
+    Args:
+        env: a tether-gym env.
+        thrust_weight: weight of the normalised thrust in the cost (Bryson's rule: 1).
+    """
+
+    name = "lqr"
+
+    def __init__(self, env: Any, thrust_weight: float = 1.0) -> None:
+        super().__init__(env)
+        if not (math.isfinite(thrust_weight) and thrust_weight > 0):
+            raise ValueError(f"thrust_weight must be a finite number > 0; got {thrust_weight!r}")
+        self.thrust_weight = float(thrust_weight)
+        self.model = model = LinearModel(self.task)
+        state_weight = model.energy_weight() / self.task.energy_scale
+        force_scale = np.repeat(self.max_thrust, 3)
+        input_weight = np.diag(self.thrust_weight / force_scale**2)
+        riccati = scipy.linalg.solve_discrete_are(model.Ad, model.Bd, state_weight, input_weight)
+        self.gain = np.linalg.solve(
+            input_weight + model.Bd.T @ riccati @ model.Bd, model.Bd.T @ riccati @ model.Ad
+        )  # (3k, 2r)
+        self.riccati = riccati
+
+    def closed_loop_eigenvalues(self, continuous: bool = True) -> np.ndarray:
+        """Eigenvalues of the unclipped closed loop of the linear model: of ``A - B G`` (1/s)
+        with ``continuous=True``, else of the sampled ``Ad - Bd G``."""
+        model = self.model
+        matrix = model.A - model.B @ self.gain if continuous else model.Ad - model.Bd @ self.gain
+        return np.linalg.eigvals(matrix)
+
+    def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
+        displacement = positions - self.nominal_relative[None]
+        state = self.model.modal_state(displacement, velocities)
+        return -(state @ self.gain.T).reshape(positions.shape[0], self.thrusters.size, 3)
+
+
+class TensionAwareController(Controller):
+    """Tension-aware damping: velocity feedback, plus virtual struts across slack cables.
+
+    **The idea.** A tension-only cable resists stretching but not shortening. With large initial
+    conditions the cables of this task are slack much of the time. The cluster is then a
+    mechanism, and only the small bias thrust (about 0.5 N for the default tetrahedron) pulls it
+    back out to its nominal shape. Velocity feedback treats that slow re-tensioning like any
+    other motion and brakes it. So the satellites creep outward at the speed where the brake
+    equals the bias, and a slow tail of energy stored against the bias is left.
+
+    This law gives each slack cable what it lacks, a compression strut. Each cable whose observed
+    elongation ``dL`` is below the slack point ``-N0 L0 / EA`` pushes its two satellites apart
+    with ``kappa |dL|`` along the cable. Together with velocity feedback ``-g m w`` on the
+    deformation velocity, the strut is a proportional-derivative law in the slack directions.
+    The stiffness is set for critical damping against the velocity-feedback gain,
+    ``kappa = m g^2 / 4``, with ``g`` from the rule of :class:`VelocityFeedbackController`. Taut
+    cables get no strut, because the cable itself is the spring there. The thrust limit clips
+    the sum.
+
+    Args:
+        env: a tether-gym env.
+        gain: velocity-feedback rate ``g`` in 1/s; None applies the velocity-feedback rule.
+        strut_stiffness: ``kappa`` in N/m; None uses ``m g^2 / 4`` with the mean thruster mass.
+    """
+
+    name = "tension_aware"
+
+    def __init__(self, env: Any, gain: float | None = None, strut_stiffness: float | None = None) -> None:
+        super().__init__(env)
+        self.velocity_feedback = VelocityFeedbackController(env, gain=gain)
+        self.gain = self.velocity_feedback.gain
+        if strut_stiffness is None:
+            strut_stiffness = float(self.masses[self.thrusters].mean()) * self.gain**2 / 4.0
+        if not (math.isfinite(strut_stiffness) and strut_stiffness >= 0):
+            raise ValueError(f"strut_stiffness must be a finite stiffness >= 0 N/m; got {strut_stiffness!r}")
+        self.strut_stiffness = float(strut_stiffness)
+        cluster = self.cluster
+        self.cables = cluster.cables
+        self.slack_point = -cluster.N0 / cluster.stiffness  # (c,) m, elongation below which a cable is slack
+
+    def strut_forces(self, positions: np.ndarray, elongations: np.ndarray) -> np.ndarray:
+        """(N, n, 3) forces (N) of the virtual struts across the slack cables."""
+        i, j = self.cables[:, 0], self.cables[:, 1]
+        delta = positions[:, j] - positions[:, i]
+        direction = delta / np.maximum(np.linalg.norm(delta, axis=2, keepdims=True), 1e-12)
+        shortfall = np.where(elongations < self.slack_point[None], -elongations, 0.0)  # (N, c) m, >= 0
+        push = (self.strut_stiffness * shortfall)[:, :, None] * direction
+        force = np.zeros(positions.shape)
+        np.add.at(force, (slice(None), i), -push)
+        np.add.at(force, (slice(None), j), push)
+        return force
+
+    def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
+        damping = self.velocity_feedback.thrust(positions, velocities, elongations)
+        return damping + self.strut_forces(positions, elongations)[:, self.thrusters]
+
+
+#: The scripted baselines by name.
+BASELINES: dict[str, type[Controller]] = {
+    cls.name: cls
+    for cls in (PassiveController, VelocityFeedbackController, LQRController, TensionAwareController)
+}
+
+
+def make_baseline(name: str, env: Any, **kwargs: Any) -> Controller:
+    """The baseline ``name`` (one of :data:`BASELINES`) for ``env``, with its keyword arguments."""
+    if name not in BASELINES:
+        raise ValueError(f"unknown baseline {name!r}; choose one of {sorted(BASELINES)}")
+    return BASELINES[name](env, **kwargs)

@@ -1,0 +1,185 @@
+"""Compare controllers side by side: ``python -m agents.compare`` (the project's main job).
+
+Every controller (by default the four scripted baselines and every model shipped in
+``agents/models/<env id>/``) runs the same held-out episodes: episode e starts from the reset
+seeded ``seed + e``. The command prints a table, and writes to ``--out``:
+
+* ``comparison.md`` and ``comparison.csv``: the table (see :data:`agents.evaluate.METRICS`);
+* ``energy.png``: vibration energy over time, E(t)/E0, median and interquartile band per
+  controller;
+* ``displacement.png``: one satellite's displacement from its nominal place over time, in the
+  first episode, for every controller.
+
+The seeds default to 10 000 and up, far from the seeds that training and its evaluation
+callback use (0 and up, and 1 000 000 and up).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.baselines import BASELINES
+from agents.evaluate import METRICS, EpisodeRecord, rollout, summarise
+from agents.policies import make_controller, shipped_models
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
+
+__all__ = ["compare", "main"]
+
+#: First held-out seed.
+HELD_OUT_SEED = 10_000
+
+
+def _progress_printer(name: str) -> Any:
+    """A progress callback that redraws one line on a terminal, and prints once otherwise."""
+    interactive = sys.stdout.isatty()
+    start = time.perf_counter()
+
+    def report(done: int, total: int) -> None:
+        if interactive and (done % 10 == 0 or done == total):
+            bar = "#" * (30 * done // total)
+            print(f"\r  {name:<22} [{bar:<30}] {done}/{total} steps", end="", flush=True)
+        if done == total:
+            elapsed = time.perf_counter() - start
+            print(("\r" if interactive else "") + f"  {name:<22} {total} steps in {elapsed:5.1f} s" + " " * 20)
+
+    return report
+
+
+def compare(
+    env_id: str = DEFAULT_ENV_ID,
+    controllers: list[str] | None = None,
+    episodes: int = 64,
+    seed: int = HELD_OUT_SEED,
+    out: str | Path = "outputs/compare",
+    satellite: int = 0,
+    plots: bool = True,
+    env_kwargs: dict[str, Any] | None = None,
+) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
+    """Evaluate ``controllers`` (names or model paths; default: every baseline and shipped
+    model) on ``episodes`` episodes seeded ``seed, seed+1, ...``; write the table and plots to
+    ``out``. Returns the episode records and the summaries, in the controllers' order."""
+    import gymnasium as gym
+
+    if env_id not in ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; tether-gym ids are {list(ENV_IDS)}")
+    if episodes < 2:
+        raise ValueError(f"episodes must be at least 2 (for a confidence interval); got {episodes}")
+    names = controllers or (list(BASELINES) + list(shipped_models(env_id)))
+    probe = gym.make_vec(env_id, num_envs=1, **dict(env_kwargs or {}))
+    policies = [make_controller(name, probe) for name in names]
+    probe.close()
+    seeds = list(range(seed, seed + episodes))
+    print(f"{env_id}: {len(names)} controllers x {episodes} episodes (seeds {seed}..{seed + episodes - 1})")
+    records = []
+    for name, policy in zip(names, policies):
+        label = getattr(policy, "name", name) if name in BASELINES else name
+        records.append(rollout(policy, env_id, seeds, name=label, satellite=satellite, env_kwargs=env_kwargs,
+                               progress=_progress_printer(label)))
+    summaries = [summarise(record) for record in records]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = markdown_table(records, summaries)
+    header = (f"{env_id}, {episodes} episodes per controller, seeds {seed}..{seed + episodes - 1}, "
+              f"{records[0].time[-1]:.0f} s each\n\n")
+    (out / "comparison.md").write_text(header + table + "\n")
+    write_csv(out / "comparison.csv", records, summaries)
+    print()
+    print(table)
+    if plots:
+        plot_energy(records, out / "energy.png", env_id)
+        plot_displacement(records, out / "displacement.png", env_id, satellite)
+    print(f"\nwrote {out / 'comparison.md'}, {out / 'comparison.csv'}"
+          + (f", {out / 'energy.png'}, {out / 'displacement.png'}" if plots else ""))
+    return records, summaries
+
+
+def markdown_table(records: list[EpisodeRecord], summaries: list[dict[str, Any]]) -> str:
+    """The comparison as a Markdown table, one row per controller."""
+    headers = ["controller"] + [f"{title} ({unit})" if unit else title for _, title, unit in METRICS]
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    for record, summary in zip(records, summaries):
+        lines.append("| " + " | ".join([record.name] + [summary["cells"][key] for key, _, _ in METRICS]) + " |")
+    return "\n".join(lines)
+
+
+def write_csv(path: Path, records: list[EpisodeRecord], summaries: list[dict[str, Any]]) -> None:
+    """The comparison's numbers, one row per controller."""
+    keys = list(summaries[0]["values"])
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(["controller"] + keys)
+        for record, summary in zip(records, summaries):
+            writer.writerow([record.name] + [summary["values"][key] for key in keys])
+
+
+def plot_energy(records: list[EpisodeRecord], path: Path, env_id: str) -> None:
+    """E(t)/E0: median line and interquartile band per controller, log scale."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    for record in records:
+        ratio = record.energy / record.energy[:, :1]
+        median = np.nanmedian(ratio, axis=0)
+        low, high = np.nanpercentile(ratio, [25, 75], axis=0)
+        line = ax.semilogy(record.time, median, label=record.name)[0]
+        ax.fill_between(record.time, low, high, color=line.get_color(), alpha=0.18, linewidth=0)
+    ax.axhline(0.05, color="0.5", linestyle=":", linewidth=1)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("vibration energy / initial")
+    ax.set_title(f"{env_id}: vibration energy, median and interquartile range over {records[0].energy.shape[0]} episodes")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, satellite: int) -> None:
+    """Satellite ``satellite``'s displacement components over time in the first episode."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(8, 6.5), sharex=True)
+    for record in records:
+        for axis, ax in enumerate(axes):
+            ax.plot(record.time, 1e3 * record.displacement[0, :, axis], label=record.name, linewidth=1.1)
+    for axis, ax in enumerate(axes):
+        ax.set_ylabel(f"{'xyz'[axis]} (mm)")
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(f"{env_id}: satellite {satellite} displacement from nominal, episode seed {records[0].seeds[0]}")
+    axes[0].legend(ncol=3, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS))
+    parser.add_argument("--controllers", nargs="+", help="baseline names, shipped model names or model paths "
+                        "(default: every baseline and every shipped model of the id)")
+    parser.add_argument("--episodes", type=int, default=64)
+    parser.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
+    parser.add_argument("--satellite", type=int, default=0, help="satellite of the displacement plot")
+    parser.add_argument("--out", default="outputs/compare")
+    parser.add_argument("--no-plots", action="store_true")
+    args = parser.parse_args(argv)
+    compare(env_id=args.env, controllers=args.controllers, episodes=args.episodes, seed=args.seed, out=args.out,
+            satellite=args.satellite, plots=not args.no_plots)
+
+
+if __name__ == "__main__":
+    main()
