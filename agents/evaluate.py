@@ -104,17 +104,24 @@ def rollout(
         observation, reward, term, trunc, infos = envs.step(actions)
         done = term | trunc
         final_info = infos.get("final_info", {})
-        state_energy = np.where(done, final_info.get("vibration_energy", 0.0), infos.get("vibration_energy", 0.0))
+
+        def stepped(key: str) -> np.ndarray:
+            """The info ``key`` of the state each sub-env stepped into (from final_info where it
+            ended and was reset)."""
+            new, old = np.asarray(infos.get(key, 0.0)), np.asarray(final_info.get(key, 0.0))
+            return np.where(done.reshape((-1,) + (1,) * (max(new.ndim, old.ndim) - 1)), old, new)
+
+        state_energy = stepped("vibration_energy")
         rows = np.flatnonzero(alive)
         energy[rows, k + 1] = state_energy[rows]
         deviation = task_deviation(infos, observation, dev_index, task.length_scale)
         displacement[rows, k + 1] = deviation[rows]
         rewards[rows, k] = reward[rows]
-        slack_count = np.where(done, final_info.get("slack_count", 0), infos.get("slack_count", 0))
+        slack_count = stepped("slack_count")
         slack[rows, k] = slack_count[rows] > 0
-        tension = np.where(done[:, None], final_info.get("peak_tension", 0.0), infos.get("peak_tension", 0.0))
+        tension = stepped("peak_tension")
         peak[rows] = np.maximum(peak[rows], tension[rows].max(axis=1))
-        used = np.where(done, final_info.get("propellant_used", 0.0), infos.get("propellant_used", 0.0))
+        used = stepped("propellant_used")
         propellant[rows] = used[rows]
         ended = alive & done
         if ended.any():

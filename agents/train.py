@@ -138,12 +138,14 @@ def train(
     checkpoint_freq: int = 250_000,
     progress_bar: bool = True,
     verbose: int = 0,
+    command: str | None = None,
 ) -> Path:
     """Train ``algo`` on ``env_id`` and return the run directory (see the module docstring).
 
     ``timesteps`` and ``num_envs`` override the file's ``n_timesteps``/``n_envs``; ``overrides``
     replaces any other entries. ``eval_freq`` and ``checkpoint_freq`` count total env steps
-    (over all envs)."""
+    (over all envs). ``command`` is recorded in ``config.yml`` (the command line, when run as
+    ``python -m agents.train``)."""
     if algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
     if env_id not in ENV_IDS:
@@ -162,7 +164,7 @@ def train(
     run.mkdir(parents=True, exist_ok=True)
     record = {
         "algo": algo, "env_id": env_id, "seed": seed, "hyperparams": hyperparams,
-        "command": shlex.join([Path(sys.executable).name, "-m", "agents.train", *sys.argv[1:]]),
+        "command": command,
         "tether_gym_version": tether_gym.__version__,
     }
     with open(run / "config.yml", "w") as stream:
@@ -256,6 +258,7 @@ def main(argv: list[str] | None = None) -> None:
         num_envs=args.n_envs, hyperparams_file=args.hyperparams, resume=args.resume, eval_freq=args.eval_freq,
         eval_episodes=args.eval_episodes, checkpoint_freq=args.checkpoint_freq,
         progress_bar=not args.no_progress, verbose=args.verbose,
+        command=shlex.join(["python", "-m", "agents.train", *(sys.argv[1:] if argv is None else argv)]),
     )
 
 

@@ -11,6 +11,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from tether_gym._kernels import PARALLEL_CHUNKS
+
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _rigid_motion(x: np.ndarray, v: np.ndarray, masses: np.ndarray, out: np.ndarray) -> None:
@@ -261,9 +263,6 @@ def _evaluate_clusters(
         scalars[b, 8] = kinetic
         scalars[b, 9] = strain
 
-
-#: Chunks the parallel driver splits a batch into (see ``tether_gym._kernels.PARALLEL_CHUNKS``).
-PARALLEL_CHUNKS = 64
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
