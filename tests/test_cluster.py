@@ -90,9 +90,10 @@ def test_presets_are_valid_and_sub_step_at_control_rates(name: str) -> None:
     assert c.name == name
     assert np.allclose(c.L0, np.linalg.norm(c.positions[c.cables[:, 1]] - c.positions[c.cables[:, 0]], axis=1))
     sim = tg.Simulator(c)
-    # Several sub-steps per 0.1 s control interval at the default safety factor.
+    # Several sub-steps per control interval of the preset's env id at the default safety factor.
+    (interval,) = {task.get("control_interval", 0.1) for preset, _, task in tg.ENV_IDS.values() if preset == name}
     substep = tg.DEFAULT_SAFETY_FACTOR * sim.critical_time_step()
-    assert 2 <= 0.1 / substep <= 50
+    assert 2 <= interval / substep <= 50
     assert np.all(c.breaking_load > 100.0) and np.all(c.masses >= 1.0)
 
 

@@ -129,8 +129,11 @@ def test_reward_terms_add_up_and_info_is_complete() -> None:
 def test_nominal_shape_is_an_equilibrium(name: str) -> None:
     env = TetherClusterEnv(preset=name)
     task = env.task
-    residual = task.bias[0] - task.sim.internal_forces(task.nominal)[0]
+    residual = task.bias[0] - task.sim.equilibrium_force(task.nominal)[0]
     assert np.abs(residual).max() < 1e-12 * max(1.0, np.abs(task.bias).max())
+    if not env.cluster.frame.is_inertial:
+        # Spin or the gravity gradient holds these shapes, not thrust: the bias is round-off.
+        assert np.abs(task.bias).max() < 1e-12 * env.cluster.N0.max()
     env.reset(options={"positions": env.cluster.positions, "velocities": np.zeros_like(env.cluster.positions)})
     for _ in range(50):
         obs, reward, *_ = env.step(np.zeros(env.action_space.shape))

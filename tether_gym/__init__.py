@@ -6,13 +6,17 @@ differences with an element-by-element critical-step estimate.  Main entry point
 * :class:`Cluster`, :func:`make_cluster`, :func:`load_cluster`, :func:`save_cluster`: describe a
   cluster, or take a named preset.
 * :class:`Simulator` (one cluster) and :class:`BatchSimulator` (B clusters, one core).
+* :class:`Frame`: inertial, orbiting (Hill / Clohessy-Wiltshire) or spinning frames.
 * Gymnasium ids ``TetherTetrahedron-v0`` (default), ``TetherChain-v0``, ``TetherTriangle-v0``,
-  ``TetherOctahedron-v0``, ``TetherHub-v0``: :class:`tether_gym.envs.TetherClusterEnv`.
+  ``TetherOctahedron-v0``, ``TetherHub-v0``, and in turning frames ``TetherRadialChain-v0``
+  (orbit), ``TetherSpinningTriangle-v0``, ``TetherSpinningHub-v0``:
+  :class:`tether_gym.envs.TetherClusterEnv`.
 * :mod:`tether_gym.analysis`: tangent stiffness and normal modes for verification and control
   design.
 """
 
 from tether_gym.cluster import Cluster, ClusterError, load_cluster, save_cluster
+from tether_gym.frames import LEO_ORBIT_RATE, Frame
 from tether_gym.presets import PRESETS, make_cluster, preset_names
 from tether_gym.simulator import (
     DEFAULT_SAFETY_FACTOR,
@@ -39,6 +43,8 @@ __all__ = [
     "Cluster",
     "ClusterError",
     "EnergyReport",
+    "Frame",
+    "LEO_ORBIT_RATE",
     "SimulationDiverged",
     "Simulator",
     "load_cluster",

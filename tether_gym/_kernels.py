@@ -43,24 +43,45 @@ STATUS_TOO_MANY_SUBSTEPS = 2
 @njit(cache=True, nogil=True, error_model="numpy")
 def cable_forces(
     x: np.ndarray,
+    v: np.ndarray,
     reference: np.ndarray,
     cables: np.ndarray,
     stiffness: np.ndarray,
     L0: np.ndarray,
     N0: np.ndarray,
+    axial_damping: np.ndarray,
     inv_split_mass_sum: np.ndarray,
+    breaking_load: np.ndarray,
+    intact: np.ndarray,
     linearised: bool,
     taut_branch: bool,
+    may_break: bool,
     f_int: np.ndarray,
     tension: np.ndarray,
-) -> tuple[float, bool]:
+    peak: np.ndarray,
+) -> tuple[float, bool, float, float]:
     """Restoring forces and cable tensions of one cluster, plus its largest element frequency.
 
-    Writes ``f_int`` (n, 3) in N and ``tension`` (m,) in N (0 for slack cables).  Returns
-    ``(omega2_max, finite)``: the largest squared element frequency in (rad/s)^2, taken on the taut
-    branch ``max(EA/L0, N_taut/L) * (1/m_i^e + 1/m_j^e)`` so that a slack cable that can snap taut
-    within the next step still limits the step; and whether every cable length was finite and
-    non-zero (two tethered satellites meeting is a collision the model cannot represent).
+    Writes ``f_int`` (n, 3) in N and ``tension`` (m,) in N (0 for slack and broken cables), and
+    raises ``peak`` (m,) to any larger tension.  A taut cable carries
+    ``N = max(0, N0 + EA/L0 dL + c_ax dL')``, its stretching rate ``dL'`` taken from the
+    velocities ``v`` (n, 3) m/s: in the integrator these are the half-step velocities
+    ``v_{n-1/2}``, the usual explicit (lagged) treatment of a velocity-dependent internal force.
+    With ``may_break``, a cable whose tension passes its ``breaking_load`` is marked broken in
+    ``intact`` (m,) and carries nothing from then on.
+
+    Returns ``(omega2_max, finite, viscous_power, released_energy)``:
+
+    * ``omega2_max``: the largest squared element frequency in (rad/s)^2, taken on the taut branch
+      ``max(EA/L0, N_taut/L) * (1/m_i^e + 1/m_j^e)`` so that a slack cable that can snap taut
+      within the next step still limits the step.  Axial damping with lagged velocity lowers the
+      stable step of an element from ``2/omega`` to ``(2/omega)(sqrt(1 + xi^2) - xi)``, with
+      ``xi = c_ax (1/m_i^e + 1/m_j^e) / (2 omega)``; the returned value is the frequency that
+      gives that step, ``omega^2 (sqrt(1 + xi^2) + xi)^2``.
+    * ``finite``: every intact cable length was finite and non-zero (two tethered satellites
+      meeting is a collision the model cannot represent).
+    * ``viscous_power``: power dissipated by the cables' axial damping, W.
+    * ``released_energy``: elastic energy of the cables that broke in this call, J.
 
     ``taut_branch=True`` drops the tension-only cut-off (``N`` may go negative): the smooth law
     that the finite-difference critical-step estimate perturbs.
@@ -69,7 +90,12 @@ def cable_forces(
     omega2_max = 0.0
     length_sum = 0.0
     shortest = math.inf
+    viscous_power = 0.0
+    released = 0.0
     for c in range(cables.shape[0]):
+        if not intact[c]:
+            tension[c] = 0.0
+            continue
         i = cables[c, 0]
         j = cables[c, 1]
         dx = x[j, 0] - x[i, 0]
@@ -94,12 +120,30 @@ def cable_forces(
             elongation = length - L0[c]
         n_taut = N0[c] + stiffness[c] * elongation
         n_cable = n_taut if (n_taut > 0.0 or taut_branch) else 0.0
-        tension[c] = n_cable
+        damping_c = axial_damping[c]
+        if damping_c > 0.0 and n_cable != 0.0:
+            rate = (v[j, 0] - v[i, 0]) * ex + (v[j, 1] - v[i, 1]) * ey + (v[j, 2] - v[i, 2]) * ez
+            n_cable = n_taut + damping_c * rate
+            if n_cable < 0.0 and not taut_branch:
+                n_cable = 0.0
+            viscous_power += (n_cable - n_taut) * rate
         geometric = n_cable * inverse_length
         k_max = stiffness[c] if stiffness[c] >= geometric else geometric
         omega2 = k_max * inv_split_mass_sum[c]
+        if damping_c > 0.0:
+            xi = 0.5 * damping_c * inv_split_mass_sum[c] / math.sqrt(omega2)
+            factor = math.sqrt(1.0 + xi * xi) + xi
+            omega2 *= factor * factor
         if omega2 > omega2_max:
             omega2_max = omega2
+        if n_cable > peak[c]:
+            peak[c] = n_cable
+        if may_break and n_cable > breaking_load[c]:
+            intact[c] = False
+            elastic = n_taut if n_taut > 0.0 else 0.0
+            released += 0.5 * elastic * elastic / stiffness[c]
+            n_cable = 0.0
+        tension[c] = n_cable
         if n_cable != 0.0:
             fx = n_cable * ex
             fy = n_cable * ey
@@ -110,7 +154,17 @@ def cable_forces(
             f_int[j, 0] += fx
             f_int[j, 1] += fy
             f_int[j, 2] += fz
-    return omega2_max, math.isfinite(length_sum) and shortest > 0.0
+    finite = math.isfinite(length_sum) and shortest > 0.0
+    return omega2_max, finite, viscous_power, released
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _solve_gyroscopic(lhs: float, gyro: float, rx: float, ry: float) -> tuple[float, float]:
+    """Solve ``lhs vx - gyro vy = rx, lhs vy + gyro vx = ry``: the in-plane part of a velocity
+    update whose Coriolis term is taken at the centred velocity (a Cayley rotation, which, like
+    the exact Coriolis force, does no work)."""
+    det = lhs * lhs + gyro * gyro
+    return (lhs * rx + gyro * ry) / det, (lhs * ry - gyro * rx) / det
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -135,7 +189,12 @@ def _advance_clusters(
     stiffness: np.ndarray,
     L0: np.ndarray,
     N0: np.ndarray,
+    axial_damping: np.ndarray,
     inv_split_mass_sum: np.ndarray,
+    breaking_load: np.ndarray,
+    intact: np.ndarray,
+    frame_rate: np.ndarray,
+    frame_tidal: np.ndarray,
     reference: np.ndarray,
     linearised: bool,
     safety_factor: float,
@@ -164,6 +223,12 @@ def _advance_clusters(
     a fresh state (just reset): ``v_half`` then holds the initial velocity and the first interval
     assumes uniformly accelerated motion, ``v_{1/2} = v_0 + h/2 a_0`` (paper, section 2).
 
+    In a turning frame (``frame_rate[b] = Omega`` about z, tidal diagonal ``frame_tidal[b]``,
+    1/s^2) the force gains ``M diag(T) u_n`` and the Coriolis force ``-2 M Omega x v``, which is
+    taken at the centred velocity ``(v_{n-1/2} + v_{n+1/2}) / 2`` like the diagonal damping: the
+    update stays explicit (a 2x2 solve per satellite), unconditionally stable in the Coriolis
+    term and free of spurious Coriolis work.
+
     The force is piecewise constant and switches at the start of the interval.  The first velocity
     update spans ``[t_n - h_{n-1/2}/2, t_n + h_{n+1/2}/2]``, half under the previous interval's force
     ``previous_force`` and half under the new one, so it uses their time-weighted mean: the impulse
@@ -171,9 +236,11 @@ def _advance_clusters(
 
     Each sub-step is ``min(safety_factor * 2 / omega_est, max_step)``, re-estimated at every
     configuration, then shortened so that the rest of the interval splits into equal steps; the
-    interval ends exactly at ``duration``.  ``peak_tension[b]`` receives each cable's largest
-    tension over the interval, N.  ``status_out[b]`` receives the cluster's status, and a cluster
-    that stays healthy has ``duration`` added to its ``time[b]``.
+    interval ends exactly at ``duration``.  ``omega_est^2`` is the largest element value of
+    :func:`cable_forces` plus ``max |T|``.  Cables whose tension passes their breaking load break
+    (``intact``) and the cluster goes on without them.  ``peak_tension[b]`` receives each cable's
+    largest tension over the interval, N.  ``status_out[b]`` receives the cluster's status, and a
+    cluster that stays healthy has ``duration`` added to its ``time[b]``.
 
     The loop over clusters lives inside this function (the drivers hand it a range) because a
     call per cluster with this many array arguments cost more than the whole sub-stepping of a
@@ -194,6 +261,9 @@ def _advance_clusters(
         pb = force[b]
         mb = masses[b]
         cb = damping[b]
+        wb = frame_rate[b]
+        tb = frame_tidal[b]
+        tidal_max = max(abs(tb[0]), abs(tb[1]), abs(tb[2]))
         n_record = step_record.shape[1]
         elapsed = 0.0
         count = 0
@@ -225,20 +295,34 @@ def _advance_clusters(
                 last = False
             if h_last == 0.0:
                 for i in range(n_nodes):
-                    for d in range(3):
-                        acceleration = (pb[i, d] - fb[i, d] - cb[i] * vb[i, d]) / mb[i]
-                        vb[i, d] = vb[i, d] + 0.5 * h * acceleration
+                    ax = (pb[i, 0] - fb[i, 0] - cb[i] * vb[i, 0] + mb[i] * tb[0] * xb[i, 0]) / mb[i] + 2.0 * wb * vb[i, 1]
+                    ay = (pb[i, 1] - fb[i, 1] - cb[i] * vb[i, 1] + mb[i] * tb[1] * xb[i, 1]) / mb[i] - 2.0 * wb * vb[i, 0]
+                    az = (pb[i, 2] - fb[i, 2] - cb[i] * vb[i, 2] + mb[i] * tb[2] * xb[i, 2]) / mb[i]
+                    vb[i, 0] = vb[i, 0] + 0.5 * h * ax
+                    vb[i, 1] = vb[i, 1] + 0.5 * h * ay
+                    vb[i, 2] = vb[i, 2] + 0.5 * h * az
             else:
                 h_mid = 0.5 * (h_last + h)
                 blend = h_last / (h_last + h) if count == 0 else 0.0
                 inverse_h_mid = 1.0 / h_mid
                 for i in range(n_nodes):
                     inertia = mb[i] * inverse_h_mid
-                    inverse_lhs = 1.0 / (inertia + 0.5 * cb[i])
+                    lhs = inertia + 0.5 * cb[i]
+                    inverse_lhs = 1.0 / lhs
                     rhs_factor = inertia - 0.5 * cb[i]
-                    for d in range(3):
-                        p_dual = pb[i, d] + blend * (previous_force[b, i, d] - pb[i, d])
-                        vb[i, d] = (rhs_factor * vb[i, d] + p_dual - fb[i, d]) * inverse_lhs
+                    gyro = mb[i] * wb
+                    r0 = rhs_factor * vb[i, 0] + gyro * vb[i, 1]
+                    r1 = rhs_factor * vb[i, 1] - gyro * vb[i, 0]
+                    r2 = rhs_factor * vb[i, 2]
+                    r0 += pb[i, 0] + blend * (previous_force[b, i, 0] - pb[i, 0]) - fb[i, 0] + mb[i] * tb[0] * xb[i, 0]
+                    r1 += pb[i, 1] + blend * (previous_force[b, i, 1] - pb[i, 1]) - fb[i, 1] + mb[i] * tb[1] * xb[i, 1]
+                    r2 += pb[i, 2] + blend * (previous_force[b, i, 2] - pb[i, 2]) - fb[i, 2] + mb[i] * tb[2] * xb[i, 2]
+                    if gyro == 0.0:
+                        vb[i, 0] = r0 * inverse_lhs
+                        vb[i, 1] = r1 * inverse_lhs
+                    else:
+                        vb[i, 0], vb[i, 1] = _solve_gyroscopic(lhs, gyro, r0, r1)
+                    vb[i, 2] = r2 * inverse_lhs
             for i in range(n_nodes):
                 speed2 = 0.0
                 for d in range(3):
@@ -255,16 +339,16 @@ def _advance_clusters(
                 h_lo = h
             if h > h_hi:
                 h_hi = h
-            omega2[b], finite = cable_forces(
-                xb, reference[b], cables, stiffness[b], L0[b], N0[b], inv_split_mass_sum[b],
-                linearised, False, fb, tension[b],
+            omega2_cables, finite, viscous_power, released = cable_forces(
+                xb, vb, reference[b], cables, stiffness[b], L0[b], N0[b], axial_damping[b],
+                inv_split_mass_sum[b], breaking_load[b], intact[b], linearised, False, True, fb,
+                tension_b, peak,
             )
+            omega2[b] = omega2_cables + tidal_max
+            dissipated_b += h * viscous_power + released
             if not finite:
                 status[b] = STATUS_NON_FINITE
                 break
-            for c in range(tension_b.shape[0]):
-                if tension_b[c] > peak[c]:
-                    peak[c] = tension_b[c]
             if last:
                 break
             elapsed += h
@@ -276,12 +360,19 @@ def _advance_clusters(
         step_min[b] = h_lo
         step_max[b] = h_hi
         # Velocity at the end of the interval, consistent with the force just applied:
-        # (M + h/2 C) v_n = M v_{n-1/2} + h/2 (p - f_int(u_n)).
+        # (M + h/2 C) v_n + h M Omega x v_n = M v_{n-1/2} + h/2 (p - f_int(u_n) + M T u_n).
         half = 0.5 * h_last
         for i in range(n_nodes):
             denominator = mb[i] + half * cb[i]
-            for d in range(3):
-                v_sync[b, i, d] = (mb[i] * vb[i, d] + half * (pb[i, d] - fb[i, d])) / denominator
+            r0 = mb[i] * vb[i, 0] + half * (pb[i, 0] - fb[i, 0] + mb[i] * tb[0] * xb[i, 0])
+            r1 = mb[i] * vb[i, 1] + half * (pb[i, 1] - fb[i, 1] + mb[i] * tb[1] * xb[i, 1])
+            r2 = mb[i] * vb[i, 2] + half * (pb[i, 2] - fb[i, 2] + mb[i] * tb[2] * xb[i, 2])
+            if wb == 0.0:
+                v_sync[b, i, 0] = r0 / denominator
+                v_sync[b, i, 1] = r1 / denominator
+            else:
+                v_sync[b, i, 0], v_sync[b, i, 1] = _solve_gyroscopic(denominator, h_last * mb[i] * wb, r0, r1)
+            v_sync[b, i, 2] = r2 / denominator
         if status[b] == STATUS_OK:
             time[b] += duration
         status_out[b] = status[b]
@@ -295,24 +386,25 @@ PARALLEL_CHUNKS = 64
 @njit(cache=True, nogil=True, error_model="numpy")
 def advance_serial(
     active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
-    masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
-    max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
-    peak_tension, status_out,
+    masses, damping, cables, stiffness, L0, N0, axial_damping, inv_split_mass_sum, breaking_load, intact,
+    frame_rate, frame_tidal, reference, linearised, safety_factor, max_step, max_substeps, work, dissipated,
+    substeps, step_min, step_max, status, step_record, peak_tension, status_out,
 ):  # pragma: no cover - compiled
     _advance_clusters(
         0, x.shape[0], active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
-        previous_force, masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference,
-        linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-        step_max, status, step_record, peak_tension, status_out,
+        previous_force, masses, damping, cables, stiffness, L0, N0, axial_damping, inv_split_mass_sum,
+        breaking_load, intact, frame_rate, frame_tidal, reference, linearised, safety_factor, max_step,
+        max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record, peak_tension,
+        status_out,
     )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def advance_parallel(
     active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
-    masses, damping, cables, stiffness, L0, N0, inv_split_mass_sum, reference, linearised, safety_factor,
-    max_step, max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record,
-    peak_tension, status_out,
+    masses, damping, cables, stiffness, L0, N0, axial_damping, inv_split_mass_sum, breaking_load, intact,
+    frame_rate, frame_tidal, reference, linearised, safety_factor, max_step, max_substeps, work, dissipated,
+    substeps, step_min, step_max, status, step_record, peak_tension, status_out,
 ):  # pragma: no cover - compiled
     batch = x.shape[0]
     chunks = min(batch, PARALLEL_CHUNKS)
@@ -320,20 +412,25 @@ def advance_parallel(
         _advance_clusters(
             k * batch // chunks, (k + 1) * batch // chunks, active, duration, time, x, v_half, v_sync, f_int,
             tension, h_prev, omega2, force, previous_force, masses, damping, cables, stiffness, L0, N0,
-            inv_split_mass_sum, reference, linearised, safety_factor, max_step, max_substeps, work,
-            dissipated, substeps, step_min, step_max, status, step_record, peak_tension, status_out,
+            axial_damping, inv_split_mass_sum, breaking_load, intact, frame_rate, frame_tidal, reference,
+            linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
+            step_max, status, step_record, peak_tension, status_out,
         )
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def evaluate_batch(
     x: np.ndarray,
+    v: np.ndarray,
     reference: np.ndarray,
     cables: np.ndarray,
     stiffness: np.ndarray,
     L0: np.ndarray,
     N0: np.ndarray,
+    axial_damping: np.ndarray,
     inv_split_mass_sum: np.ndarray,
+    intact: np.ndarray,
+    frame_tidal: np.ndarray,
     linearised: bool,
     taut_branch: bool,
     f_int: np.ndarray,
@@ -341,10 +438,14 @@ def evaluate_batch(
     omega2: np.ndarray,
     finite: np.ndarray,
 ) -> None:
-    """``cable_forces`` for every cluster of a batch: fills f_int (B, n, 3), tension (B, m),
-    omega2 (B,) and finite (B,)."""
+    """``cable_forces`` for every cluster of a batch, without breaking any cable: fills f_int
+    (B, n, 3), tension (B, m), omega2 (B,) (the step-limiting value, tidal term included) and
+    finite (B,)."""
+    peak = np.empty(cables.shape[0])
     for b in range(x.shape[0]):
-        omega2[b], finite[b] = cable_forces(
-            x[b], reference[b], cables, stiffness[b], L0[b], N0[b], inv_split_mass_sum[b],
-            linearised, taut_branch, f_int[b], tension[b],
+        omega2_cables, finite[b], _, _ = cable_forces(
+            x[b], v[b], reference[b], cables, stiffness[b], L0[b], N0[b], axial_damping[b],
+            inv_split_mass_sum[b], stiffness[b], intact[b], linearised, taut_branch, False, f_int[b],
+            tension[b], peak,
         )
+        omega2[b] = omega2_cables + max(abs(frame_tidal[b, 0]), abs(frame_tidal[b, 1]), abs(frame_tidal[b, 2]))

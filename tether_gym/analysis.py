@@ -12,7 +12,14 @@ from numpy.typing import ArrayLike
 
 from tether_gym.cluster import Cluster
 
-__all__ = ["max_frequency", "normal_modes", "tangent_stiffness"]
+__all__ = [
+    "axial_damping_matrix",
+    "frame_stiffness",
+    "gyroscopic_matrix",
+    "max_frequency",
+    "normal_modes",
+    "tangent_stiffness",
+]
 
 
 def tangent_stiffness(cluster: Cluster, positions: ArrayLike | None = None, *, taut_branch: bool = False) -> np.ndarray:
@@ -72,3 +79,41 @@ def max_frequency(cluster: Cluster, positions: ArrayLike | None = None, *, taut_
     """
     omega2, _ = normal_modes(cluster, positions, taut_branch=taut_branch)
     return float(np.sqrt(max(omega2[-1], 0.0)))
+
+
+def _cable_blocks(cluster: Cluster, positions: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """(3n, 3n) assembly of one (3, 3) block per cable, ``blocks`` (m, 3, 3), in the pattern
+    ``[[B, -B], [-B, B]]`` on the cable's two nodes."""
+    n = cluster.num_nodes
+    matrix = np.zeros((3 * n, 3 * n))
+    for c, (i, j) in enumerate(cluster.cables):
+        a = slice(3 * i, 3 * i + 3)
+        b = slice(3 * j, 3 * j + 3)
+        matrix[a, a] += blocks[c]
+        matrix[b, b] += blocks[c]
+        matrix[a, b] -= blocks[c]
+        matrix[b, a] -= blocks[c]
+    return matrix
+
+
+def axial_damping_matrix(cluster: Cluster, positions: ArrayLike | None = None) -> np.ndarray:
+    """(3n, 3n) damping matrix of the cables' Kelvin-Voigt damping at ``positions`` (n, 3), m,
+    with every cable taut: ``c_ax e e^T`` per cable, N*s/m."""
+    x = cluster.positions if positions is None else np.asarray(positions, dtype=np.float64)
+    delta = x[cluster.cables[:, 1]] - x[cluster.cables[:, 0]]
+    e = delta / np.linalg.norm(delta, axis=1, keepdims=True)
+    return _cable_blocks(cluster, x, cluster.axial_damping[:, None, None] * e[:, :, None] * e[:, None, :])
+
+
+def frame_stiffness(cluster: Cluster) -> np.ndarray:
+    """(3n, 3n) stiffness of the frame's centrifugal and tidal forces, ``-M diag(T)``, N/m (zero in
+    an inertial frame; negative entries push satellites away, as the gravity gradient does
+    radially).  Add it to :func:`tangent_stiffness` for the linearised motion in the frame."""
+    return -np.diag(np.repeat(cluster.masses, 3) * np.tile(cluster.frame.tidal, cluster.num_nodes))
+
+
+def gyroscopic_matrix(cluster: Cluster) -> np.ndarray:
+    """(3n, 3n) skew matrix ``G`` of the Coriolis force ``-G v = -2 M Omega x v`` in the cluster's
+    frame, N*s/m (zero in an inertial frame)."""
+    block = 2.0 * cluster.frame.rate * np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    return np.kron(np.diag(cluster.masses), block)

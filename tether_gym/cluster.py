@@ -1,8 +1,9 @@
 """The description of a cluster of tethered satellites: validated on construction, immutable after.
 
 A :class:`Cluster` holds everything the physics needs and nothing about control: node positions,
-masses and diagonal damping, and the cables with their axial stiffness, reference length,
-pretension and breaking load.  Clusters are saved to and loaded from plain JSON or TOML files so
+masses and diagonal damping, the cables with their axial stiffness, reference length,
+pretension, axial (Kelvin-Voigt) damping and breaking load, and the frame the positions are
+written in (inertial, orbiting or spinning).  Clusters are saved to and loaded from plain JSON or TOML files so
 that users can describe their own.
 """
 
@@ -18,6 +19,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from tether_gym.frames import Frame, FrameError
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -76,7 +79,9 @@ class Cluster:
     """A cluster of point-mass satellites joined by massless, linear-elastic, tension-only cables.
 
     Cable ``c`` joining nodes ``i, j`` carries the axial force
-    ``N = max(0, N0 + EA/L0 * (|x_j - x_i| - L0))``.  Scalars are broadcast to every node or
+    ``N = max(0, N0 + EA/L0 * dL + c_ax * dL')`` while taut (``N0 + EA/L0 dL > 0``) and none
+    while slack, with ``dL = |x_j - x_i| - L0``; once its tension passes ``breaking_load`` it
+    breaks and carries nothing until the simulator is reset.  Scalars are broadcast to every node or
     cable.  All arrays are stored as read-only float64 (int64 for ``cables``).
 
     Args:
@@ -90,6 +95,11 @@ class Cluster:
         L0: (m,) or scalar reference (unstretched-plus-pretension) length, m, > 0; default: the
             distance between the cable's nodes in ``positions``.
         breaking_load: (m,) or scalar tension at which a cable breaks, N, > 0 (default inf).
+        axial_damping: (m,) or scalar Kelvin-Voigt damping ``c_ax`` of each cable, N*s/m, >= 0
+            (default 0): the physical alternative to the paper's diagonal damping, acting only
+            on the cable's stretching rate, and only while it is taut.
+        frame: the :class:`~tether_gym.frames.Frame` of ``positions`` and of the motion (default
+            inertial); a Hill or rotating frame adds Coriolis, centrifugal and tidal forces.
         name: a short label.
     """
 
@@ -101,6 +111,8 @@ class Cluster:
     damping: np.ndarray = 0.0  # type: ignore[assignment]
     L0: np.ndarray | None = None
     breaking_load: np.ndarray = math.inf  # type: ignore[assignment]
+    axial_damping: np.ndarray = 0.0  # type: ignore[assignment]
+    frame: Frame = dataclasses.field(default_factory=Frame.inertial)
     name: str = "custom"
 
     def __post_init__(self) -> None:
@@ -195,12 +207,21 @@ class Cluster:
                 f"unbreakable); got {self.breaking_load!r}"
             )
         breaking.setflags(write=False)
+        axial_damping = _float_array("axial_damping", self.axial_damping, (n_cables,), "N*s/m per cable")
+        if np.any(axial_damping < 0.0):
+            c = int(np.argmax(axial_damping < 0.0))
+            raise ClusterError(f"axial_damping must be >= 0 N*s/m; cable {c} has {axial_damping[c]}")
+        try:
+            frame = Frame.from_dict(self.frame)
+        except (FrameError, TypeError) as error:
+            raise ClusterError(f"invalid frame: {error}") from None
         if not isinstance(self.name, str):
             raise ClusterError(f"name must be a string; got {self.name!r}")
 
         for field, value in (
             ("positions", positions), ("masses", masses), ("cables", cables), ("EA", EA),
             ("N0", N0), ("damping", damping), ("L0", L0), ("breaking_load", breaking),
+            ("axial_damping", axial_damping), ("frame", frame),
         ):
             object.__setattr__(self, field, value)
 
@@ -260,6 +281,10 @@ class Cluster:
         }
         if np.all(np.isfinite(self.breaking_load)):
             data["breaking_load"] = self.breaking_load.tolist()
+        if np.any(self.axial_damping > 0.0):
+            data["axial_damping"] = self.axial_damping.tolist()
+        if not self.frame.is_inertial:
+            data["frame"] = self.frame.to_dict()
         return data
 
     @classmethod
@@ -277,17 +302,18 @@ class Cluster:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Cluster):
             return NotImplemented
-        return self.name == other.name and all(
+        return self.name == other.name and self.frame == other.frame and all(
             np.array_equal(getattr(self, f), getattr(other, f))
-            for f in ("positions", "masses", "cables", "EA", "N0", "damping", "L0", "breaking_load")
+            for f in ("positions", "masses", "cables", "EA", "N0", "damping", "L0", "breaking_load", "axial_damping")
         )
 
     __hash__ = None  # type: ignore[assignment]
 
     def __repr__(self) -> str:
+        frame = "" if self.frame.is_inertial else f", frame={self.frame.kind} at {self.frame.rate:.4g} rad/s"
         return (
             f"Cluster(name={self.name!r}, satellites={self.num_nodes}, cables={self.num_cables}, "
-            f"mass={self.masses.sum():.4g} kg)"
+            f"mass={self.masses.sum():.4g} kg{frame})"
         )
 
 

@@ -6,6 +6,12 @@ pretension of a fraction of a newton, which low-thrust cold-gas thrusters can ho
 values the critical step is 0.1-0.15 s, so at the default safety factor every 0.1 s control
 interval is integrated in several sub-steps.
 
+The presets ``radial_chain``, ``spinning_triangle`` and ``spinning_hub`` live in turning frames
+(:class:`~tether_gym.frames.Frame`), where the gravity gradient or the spin, not thrust, holds the
+cables taut: their pretensions are set so that the nominal shape is an equilibrium of the frame.
+They damp through the cables (Kelvin-Voigt, ``axial_damping_ratio``) rather than the paper's
+diagonal damping, which would act on velocities relative to the turning frame.
+
 Every preset is a function of keyword arguments returning a :class:`~tether_gym.Cluster`;
 :func:`make_cluster` looks one up by name and passes keyword overrides through.
 """
@@ -19,6 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from tether_gym.cluster import Cluster, ClusterError
+from tether_gym.frames import LEO_ORBIT_RATE, Frame
 
 __all__ = ["PRESETS", "make_cluster", "preset_names"]
 
@@ -193,12 +200,176 @@ def hub(
     )
 
 
+def _axial_damping(cables: np.ndarray, masses: np.ndarray, stiffness: np.ndarray, ratio: float) -> np.ndarray:
+    """(m,) Kelvin-Voigt coefficients, N*s/m, giving each cable the damping ratio ``ratio`` of the
+    axial oscillation of its two end masses alone: ``c = 2 ratio sqrt(k mu)``, mu the reduced mass."""
+    if not (math.isfinite(ratio) and ratio >= 0):
+        raise ClusterError(f"axial_damping_ratio must be a finite number >= 0; got {ratio!r}")
+    m_i, m_j = masses[cables[:, 0]], masses[cables[:, 1]]
+    return 2.0 * ratio * np.sqrt(stiffness * m_i * m_j / (m_i + m_j))
+
+
+def _positive(name: str, value: float, unit: str) -> float:
+    if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0):
+        raise ClusterError(f"{name} must be a finite number > 0 {unit}; got {value!r}")
+    return float(value)
+
+
+def radial_chain(
+    n: int = 3,
+    spacing: float = 500.0,
+    mass: float = 50.0,
+    EA: float = 20e3,
+    orbit_rate: float = LEO_ORBIT_RATE,
+    axial_damping_ratio: float = 0.05,
+    damping_rate: float = 0.0,
+    breaking_load: float = 1000.0,
+) -> Cluster:
+    """``n`` satellites in a straight line along the local vertical of a circular orbit, in the Hill
+    frame, held taut by the gravity gradient alone (no thrust).
+
+    At rest in the Hill frame, satellite k at radial offset ``x_k`` (centre of mass at the origin)
+    feels the tidal force ``3 n^2 m x_k``; cable k carries the pull of everything outboard of it,
+    ``N_k = 3 n^2 sum_{i > k} m_i x_i`` (for two satellites ``3 n^2 mu L``).  The pretension of
+    each cable is that tension at the nominal spacing, so the nominal line is an equilibrium.
+    The defaults (50 kg satellites 500 m apart in 400 km LEO) give about 0.1 N: such tethers are
+    barely taut, and slack easily.
+
+    Args:
+        n: number of satellites, >= 2.
+        spacing: cable length, m.
+        mass: mass of each satellite, kg.
+        EA: axial stiffness of each cable, N.
+        orbit_rate: orbital rate n of the circular orbit, rad/s (default 400 km LEO).
+        axial_damping_ratio: Kelvin-Voigt damping of each cable, as the damping ratio of its
+            end masses' axial oscillation.
+        damping_rate: diagonal damping per unit mass (relative to the Hill frame), 1/s.
+        breaking_load: cable breaking tension, N.
+    """
+    if not isinstance(n, (int, np.integer)) or n < 2:
+        raise ClusterError(f"radial_chain needs n >= 2 satellites (an integer); got n={n!r}")
+    spacing = _positive("spacing", spacing, "m")
+    mass = _positive("mass", mass, "kg")
+    frame = Frame.hill(_positive("orbit_rate", orbit_rate, "rad/s"))
+    positions = np.zeros((n, 3))
+    positions[:, 0] = spacing * (np.arange(n) - (n - 1) / 2.0)
+    masses = np.full(n, mass)
+    tidal_force = masses * frame.tidal[0] * positions[:, 0]  # (n,) N, outward above the centre
+    tension = np.array([tidal_force[k + 1:].sum() for k in range(n - 1)])
+    cables = np.array([(k, k + 1) for k in range(n - 1)])
+    stiffness = _positive("EA", EA, "N") / spacing
+    return Cluster(
+        positions=positions, masses=masses, cables=cables, EA=EA, N0=tension, damping=damping_rate * masses,
+        breaking_load=breaking_load, axial_damping=_axial_damping(cables, masses, np.full(n - 1, stiffness), axial_damping_ratio),
+        frame=frame, name="radial_chain",
+    )
+
+
+def spinning_triangle(
+    edge: float = 100.0,
+    mass: float = 10.0,
+    EA: float = 50e3,
+    spin_rate: float = 0.06,
+    axial_damping_ratio: float = 0.05,
+    damping_rate: float = 0.0,
+    breaking_load: float = 1500.0,
+) -> Cluster:
+    """Three satellites in an equilateral triangle spinning about its normal (z), seen in the frame
+    that spins with it.  Spin holds the cables taut: each satellite, at radius ``edge/sqrt(3)``,
+    needs the centripetal force ``m W^2 edge / sqrt(3)``, which its two cables supply with the
+    tension ``N = m W^2 edge / 3`` (1.2 N by default, a 105 s spin period).
+
+    Args:
+        edge: cable length, m.
+        mass: mass of each satellite, kg.
+        EA: axial stiffness of each cable, N.
+        spin_rate: spin rate W of the formation (and frame) about z, rad/s.
+        axial_damping_ratio: Kelvin-Voigt damping of each cable, as the damping ratio of its
+            end masses' axial oscillation.
+        damping_rate: diagonal damping per unit mass (relative to the spinning frame), 1/s.
+        breaking_load: cable breaking tension, N.
+    """
+    edge = _positive("edge", edge, "m")
+    mass = _positive("mass", mass, "kg")
+    frame = Frame.rotating(_positive("spin_rate", spin_rate, "rad/s"))
+    radius = edge / math.sqrt(3.0)
+    angles = np.array([0.0, 2 * math.pi / 3, 4 * math.pi / 3])
+    positions = np.stack([radius * np.cos(angles), radius * np.sin(angles), np.zeros(3)], axis=1)
+    cables = np.array([(0, 1), (1, 2), (0, 2)])
+    masses = np.full(3, mass)
+    stiffness = np.full(3, _positive("EA", EA, "N") / edge)
+    return Cluster(
+        positions=positions, masses=masses, cables=cables, EA=EA, N0=mass * frame.rate**2 * edge / 3.0,
+        damping=damping_rate * masses, breaking_load=breaking_load,
+        axial_damping=_axial_damping(cables, masses, stiffness, axial_damping_ratio), frame=frame,
+        name="spinning_triangle",
+    )
+
+
+def spinning_hub(
+    spokes: int = 6,
+    radius: float = 100.0,
+    hub_mass: float = 100.0,
+    mass: float = 10.0,
+    EA: float = 50e3,
+    spin_rate: float = 0.05,
+    rim_share: float = 0.25,
+    axial_damping_ratio: float = 0.05,
+    damping_rate: float = 0.0,
+    breaking_load: float = 1500.0,
+) -> Cluster:
+    """A hub satellite (node 0) with ``spokes`` satellites on a wheel around it, spinning about z,
+    seen in the frame that spins with it.  Each outer satellite needs the centripetal force
+    ``m W^2 R``; a share ``rim_share`` of it comes from the two rim cables to its neighbours
+    (tension ``rim_share m W^2 R / (2 sin(pi / spokes))``), the rest from its spoke.  With the
+    defaults the spokes carry 1.9 N and the rim cables 0.6 N; the spin period is 126 s.
+
+    Args:
+        spokes: number of outer satellites, >= 3.
+        radius: spoke length, m.
+        hub_mass: mass of the hub, kg.
+        mass: mass of each outer satellite, kg.
+        EA: axial stiffness of every cable, N.
+        spin_rate: spin rate W about z, rad/s.
+        rim_share: fraction of the centripetal load carried by the rim, in [0, 1) (0: rim cables
+            just taut, with no pretension).
+        axial_damping_ratio: Kelvin-Voigt damping of each cable, as the damping ratio of its
+            end masses' axial oscillation.
+        damping_rate: diagonal damping per unit mass (relative to the spinning frame), 1/s.
+        breaking_load: cable breaking tension, N.
+    """
+    if not isinstance(spokes, (int, np.integer)) or spokes < 3:
+        raise ClusterError(f"spinning_hub needs spokes >= 3 (an integer); got spokes={spokes!r}")
+    if not (isinstance(rim_share, (int, float)) and 0.0 <= rim_share < 1.0):
+        raise ClusterError(f"rim_share must be a fraction in [0, 1); got {rim_share!r}")
+    radius = _positive("radius", radius, "m")
+    frame = Frame.rotating(_positive("spin_rate", spin_rate, "rad/s"))
+    angles = 2 * math.pi * np.arange(spokes) / spokes
+    outer = np.stack([radius * np.cos(angles), radius * np.sin(angles), np.zeros(spokes)], axis=1)
+    positions = np.vstack([np.zeros((1, 3)), outer])
+    cables = np.array([(0, k + 1) for k in range(spokes)] + [(k + 1, (k + 1) % spokes + 1) for k in range(spokes)])
+    masses = np.concatenate([[_positive("hub_mass", hub_mass, "kg")], np.full(spokes, _positive("mass", mass, "kg"))])
+    centripetal = mass * frame.rate**2 * radius
+    rim_tension = rim_share * centripetal / (2.0 * math.sin(math.pi / spokes))
+    tension = np.concatenate([np.full(spokes, (1.0 - rim_share) * centripetal), np.full(spokes, rim_tension)])
+    lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
+    return Cluster(
+        positions=positions, masses=masses, cables=cables, EA=EA, N0=tension, damping=damping_rate * masses,
+        breaking_load=breaking_load,
+        axial_damping=_axial_damping(cables, masses, _positive("EA", EA, "N") / lengths, axial_damping_ratio),
+        frame=frame, name="spinning_hub",
+    )
+
+
 PRESETS: dict[str, Callable[..., Cluster]] = {
     "tetrahedron": tetrahedron,
     "chain": chain,
     "triangle": triangle,
     "octahedron": octahedron,
     "hub": hub,
+    "radial_chain": radial_chain,
+    "spinning_triangle": spinning_triangle,
+    "spinning_hub": spinning_hub,
 }
 
 

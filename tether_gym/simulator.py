@@ -79,12 +79,17 @@ class AdvanceStats:
 class EnergyReport:
     """Energy accounting since the last reset, J; arrays of shape (B,) (scalars for a Simulator).
 
-    ``residual = kinetic + strain - initial + dissipated - work`` is zero for the exact solution;
-    for the integrator it is O(h^2) and bounded.
+    ``kinetic`` is taken with the velocities relative to the cluster's frame, ``strain`` is the
+    elastic energy of the intact cables, and ``frame_potential`` the potential of the frame's
+    centrifugal and tidal forces (zero in an inertial frame; the Coriolis force does no work).
+    ``dissipated`` counts diagonal and axial damping and the elastic energy of cables that broke.
+    ``residual = total - initial + dissipated - work`` is zero for the exact solution; for the
+    integrator it is O(h^2) and bounded.
     """
 
     kinetic: np.ndarray
     strain: np.ndarray
+    frame_potential: np.ndarray
     dissipated: np.ndarray
     work: np.ndarray
     initial: np.ndarray
@@ -92,8 +97,9 @@ class EnergyReport:
 
     @property
     def total(self) -> np.ndarray:
-        """Mechanical energy kinetic + strain, J."""
-        return self.kinetic + self.strain
+        """Mechanical energy kinetic + strain + frame potential, J (the Jacobi integral in a
+        turning frame)."""
+        return self.kinetic + self.strain + self.frame_potential
 
 
 def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str) -> np.ndarray:
@@ -191,6 +197,9 @@ class BatchSimulator:
         self.N0 = np.empty((B, m))
         self.inv_split_mass_sum = np.empty((B, m))
         self.breaking_load = np.empty((B, m))
+        self.axial_damping = np.empty((B, m))
+        self.frame_rate = np.empty(B)
+        self.frame_tidal = np.empty((B, 3))
         self.reference = np.empty((B, n, 3))
         self.clusters: list[Cluster] = [template] * B
         for b, cluster in enumerate(cluster_list):
@@ -201,6 +210,7 @@ class BatchSimulator:
         self.velocities_ = np.zeros((B, n, 3))
         self._f_int = np.zeros((B, n, 3))
         self.tension = np.zeros((B, m))
+        self.intact = np.ones((B, m), dtype=np.bool_)
         self._h_prev = np.zeros(B)
         self._omega2 = np.zeros(B)
         self._previous_force = np.zeros((B, n, 3))
@@ -232,6 +242,9 @@ class BatchSimulator:
         self.N0[index] = cluster.N0
         self.inv_split_mass_sum[index] = cluster.inv_split_mass_sum
         self.breaking_load[index] = cluster.breaking_load
+        self.axial_damping[index] = cluster.axial_damping
+        self.frame_rate[index] = cluster.frame.rate
+        self.frame_tidal[index] = cluster.frame.tidal
         self.reference[index] = cluster.positions
         if reset:
             self.reset(cluster.positions[None], indices=[index])
@@ -253,8 +266,13 @@ class BatchSimulator:
 
     @property
     def slack(self) -> np.ndarray:
-        """(B, m) bool: cables carrying no tension at the current positions."""
+        """(B, m) bool: cables carrying no tension at the current positions (broken ones too)."""
         return self.tension <= 0.0
+
+    @property
+    def broken(self) -> np.ndarray:
+        """(B, m) bool: cables that broke since the cluster's last reset (they stay broken)."""
+        return ~self.intact
 
     def _indices(self, indices: Sequence[int] | np.ndarray | None) -> np.ndarray:
         if indices is None:
@@ -279,11 +297,12 @@ class BatchSimulator:
         """Set the state of some clusters (all by default) and restart their energy accounting.
 
         Args:
-            positions: (k, n, 3) absolute node positions, m, for the k selected clusters.
-            velocities: (k, n, 3) node velocities, m/s (default: at rest).
+            positions: (k, n, 3) node positions in the cluster's frame, m, for the k selected clusters.
+            velocities: (k, n, 3) node velocities relative to that frame, m/s (default: at rest).
             indices: the k clusters to reset (default: all B, in order).
 
-        The next :meth:`advance` of these clusters starts with uniformly accelerated motion.
+        Every cable is intact again.  The next :meth:`advance` of these clusters starts with
+        uniformly accelerated motion.
         """
         idx = self._indices(indices)
         shape = (idx.size, self.num_nodes, 3)
@@ -297,13 +316,14 @@ class BatchSimulator:
         self._work[idx] = 0.0
         self._dissipated[idx] = 0.0
         self.status[idx] = _kernels.STATUS_OK
+        self.intact[idx] = True
         self._refresh(idx)
         report = self.energy()
-        self._energy0[idx] = report.kinetic[idx] + report.strain[idx]
+        self._energy0[idx] = report.total[idx]
 
     def _refresh(self, idx: np.ndarray) -> None:
         """Recompute forces, tensions and frequency estimates of clusters ``idx`` at their positions."""
-        f_int, tension, omega2, finite = self._evaluate(self.positions_[idx], idx)
+        f_int, tension, omega2, finite = self._evaluate(self.positions_[idx], idx, velocities=self._v_half[idx])
         if not finite.all():
             raise ValueError(
                 f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable; "
@@ -314,17 +334,27 @@ class BatchSimulator:
         self._omega2[idx] = omega2
 
     def _evaluate(
-        self, x: np.ndarray, idx: np.ndarray, taut_branch: bool = False
+        self,
+        x: np.ndarray,
+        idx: np.ndarray,
+        taut_branch: bool = False,
+        velocities: np.ndarray | None = None,
+        intact: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Forces, tensions, step-limiting omega^2 and finiteness of clusters ``idx`` at ``x``
+        (k, n, 3), with the cables' axial damping acting on ``velocities`` (default: at rest) and
+        the cables ``intact`` (default: each cluster's current state)."""
         k = idx.size
         f_int = np.empty((k, self.num_nodes, 3))
         tension = np.empty((k, self.num_cables))
         omega2 = np.empty(k)
         finite = np.empty(k, dtype=np.bool_)
+        v = np.zeros((k, self.num_nodes, 3)) if velocities is None else np.ascontiguousarray(velocities)
         with np.errstate(divide="ignore", invalid="ignore"):
             _kernels.evaluate_batch(
-                np.ascontiguousarray(x), self.reference[idx], self.cables, self.stiffness[idx],
-                self.L0[idx], self.N0[idx], self.inv_split_mass_sum[idx],
+                np.ascontiguousarray(x), v, self.reference[idx], self.cables, self.stiffness[idx],
+                self.L0[idx], self.N0[idx], self.axial_damping[idx], self.inv_split_mass_sum[idx],
+                self.intact[idx] if intact is None else np.ascontiguousarray(intact), self.frame_tidal[idx],
                 self.elongation == "linearised", taut_branch, f_int, tension, omega2, finite,
             )
         return f_int, tension, omega2, finite
@@ -380,8 +410,9 @@ class BatchSimulator:
         kernel(
             active, duration, self.time, self.positions_, self._v_half, self.velocities_, self._f_int,
             self.tension, self._h_prev, self._omega2, force, self._previous_force, self.masses,
-            self.damping, self.cables, self.stiffness, self.L0, self.N0, self.inv_split_mass_sum, self.reference,
-            self.elongation == "linearised", self.safety_factor, self.max_step, self.max_substeps,
+            self.damping, self.cables, self.stiffness, self.L0, self.N0, self.axial_damping,
+            self.inv_split_mass_sum, self.breaking_load, self.intact, self.frame_rate, self.frame_tidal,
+            self.reference, self.elongation == "linearised", self.safety_factor, self.max_step, self.max_substeps,
             self._work, self._dissipated, stats.substeps, stats.step_min, stats.step_max, self.status,
             stats.step_sizes, stats.peak_tension, stats.status,
         )
@@ -390,11 +421,13 @@ class BatchSimulator:
     def internal_forces(
         self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None
     ) -> np.ndarray:
-        """(k, n, 3) restoring forces f_int, N, at ``positions`` (k, n, 3), m, of clusters
-        ``indices`` (default all B, in order), with each cluster's own cable parameters.
+        """(k, n, 3) elastic restoring forces f_int, N, at ``positions`` (k, n, 3), m, of clusters
+        ``indices`` (default all B, in order), with each cluster's own cable parameters and its
+        broken cables left out.
 
-        ``f_int`` is the term of ``M a + C v + f_int = p``: a satellite held at ``positions``
-        needs the external force ``p = f_int`` to stay there.
+        ``f_int`` is the term of ``M a + C v + f_int = p``.  In an inertial frame a satellite held
+        at rest at ``positions`` needs the external force ``p = f_int`` to stay there; see
+        :meth:`equilibrium_force` for turning frames.
         """
         idx = self._indices(indices)
         x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
@@ -402,6 +435,22 @@ class BatchSimulator:
         if not finite.all():
             raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
         return f_int
+
+    def equilibrium_force(
+        self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None
+    ) -> np.ndarray:
+        """(k, n, 3) external force, N, that holds clusters ``indices`` at rest in their frame at
+        ``positions`` (k, n, 3), m, with every cable intact: ``f_int(x) - M diag(T) x``.
+
+        It is zero (to round-off) for a cluster whose shape is an equilibrium of its frame, such as
+        a radial chain in the Hill frame or a spinning formation in its rotating frame.
+        """
+        idx = self._indices(indices)
+        x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
+        f_int, _, _, finite = self._evaluate(x, idx, intact=np.ones((idx.size, self.num_cables), dtype=np.bool_))
+        if not finite.all():
+            raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
+        return f_int - self.masses[idx][:, :, None] * self.frame_tidal[idx][:, None, :] * x
 
     def critical_time_step(self, method: CriticalStepMethod = "closed-form") -> np.ndarray:
         """(B,) estimated critical step ``2 / omega_max`` at the current positions, s.
@@ -460,11 +509,11 @@ class BatchSimulator:
         just_taut_N0 = self.N0 - np.minimum(tension_taut_branch, 0.0)
         f_int = np.empty((E, 2, 3))
         _kernels.evaluate_batch(
-            np.ascontiguousarray(perturbed.reshape(E, 2, 3)), np.ascontiguousarray(ref_elements),
+            np.ascontiguousarray(perturbed.reshape(E, 2, 3)), np.zeros((E, 2, 3)), np.ascontiguousarray(ref_elements),
             np.array([[0, 1]], dtype=np.int64), per_element(self.stiffness), per_element(self.L0),
-            per_element(just_taut_N0), per_element(self.inv_split_mass_sum),
-            self.elongation == "linearised", True, f_int, np.empty((E, 1)), np.empty(E),
-            np.empty(E, dtype=np.bool_),
+            per_element(just_taut_N0), np.zeros((E, 1)), per_element(self.inv_split_mass_sum),
+            np.ones((E, 1), dtype=np.bool_), np.zeros((E, 3)), self.elongation == "linearised", True, f_int,
+            np.empty((E, 1)), np.empty(E), np.empty(E, dtype=np.bool_),
         )
         f = f_int.reshape(B, m, 6, 2, 6)
         columns = (f[:, :, :, 0] - f[:, :, :, 1]) / (2.0 * h[:, :, None, None])  # (B, m, j, i)
@@ -475,16 +524,26 @@ class BatchSimulator:
         )  # (B, m, 6)
         scale = 1.0 / np.sqrt(dof_mass)
         scaled = np.abs(columns) * scale[:, :, :, None] * scale[:, :, None, :]
-        return scaled.sum(axis=3).max(axis=2)
+        omega2 = scaled.sum(axis=3).max(axis=2)
+        # Axial damping with lagged velocity shortens the stable step (see _kernels.cable_forces).
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xi = np.where(self.axial_damping > 0.0, 0.5 * self.axial_damping * self.inv_split_mass_sum / np.sqrt(omega2), 0.0)
+        omega2 = omega2 * (np.sqrt(1.0 + xi * xi) + xi) ** 2
+        omega2 = omega2 + np.abs(self.frame_tidal).max(axis=1)[:, None]
+        return np.where(self.intact, omega2, 0.0)
 
     def energy(self) -> EnergyReport:
         """Energy accounting of every cluster since its last reset (see :class:`EnergyReport`)."""
         kinetic = 0.5 * np.einsum("bn,bnd,bnd->b", self.masses, self.velocities_, self.velocities_)
-        strain = (0.5 * self.tension**2 / self.stiffness).sum(axis=1)
-        residual = kinetic + strain - self._energy0 + self._dissipated - self._work
+        # With axial damping the tension holds a viscous part; the strain energy is elastic only.
+        elastic = self.tension if not self.axial_damping.any() else self._evaluate(self.positions_, np.arange(self.num_clusters))[1]
+        strain = (0.5 * elastic**2 / self.stiffness).sum(axis=1)
+        frame_potential = -0.5 * np.einsum("bn,bnd,bd->b", self.masses, self.positions_**2, self.frame_tidal)
+        residual = kinetic + strain + frame_potential - self._energy0 + self._dissipated - self._work
         return EnergyReport(
             kinetic=kinetic,
             strain=strain,
+            frame_potential=frame_potential,
             dissipated=self._dissipated.copy(),
             work=self._work.copy(),
             initial=self._energy0.copy(),

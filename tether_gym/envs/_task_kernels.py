@@ -148,6 +148,9 @@ def _evaluate_clusters(
     tension: np.ndarray,
     stiffness: np.ndarray,
     L0: np.ndarray,
+    N0: np.ndarray,
+    intact: np.ndarray,
+    frame_tidal: np.ndarray,
     breaking_load: np.ndarray,
     bias: np.ndarray,
     nominal: np.ndarray,
@@ -161,6 +164,7 @@ def _evaluate_clusters(
     peak_tension: np.ndarray,
     impulse: np.ndarray,
     deviation_limit: float,
+    terminate_on_break: bool,
     weights: np.ndarray,
     observation: np.ndarray,
     scalars: np.ndarray,
@@ -174,8 +178,16 @@ def _evaluate_clusters(
     (0 running, 1 formation lost, 2 cable broken, 3 numerics diverged) and ``scalars[b]``:
     ``[reward, reward_vibration, reward_propellant, reward_slack, reward_failure,
     vibration_energy (J), max_deviation (m), slack_fraction, kinetic_energy (J),
-    strain_energy (J)]``.  ``weights`` = ``[vibration_weight / energy_scale,
-    propellant_weight / full_impulse, slack_weight, failure_penalty]``.
+    strain_energy (J), frame_potential (J)]``.  ``weights`` = ``[vibration_weight / energy_scale,
+    propellant_weight / full_impulse, slack_weight, failure_penalty]``.  A cable past its
+    breaking load ends the episode only with ``terminate_on_break``.
+
+    The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension may
+    hold a viscous part).  In a turning frame (``frame_tidal`` (B, 3), 1/s^2) the vibration energy
+    also holds the change of the frame potential of the shape about its centre of mass,
+    ``-1/2 sum_i m_i (r_i.T r_i - R_i.T R_i)`` (``r``, ``R``: current and nominal positions about
+    the centre of mass), so that it measures the deformation against the frame's effective
+    potential and is zero at the nominal equilibrium.
     """
     n = x.shape[1]
     m = cables.shape[0]
@@ -195,11 +207,24 @@ def _evaluate_clusters(
         kinetic_deformation = 0.0
         kinetic = 0.0
         bias_potential = 0.0
+        frame_potential = 0.0
+        shape_potential = 0.0
+        tidal = frame_tidal[b]
         worst = 0.0
         for i in range(n):
             rx = xb[i, 0] - motion[0, 0]
             ry = xb[i, 1] - motion[0, 1]
             rz = xb[i, 2] - motion[0, 2]
+            if tidal[0] != 0.0 or tidal[1] != 0.0 or tidal[2] != 0.0:
+                nx = nominal[b, i, 0] - nominal_com[0]
+                ny = nominal[b, i, 1] - nominal_com[1]
+                nz = nominal[b, i, 2] - nominal_com[2]
+                shape_potential -= 0.5 * mb[i] * (
+                    tidal[0] * (rx * rx - nx * nx) + tidal[1] * (ry * ry - ny * ny) + tidal[2] * (rz * rz - nz * nz)
+                )
+                frame_potential -= 0.5 * mb[i] * (
+                    tidal[0] * xb[i, 0] * xb[i, 0] + tidal[1] * xb[i, 1] * xb[i, 1] + tidal[2] * xb[i, 2] * xb[i, 2]
+                )
             ux = vb[i, 0] - motion[1, 0] - (motion[2, 1] * rz - motion[2, 2] * ry)
             uy = vb[i, 1] - motion[1, 1] - (motion[2, 2] * rx - motion[2, 0] * rz)
             uz = vb[i, 2] - motion[1, 2] - (motion[2, 0] * ry - motion[2, 1] * rx)
@@ -228,15 +253,18 @@ def _evaluate_clusters(
             dx = xb[j, 0] - xb[i, 0]
             dy = xb[j, 1] - xb[i, 1]
             dz = xb[j, 2] - xb[i, 2]
-            observation[b, offset + c] = _bounded((math.sqrt(dx * dx + dy * dy + dz * dz) - L0[b, c]) / length_scale)
-            strain += 0.5 * tension[b, c] * tension[b, c] / stiffness[b, c]
+            elongation = math.sqrt(dx * dx + dy * dy + dz * dz) - L0[b, c]
+            observation[b, offset + c] = _bounded(elongation / length_scale)
+            elastic = N0[b, c] + stiffness[b, c] * elongation
+            if intact[b, c] and elastic > 0.0:
+                strain += 0.5 * elastic * elastic / stiffness[b, c]
             if tension[b, c] <= 0.0:
                 slack += 1
-            if peak_tension[b, c] > breaking_load[b, c]:
+            if terminate_on_break and peak_tension[b, c] > breaking_load[b, c]:
                 broken = True
             if observe_tensions:
                 observation[b, offset + m + c] = _bounded(tension[b, c] / breaking_load[b, c])
-        vibration = kinetic_deformation + strain - nominal_strain_energy[b] + bias_potential
+        vibration = kinetic_deformation + strain - nominal_strain_energy[b] + bias_potential + shape_potential
         if status[b] != 0:
             reason = 3
             vibration = 0.0
@@ -262,35 +290,37 @@ def _evaluate_clusters(
         scalars[b, 7] = slack_fraction
         scalars[b, 8] = kinetic
         scalars[b, 9] = strain
+        scalars[b, 10] = frame_potential
 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def evaluate_serial(
-    x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables, observed,
-    length_scale, speed_scale, observe_tensions, status, peak_tension, impulse, deviation_limit, weights,
-    observation, scalars, end_reason,
+    x, v, masses, tension, stiffness, L0, N0, intact, frame_tidal, breaking_load, bias, nominal,
+    nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension,
+    impulse, deviation_limit, terminate_on_break, weights, observation, scalars, end_reason,
 ):  # pragma: no cover - compiled
     """:func:`_evaluate_clusters` for every cluster of the batch, one thread."""
     _evaluate_clusters(
-        0, x.shape[0], x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy,
-        cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension, impulse,
-        deviation_limit, weights, observation, scalars, end_reason,
+        0, x.shape[0], x, v, masses, tension, stiffness, L0, N0, intact, frame_tidal, breaking_load, bias, nominal,
+        nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension,
+        impulse, deviation_limit, terminate_on_break, weights, observation, scalars, end_reason,
     )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def evaluate_parallel(
-    x, v, masses, tension, stiffness, L0, breaking_load, bias, nominal, nominal_strain_energy, cables, observed,
-    length_scale, speed_scale, observe_tensions, status, peak_tension, impulse, deviation_limit, weights,
-    observation, scalars, end_reason,
+    x, v, masses, tension, stiffness, L0, N0, intact, frame_tidal, breaking_load, bias, nominal,
+    nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension,
+    impulse, deviation_limit, terminate_on_break, weights, observation, scalars, end_reason,
 ):  # pragma: no cover - compiled
     """:func:`_evaluate_clusters` for every cluster of the batch, on all threads (same bits)."""
     batch = x.shape[0]
     chunks = min(batch, PARALLEL_CHUNKS)
     for k in prange(chunks):
         _evaluate_clusters(
-            k * batch // chunks, (k + 1) * batch // chunks, x, v, masses, tension, stiffness, L0, breaking_load,
-            bias, nominal, nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions,
-            status, peak_tension, impulse, deviation_limit, weights, observation, scalars, end_reason,
+            k * batch // chunks, (k + 1) * batch // chunks, x, v, masses, tension, stiffness, L0, N0, intact,
+            frame_tidal, breaking_load, bias, nominal, nominal_strain_energy, cables, observed, length_scale,
+            speed_scale, observe_tensions, status, peak_tension, impulse, deviation_limit, terminate_on_break,
+            weights, observation, scalars, end_reason,
         )

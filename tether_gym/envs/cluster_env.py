@@ -183,12 +183,17 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
             )
         if not np.isfinite(a).all():
             raise ValueError("action contains NaN or inf; thrust commands must be finite numbers in [-1, 1]")
-        self.task.step(a.reshape(1, -1))
+        self.task.step(a.reshape(1, -1), rngs=[self.np_random])
         observation = self.task.observe([self.np_random])[0]
         info = self.task.info(0)
         if self.render_mode == "human":
             self.render()
         return observation, float(self.task.scalars[0, 0]), bool(self.task.end_reason[0] > 0), False, info
+
+    def set_difficulty(self, difficulty: float) -> None:
+        """Scale initial conditions, randomisation and disturbances by ``difficulty`` in [0, 1]
+        from the next reset on (curriculum training; see the ``difficulty`` argument)."""
+        self.task.set_difficulty(difficulty)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -23,15 +23,17 @@ from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, PARALLEL_MIN_BATCH, Adva
 __all__ = ["END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "DampingTask", "TaskConfig", "task_from_arguments"]
 
 ThrustLimit = Literal["per_axis", "magnitude"]
+CableFailure = Literal["terminate", "continue"]
 
 #: ``end_reason`` codes reported in ``info`` (index into this tuple).
 END_REASONS = ("running", "formation_lost", "cable_broken", "numerics_diverged")
 
-RANDOMISABLE = ("masses", "EA", "damping", "N0")
+RANDOMISABLE = ("masses", "EA", "damping", "N0", "axial_damping")
 
 #: Per-cluster quantities the task kernel writes after each step, in this column order.
 SCALARS = ("reward", "reward_vibration", "reward_propellant", "reward_slack", "reward_failure",
-           "vibration_energy", "max_deviation", "slack_fraction", "kinetic_energy", "strain_energy")
+           "vibration_energy", "max_deviation", "slack_fraction", "kinetic_energy", "strain_energy",
+           "frame_potential")
 _COLUMN = {name: k for k, name in enumerate(SCALARS)}
 
 OBSERVATION_LIMIT = _task_kernels.OBSERVATION_LIMIT
@@ -60,8 +62,31 @@ class TaskConfig:
         observed_satellites: satellites whose displacements and velocities are observed (None:
             all).
         randomize: relative spread of domain randomisation per reset, e.g. ``{"masses": 0.2}``
-            draws every mass uniformly within +-20 % of nominal; keys among masses, EA, damping, N0.
+            draws every mass uniformly within +-20 % of nominal; keys among masses, EA, damping,
+            N0, axial_damping.
         safety_factor: the simulator's sub-step as a fraction of the critical step.
+        impulse_magnitude: size of random impulsive kicks, N*s (0: none).  Kicks arrive as a
+            Poisson process of rate ``impulse_rate``; each hits one random satellite in a random
+            direction, as a force held over one control interval.
+        impulse_rate: mean number of kicks per second.
+        periodic_amplitude: amplitude of a periodic external force on every satellite, N (0:
+            none), ``A d_i sin(2 pi t / periodic_period + phi_i)`` with a random unit direction
+            ``d_i`` and phase ``phi_i`` per satellite and episode.
+        periodic_period: its period, s.
+        thrust_noise: std of Gaussian noise added to each delivered thrust component, as a
+            fraction of the thruster's ``max_thrust``.
+        thrust_delay: actuation delay in control intervals: an action acts this many steps
+            after it is given (zero thrust before).
+        thruster_failure_probability: chance that one random thruster fails in an episode; it
+            then delivers no thrust from a time drawn uniformly in ``thruster_failure_window``.
+        thruster_failure_window: (start, end) of that time, s.
+        cable_failure: a cable past its breaking load breaks (and stays broken until reset);
+            ``"terminate"`` ends the episode there, ``"continue"`` lets the cluster go on
+            without it.
+        difficulty: in [0, 1], scales the initial displacement and velocity, the randomisation
+            spreads and the disturbances (impulses, periodic force, thrust noise) together, for
+            curriculum training; change it between episodes with ``set_difficulty``.  The
+            observation units and the reward's energy scale stay those of difficulty 1.
     """
 
     control_interval: float = 0.1
@@ -80,6 +105,16 @@ class TaskConfig:
     observed_satellites: tuple[int, ...] | None = None
     randomize: Mapping[str, float] = dataclasses.field(default_factory=dict)
     safety_factor: float = DEFAULT_SAFETY_FACTOR
+    impulse_magnitude: float = 0.0
+    impulse_rate: float = 0.05
+    periodic_amplitude: float = 0.0
+    periodic_period: float = 20.0
+    thrust_noise: float = 0.0
+    thrust_delay: int = 0
+    thruster_failure_probability: float = 0.0
+    thruster_failure_window: tuple[float, float] = (0.0, 30.0)
+    cable_failure: CableFailure = "terminate"
+    difficulty: float = 1.0
 
     def validate(self, cluster: Cluster) -> None:
         """Raise ``ValueError`` naming any setting that does not fit ``cluster``."""
@@ -105,7 +140,8 @@ class TaskConfig:
         if self.thrust_limit not in ("per_axis", "magnitude"):
             raise ValueError(f"thrust_limit must be 'per_axis' or 'magnitude'; got {self.thrust_limit!r}")
         for name in ("initial_displacement", "initial_velocity", "vibration_weight", "propellant_weight",
-                     "slack_weight", "failure_penalty", "observation_noise"):
+                     "slack_weight", "failure_penalty", "observation_noise", "impulse_magnitude", "impulse_rate",
+                     "periodic_amplitude", "thrust_noise"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0; got {value!r}")
@@ -117,6 +153,30 @@ class TaskConfig:
         for key, spread in self.randomize.items():
             if not (0 <= spread < 1):
                 raise ValueError(f"randomize[{key!r}] must be a relative spread in [0, 1); got {spread!r}")
+        if not (math.isfinite(self.periodic_period) and self.periodic_period > 0):
+            raise ValueError(f"periodic_period must be a finite number of seconds > 0; got {self.periodic_period!r}")
+        if not (isinstance(self.thrust_delay, (int, np.integer)) and 0 <= self.thrust_delay <= 1000):
+            raise ValueError(f"thrust_delay must be a whole number of control intervals in 0..1000; got {self.thrust_delay!r}")
+        if not (0.0 <= self.thruster_failure_probability <= 1.0):
+            raise ValueError(
+                f"thruster_failure_probability must be a probability in [0, 1]; got {self.thruster_failure_probability!r}"
+            )
+        window = tuple(self.thruster_failure_window)
+        if len(window) != 2 or not all(math.isfinite(t) for t in window) or not (0 <= window[0] <= window[1]):
+            raise ValueError(
+                "thruster_failure_window must be (start, end) in s with 0 <= start <= end; "
+                f"got {self.thruster_failure_window!r}"
+            )
+        if self.cable_failure not in ("terminate", "continue"):
+            raise ValueError(f"cable_failure must be 'terminate' or 'continue'; got {self.cable_failure!r}")
+        check_difficulty(self.difficulty)
+
+
+def check_difficulty(difficulty: float) -> float:
+    """``difficulty`` as a float, or a ``ValueError`` if it is not a number in [0, 1]."""
+    if not (isinstance(difficulty, (int, float, np.floating)) and 0.0 <= difficulty <= 1.0):
+        raise ValueError(f"difficulty must be a number in [0, 1] (1: the configured task); got {difficulty!r}")
+    return float(difficulty)
 
 
 def task_from_arguments(
@@ -138,7 +198,7 @@ def task_from_arguments(
     unknown = sorted(set(task) - fields)
     if unknown:
         raise TypeError(f"unknown argument(s) {unknown}; task arguments are {sorted(fields)}")
-    for key in ("thrusters", "observed_satellites"):
+    for key in ("thrusters", "observed_satellites", "thruster_failure_window"):
         if task.get(key) is not None:
             task[key] = tuple(task[key])
     if isinstance(task.get("max_thrust"), Sequence):
@@ -193,10 +253,23 @@ class DampingTask:
                                  config.slack_weight, config.failure_penalty])
         self.energy_scale = self._energy_scale()
         self.weights[0] = config.vibration_weight / self.energy_scale
+        self.difficulty = config.difficulty
         self.force = np.zeros((B, n, 3))
         self.thrust = np.zeros((B, n, 3))
         self.impulse = np.zeros(B)
         self.propellant = np.zeros(B)
+        # Disturbances and faults: what each cluster's episode holds, drawn at its reset.
+        self.disturbance = np.zeros((B, n, 3))
+        self.thruster_ok = np.ones((B, self.thrusters.size), dtype=np.bool_)
+        self.failure_time = np.full(B, np.inf)
+        self.failing_thruster = np.zeros(B, dtype=np.int64)
+        self.periodic_direction = np.zeros((B, n, 3))
+        self.periodic_phase = np.zeros((B, n))
+        self.action_queue = np.zeros((B, config.thrust_delay, self.action_size))
+        self._perturbed = bool(
+            config.impulse_magnitude or config.periodic_amplitude or config.thrust_noise
+            or config.thruster_failure_probability
+        )
         self.stats = AdvanceStats(
             substeps=np.zeros(B, dtype=np.int64), step_min=np.full(B, np.inf), step_max=np.zeros(B),
             status=np.zeros(B, dtype=np.int64), step_sizes=np.zeros((B, 0)), peak_tension=np.zeros((B, m)),
@@ -209,9 +282,10 @@ class DampingTask:
 
     # ------------------------------------------------------------------ nominal state
     def _set_nominal(self, index: int, cluster: Cluster) -> None:
-        """Cluster ``index`` gets ``cluster``'s parameters, and the bias thrust holding its shape."""
+        """Cluster ``index`` gets ``cluster``'s parameters, and the bias thrust holding its shape
+        at rest in its frame (zero, to round-off, for shapes held by spin or gravity gradient)."""
         self.sim.set_cluster(index, cluster, reset=False)
-        self.bias[index] = self.sim.internal_forces(cluster.positions[None], indices=[index])[0]
+        self.bias[index] = self.sim.equilibrium_force(cluster.positions[None], indices=[index])[0]
         tension = np.maximum(cluster.N0, 0.0)
         self.nominal_strain_energy[index] = float((0.5 * tension**2 / cluster.stiffness).sum())
 
@@ -219,7 +293,7 @@ class DampingTask:
         """Vibration-energy normaliser, J: the mean vibration energy of 64 reset states of the
         nominal cluster drawn with a fixed seed (so it is the same for every env instance)."""
         count = 64
-        x0, v0 = self.sample_initial_state(np.random.default_rng(0), count)
+        x0, v0 = self.sample_initial_state(np.random.default_rng(0), count, difficulty=1.0)
         probe = BatchSimulator(self.cluster, count, safety_factor=self.config.safety_factor)
         probe.reset(x0, v0)
         shape = (count,) + self.cluster.positions.shape
@@ -240,10 +314,11 @@ class DampingTask:
     ) -> None:
         kernel = _task_kernels.evaluate_parallel if sim.num_clusters >= PARALLEL_MIN_BATCH else _task_kernels.evaluate_serial
         kernel(
-            sim.positions_, sim.velocities_, sim.masses, sim.tension, sim.stiffness, sim.L0, sim.breaking_load,
-            bias, nominal, nominal_strain_energy, sim.cables, self.observed, self.length_scale, self.speed_scale,
-            self.config.observe_tensions, status, peak_tension, impulse, self.max_deviation, self.weights,
-            observation, scalars, end_reason,
+            sim.positions_, sim.velocities_, sim.masses, sim.tension, sim.stiffness, sim.L0, sim.N0, sim.intact,
+            sim.frame_tidal, sim.breaking_load, bias, nominal, nominal_strain_energy, sim.cables, self.observed,
+            self.length_scale, self.speed_scale, self.config.observe_tensions, status, peak_tension, impulse,
+            self.max_deviation, self.config.cable_failure == "terminate", self.weights, observation, scalars,
+            end_reason,
         )
 
     def _evaluate(self) -> None:
@@ -253,14 +328,18 @@ class DampingTask:
         )
 
     # ------------------------------------------------------------------ reset
-    def sample_initial_state(self, rng: np.random.Generator, count: int) -> tuple[np.ndarray, np.ndarray]:
+    def sample_initial_state(
+        self, rng: np.random.Generator, count: int, difficulty: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(count, n, 3) positions and velocities: the nominal shape plus Gaussian displacements and
-        velocities of the configured scales, with the rigid part removed (centroid kept in place,
-        zero linear and angular momentum), so that the motion is pure deformation."""
+        velocities of the configured scales times ``difficulty`` (default: the task's), with the
+        rigid part removed (centroid kept in place, zero linear and angular momentum relative to
+        the frame), so that the motion is pure deformation."""
         n = self.cluster.num_nodes
         shape = (count, n, 3)
-        displacement = self.config.initial_displacement * rng.standard_normal(shape)
-        velocity = self.config.initial_velocity * rng.standard_normal(shape)
+        scale = self.difficulty if difficulty is None else difficulty
+        displacement = scale * self.config.initial_displacement * rng.standard_normal(shape)
+        velocity = scale * self.config.initial_velocity * rng.standard_normal(shape)
         masses = self.cluster.masses[None, :, None]
         displacement -= (masses * displacement).sum(axis=1, keepdims=True) / masses.sum(axis=1, keepdims=True)
         x0 = self.cluster.positions[None] + displacement
@@ -276,8 +355,9 @@ class DampingTask:
     ) -> None:
         """Start new episodes for clusters ``indices``, cluster ``indices[k]`` drawing from
         ``rngs[k]``: randomise its parameters (if configured), then draw its initial conditions,
-        or use the given (k, n, 3) positions/velocities.  Each cluster draws only from its own
-        generator, so a cluster reset in a batch matches the same cluster reset alone."""
+        or use the given (k, n, 3) positions/velocities; then draw its episode's disturbances and
+        faults (if configured).  Each cluster draws only from its own generator, so a cluster
+        reset in a batch matches the same cluster reset alone."""
         for rng, b in zip(rngs, indices):
             if self.config.randomize:
                 self._set_nominal(int(b), self._randomised_cluster(rng))
@@ -294,15 +374,39 @@ class DampingTask:
         self.propellant[indices] = 0.0
         self.thrust[indices] = 0.0
         self.impulse[indices] = 0.0
+        self.disturbance[indices] = 0.0
+        self.thruster_ok[indices] = True
+        self.action_queue[indices] = 0.0
+        if self._perturbed:
+            for rng, b in zip(rngs, indices):
+                self._draw_episode_faults(rng, int(b))
         self.stats.status[indices] = self.sim.status[indices]
         self.stats.peak_tension[indices] = self.sim.tension[indices]
         self.stats.substeps[indices] = 0
         self._evaluate()
 
+    def _draw_episode_faults(self, rng: np.random.Generator, b: int) -> None:
+        """Draw cluster ``b``'s periodic-force directions and phases and its thruster failure."""
+        config = self.config
+        n = self.cluster.num_nodes
+        if config.periodic_amplitude:
+            direction = rng.standard_normal((n, 3))
+            self.periodic_direction[b] = direction / np.linalg.norm(direction, axis=1, keepdims=True)
+            self.periodic_phase[b] = rng.uniform(0.0, 2.0 * math.pi, n)
+        self.failure_time[b] = math.inf
+        if config.thruster_failure_probability and rng.random() < config.thruster_failure_probability:
+            self.failure_time[b] = rng.uniform(*config.thruster_failure_window)
+            self.failing_thruster[b] = rng.integers(self.thrusters.size)
+
+    def set_difficulty(self, difficulty: float) -> None:
+        """Scale initial conditions, randomisation and disturbances by ``difficulty`` in [0, 1]
+        from the next reset on (see :class:`TaskConfig`)."""
+        self.difficulty = check_difficulty(difficulty)
+
     def _randomised_cluster(self, rng: np.random.Generator) -> Cluster:
         changes: dict[str, Any] = {}
         for key in RANDOMISABLE:  # fixed order: the draws do not depend on dict order
-            spread = self.config.randomize.get(key, 0.0)
+            spread = self.difficulty * self.config.randomize.get(key, 0.0)
             if spread:
                 nominal = getattr(self.cluster, key)
                 changes[key] = nominal * rng.uniform(1 - spread, 1 + spread, nominal.shape)
@@ -311,22 +415,69 @@ class DampingTask:
         return self.cluster.replace(**changes)
 
     # ------------------------------------------------------------------ step
-    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> None:
+    def step(
+        self,
+        actions: np.ndarray,
+        active: np.ndarray | None = None,
+        rngs: Sequence[np.random.Generator] | None = None,
+    ) -> None:
         """Apply (B, action_size) float64 actions for one control interval (bias thrust added) to
         the ``active`` clusters (default all), then evaluate observation, reward and end flags.
 
         Commands are clipped to [-1, 1]; with the magnitude limit a command longer than 1 is
         scaled back to length 1; then they are multiplied by each thruster's ``max_thrust``.
+        With a thrust delay the actions applied are those given ``thrust_delay`` steps earlier.
+        Disturbances and thrust noise of cluster b draw from ``rngs[b]`` (needed only when they
+        are configured).
         """
         mask = self._all if active is None else active
-        interval = self.config.control_interval
+        config = self.config
+        interval = config.control_interval
+        if config.thrust_delay:
+            given = actions
+            actions = np.where(mask[:, None], self.action_queue[:, 0], 0.0)
+            self.action_queue[mask] = np.concatenate([self.action_queue[mask, 1:], given[mask, None]], axis=1)
+        if config.thruster_failure_probability:
+            failing = np.flatnonzero(mask & (self.sim.time >= self.failure_time))
+            self.thruster_ok[failing, self.failing_thruster[failing]] = False
+            if not self.thruster_ok.all():
+                actions = (actions.reshape(self.num_clusters, -1, 3) * self.thruster_ok[:, :, None]).reshape(actions.shape)
         _task_kernels.command_forces(
-            actions, self.thrusters, self.max_thrust, self.config.thrust_limit == "magnitude", self.bias,
-            interval, mask, self.force, self.thrust, self.impulse,
+            np.ascontiguousarray(actions), self.thrusters, self.max_thrust, config.thrust_limit == "magnitude",
+            self.bias, interval, mask, self.force, self.thrust, self.impulse,
         )
+        if self._perturbed:
+            if rngs is None:
+                raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
+            self._disturb(mask, rngs)
         self.sim.advance_unchecked(interval, self.force, mask, self.stats)
         self.propellant[mask] += self.impulse[mask]
         self._evaluate()
+
+    def _disturb(self, mask: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
+        """Add this interval's disturbance force and thrust noise to the active clusters' force."""
+        config = self.config
+        interval = config.control_interval
+        n = self.cluster.num_nodes
+        kick_chance = 1.0 - math.exp(-config.impulse_rate * interval)
+        midpoint = self.sim.time + 0.5 * interval
+        for b in np.flatnonzero(mask):
+            rng = rngs[b]
+            disturbance = np.zeros((n, 3))
+            if config.periodic_amplitude:
+                wave = np.sin(2.0 * math.pi * midpoint[b] / config.periodic_period + self.periodic_phase[b])
+                disturbance += self.difficulty * config.periodic_amplitude * wave[:, None] * self.periodic_direction[b]
+            if config.impulse_magnitude and rng.random() < kick_chance:
+                node = rng.integers(n)
+                direction = rng.standard_normal(3)
+                disturbance[node] += self.difficulty * config.impulse_magnitude / interval * direction / np.linalg.norm(direction)
+            if config.thrust_noise:
+                noise = rng.standard_normal((self.thrusters.size, 3))
+                noise *= (self.difficulty * config.thrust_noise * self.max_thrust * self.thruster_ok[b])[:, None]
+                self.thrust[b, self.thrusters] += noise
+                self.force[b, self.thrusters] += noise
+            self.disturbance[b] = disturbance
+            self.force[b] += disturbance
 
     # ------------------------------------------------------------------ results
     def observe(self, rngs: Sequence[np.random.Generator], indices: np.ndarray | None = None) -> np.ndarray:
@@ -353,12 +504,17 @@ class DampingTask:
             "strain_energy": strain,
             "dissipated_energy": sim._dissipated,
             "external_work": sim._work,
-            "energy_residual": kinetic + strain - sim._energy0 + sim._dissipated - sim._work,
+            "frame_potential": column[_COLUMN["frame_potential"]],
+            "energy_residual": kinetic + strain + column[_COLUMN["frame_potential"]] - sim._energy0 + sim._dissipated
+            - sim._work,
             "tensions": sim.tension,
             "slack_count": np.rint(column[_COLUMN["slack_fraction"]] * self.cluster.num_cables).astype(np.int64),
             "max_deviation": column[_COLUMN["max_deviation"]],
             "propellant_used": self.propellant,
             "thrust": self.thrust,
+            "disturbance": self.disturbance,
+            "thruster_ok": self.thruster_ok,
+            "broken_cables": ~sim.intact,
         }
         if stepped:
             arrays.update(
@@ -378,6 +534,7 @@ class DampingTask:
         sim = self.sim
         row = self.scalars[index].tolist()
         kinetic, strain = row[_COLUMN["kinetic_energy"]], row[_COLUMN["strain_energy"]]
+        frame_potential = row[_COLUMN["frame_potential"]]
         dissipated, work = float(sim._dissipated[index]), float(sim._work[index])
         info: dict[str, Any] = {
             "time": float(sim.time[index]),
@@ -386,12 +543,16 @@ class DampingTask:
             "strain_energy": strain,
             "dissipated_energy": dissipated,
             "external_work": work,
-            "energy_residual": kinetic + strain - float(sim._energy0[index]) + dissipated - work,
+            "frame_potential": frame_potential,
+            "energy_residual": kinetic + strain + frame_potential - float(sim._energy0[index]) + dissipated - work,
             "tensions": sim.tension[index].copy(),
             "slack_count": round(row[_COLUMN["slack_fraction"]] * self.cluster.num_cables),
             "max_deviation": row[_COLUMN["max_deviation"]],
             "propellant_used": float(self.propellant[index]),
             "thrust": self.thrust[index].copy(),
+            "disturbance": self.disturbance[index].copy(),
+            "thruster_ok": self.thruster_ok[index].copy(),
+            "broken_cables": ~sim.intact[index],
         }
         if stepped:
             stats = self.stats

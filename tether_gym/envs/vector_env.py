@@ -117,7 +117,7 @@ class TetherClusterVectorEnv(VectorEnv):
         if not np.isfinite(a).all():
             raise ValueError("actions contain NaN or inf; thrust commands must be finite numbers in [-1, 1]")
         task = self.task
-        task.step(np.ascontiguousarray(a))
+        task.step(np.ascontiguousarray(a), rngs=self._rngs)
         self._episode_steps += 1
         rewards = task.scalars[:, 0].copy()
         terminated = task.end_reason > 0
@@ -141,6 +141,12 @@ class TetherClusterVectorEnv(VectorEnv):
         infos = self._infos(stepped=~done)
         infos.update(final_obs=final_obs, _final_obs=done.copy(), final_info=final_info, _final_info=done.copy())
         return observation, rewards, terminated, truncated, infos
+
+    def set_difficulty(self, difficulty: float) -> None:
+        """Scale initial conditions, randomisation and disturbances of every sub-env by
+        ``difficulty`` in [0, 1] from their next reset on (with SB3: ``env_method("set_difficulty",
+        d)``)."""
+        self.task.set_difficulty(difficulty)
 
     def close_extras(self, **kwargs: Any) -> None:
         """Nothing to release: the batch lives in this process."""
