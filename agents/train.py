@@ -14,6 +14,11 @@ YAML, nothing evaluated). Training runs on the native vector env through the SB3
 
 ``--resume <checkpoint.zip>`` continues a run from a checkpoint, with the ``VecNormalize``
 statistics saved next to it, and keeps counting timesteps from there.
+
+``--curriculum START FRACTION`` (or a ``curriculum: {start: ..., fraction: ...}`` entry) trains on
+easier episodes first: the env's ``difficulty`` (initial-condition size, randomisation and
+disturbances together) rises linearly from START to 1 over the first FRACTION of the run. The
+evaluation episodes are always at difficulty 1.
 """
 
 from __future__ import annotations
@@ -43,7 +48,7 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
 ACTIVATIONS: dict[str, type[torch.nn.Module]] = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}
 #: Keys of a hyperparameter entry that are not passed to the algorithm's constructor.
-RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs")
+RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs", "curriculum")
 #: Seeds of the evaluation episodes are offset from the training seed by this much, so that they
 #: are never episodes the agent trained on.
 EVAL_SEED_OFFSET = 1_000_000
@@ -123,6 +128,46 @@ class SaveNormalizationOnBest(BaseCallback):
         return True
 
 
+class DifficultyCurriculum(BaseCallback):
+    """Raises the training env's difficulty linearly from ``start`` to 1 over the first
+    ``fraction`` of ``total`` timesteps (``env_method("set_difficulty", d)``, which takes effect at
+    each sub-env's next reset), and logs it as ``curriculum/difficulty``.
+
+    Args:
+        start: difficulty at timestep 0, in [0, 1].
+        fraction: fraction of the run over which it reaches 1, in (0, 1].
+        total: the run's total timesteps.
+    """
+
+    def __init__(self, start: float, fraction: float, total: int) -> None:
+        super().__init__()
+        if not (0.0 <= start <= 1.0 and 0.0 < fraction <= 1.0 and total > 0):
+            raise ValueError(
+                f"curriculum needs start in [0, 1] and fraction in (0, 1]; got start={start!r}, fraction={fraction!r}"
+            )
+        self.start, self.fraction, self.total = float(start), float(fraction), int(total)
+        self.difficulty = -1.0
+
+    def difficulty_at(self, timesteps: int) -> float:
+        """The scheduled difficulty after ``timesteps`` env steps."""
+        progress = min(1.0, timesteps / (self.fraction * self.total))
+        return self.start + (1.0 - self.start) * progress
+
+    def _on_training_start(self) -> None:
+        self._update()
+
+    def _on_step(self) -> bool:
+        self._update()
+        return True
+
+    def _update(self) -> None:
+        target = self.difficulty_at(self.num_timesteps)
+        if abs(target - self.difficulty) >= 0.01 or (target == 1.0 and self.difficulty != 1.0):
+            self.training_env.env_method("set_difficulty", target)
+            self.difficulty = target
+            self.logger.record("curriculum/difficulty", target)
+
+
 def train(
     algo: str = "ppo",
     env_id: str = DEFAULT_ENV_ID,
@@ -193,7 +238,7 @@ def train(
         )
         reset_num_timesteps = True
     (run / "best").mkdir(exist_ok=True)
-    callbacks = CallbackList([
+    callback_items: list[BaseCallback] = [
         CheckpointCallback(
             save_freq=max(checkpoint_freq // n_envs, 1), save_path=str(run / "checkpoints"), name_prefix=algo,
             save_vecnormalize=bool(normalize),
@@ -204,7 +249,11 @@ def train(
             callback_on_new_best=SaveNormalizationOnBest(run / "best" / "vecnormalize.pkl") if normalize else None,
             verbose=verbose,
         ),
-    ])
+    ]
+    curriculum = hyperparams.get("curriculum")
+    if curriculum:
+        callback_items.append(DifficultyCurriculum(curriculum["start"], curriculum["fraction"], total))
+    callbacks = CallbackList(callback_items)
     start = time.perf_counter()
     model.learn(
         total_timesteps=total, callback=callbacks, progress_bar=progress_bar, tb_log_name=algo,
@@ -247,6 +296,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--n-envs", type=int, help="override n_envs")
     parser.add_argument("--hyperparams", help="YAML file instead of agents/hyperparams/<algo>.yml")
     parser.add_argument("--resume", help="checkpoint .zip to continue from")
+    parser.add_argument(
+        "--curriculum", nargs=2, type=float, metavar=("START", "FRACTION"),
+        help="raise the difficulty from START to 1 over the first FRACTION of the run",
+    )
     parser.add_argument("--eval-freq", type=int, default=50_000, help="env steps between evaluations")
     parser.add_argument("--eval-episodes", type=int, default=32)
     parser.add_argument("--checkpoint-freq", type=int, default=250_000, help="env steps between checkpoints")
@@ -256,6 +309,7 @@ def main(argv: list[str] | None = None) -> None:
     train(
         algo=args.algo, env_id=args.env, seed=args.seed, out=args.out, timesteps=args.timesteps,
         num_envs=args.n_envs, hyperparams_file=args.hyperparams, resume=args.resume, eval_freq=args.eval_freq,
+        overrides={"curriculum": {"start": args.curriculum[0], "fraction": args.curriculum[1]}} if args.curriculum else None,
         eval_episodes=args.eval_episodes, checkpoint_freq=args.checkpoint_freq,
         progress_bar=not args.no_progress, verbose=args.verbose,
         command=shlex.join(["python", "-m", "agents.train", *(sys.argv[1:] if argv is None else argv)]),

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import gymnasium as gym
-import math
-
 import numpy as np
 import pytest
 
@@ -23,7 +22,7 @@ from agents.baselines import (
 )
 from agents.compare import compare
 from agents.policies import TrainedPolicy, make_controller
-from agents.train import load_hyperparameters, train
+from agents.train import load_hyperparameters, make_training_env, train
 
 
 @pytest.mark.parametrize("env_id", tether_gym.ENV_IDS)
@@ -196,6 +195,22 @@ def test_training_resumes_from_a_checkpoint(trained_run: Path, tmp_path: Path) -
     from stable_baselines3 import PPO
 
     assert PPO.load(run / "model.zip").num_timesteps == 512  # 256 from the checkpoint + 256 more
+
+
+def test_curriculum_raises_the_training_difficulty_on_schedule(tmp_path: Path) -> None:
+    from stable_baselines3 import PPO
+
+    from agents.baselines import task_of
+    from agents.train import DifficultyCurriculum
+
+    schedule = DifficultyCurriculum(0.2, 0.5, 1000)
+    assert [schedule.difficulty_at(t) for t in (0, 250, 500, 900)] == pytest.approx([0.2, 0.6, 1.0, 1.0])
+    venv = make_training_env("TetherSpinningTriangle-v0", 4, seed=0, normalize=False)
+    model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, device="cpu")
+    model.learn(256, callback=DifficultyCurriculum(0.0, 1.0, 512))
+    assert task_of(venv).difficulty == pytest.approx(0.5, abs=0.02)
+    with pytest.raises(ValueError, match="curriculum"):
+        DifficultyCurriculum(1.5, 0.5, 1000)
 
 
 def test_sac_training_smoke(tmp_path: Path) -> None:

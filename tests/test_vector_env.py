@@ -20,11 +20,28 @@ def test_make_vec_returns_the_native_vector_env() -> None:
     assert np.all(envs.task.max_thrust == 2.0)
 
 
-@pytest.mark.parametrize("num_envs", [3, 20])  # 20 uses the multi-threaded kernels
-def test_vector_env_equals_single_envs_across_autoresets(num_envs: int) -> None:
-    kwargs = dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1}, max_deviation=1.0)
-    envs = gym.make_vec("TetherTetrahedron-v0", num_envs=num_envs, **kwargs)
-    singles = [gym.make("TetherTetrahedron-v0", **kwargs) for _ in range(num_envs)]
+#: Every disturbance and fault at once, in a spinning frame, with cables weak enough to break.
+FAULTY = dict(
+    max_episode_steps=40, impulse_magnitude=2.0, impulse_rate=0.5, periodic_amplitude=0.3, thrust_noise=0.2,
+    thrust_delay=2, thruster_failure_probability=0.7, thruster_failure_window=(0.5, 3.0), cable_failure="continue",
+    preset_kwargs={"breaking_load": 8.0}, randomize={"axial_damping": 0.3}, difficulty=0.8, max_deviation=1.0,
+)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "num_envs", "kwargs"),
+    [
+        ("TetherTetrahedron-v0", 3, dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1},
+                                         max_deviation=1.0)),
+        # 20 uses the multi-threaded kernels
+        ("TetherTetrahedron-v0", 20, dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1},
+                                          max_deviation=1.0)),
+        ("TetherSpinningTriangle-v0", 20, FAULTY),
+    ],
+)
+def test_vector_env_equals_single_envs_across_autoresets(env_id: str, num_envs: int, kwargs: dict) -> None:
+    envs = gym.make_vec(env_id, num_envs=num_envs, **kwargs)
+    singles = [gym.make(env_id, **kwargs) for _ in range(num_envs)]
     obs, infos = envs.reset(seed=10)
     for i, env in enumerate(singles):
         single_obs, single_info = env.reset(seed=10 + i)

@@ -26,9 +26,12 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     Satellites (point masses) are joined by tension-only elastic cables with pretension. Their
     motion is integrated by the explicit central-difference method of the source paper, with
     automatic sub-stepping at the estimated critical time step (several sub-steps per control
-    interval). Each satellite is held in its nominal shape by a constant **bias thrust**
-    ``p_bias = f_int(nominal)``. Without it, pretension would pull the cluster together. The
-    agent's thrust is added on top of the bias. Each episode starts from large random initial
+    interval). In free space each satellite is held in its nominal shape by a constant **bias
+    thrust** ``p_bias = f_int(nominal)``. Without it, pretension would pull the cluster together.
+    The presets in turning frames (``radial_chain`` in the Hill frame of a circular orbit,
+    ``spinning_triangle`` and ``spinning_hub`` in their spinning frame) are held taut by the
+    gravity gradient or the spin instead, and their bias is zero to round-off. The agent's
+    thrust is added on top of the bias. Each episode starts from large random initial
     conditions: a cluster whose cables keep going slack and snapping taut. The task is to damp
     that vibration quickly, with little propellant, and without losing the formation.
 
@@ -46,7 +49,8 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ``Box(-1e4, 1e4, (6 s + c [+ c],), float32)``, where s is the number of observed satellites
     and c the number of cables. Everything is in the **cluster frame**: the origin is at the
-    centre of mass, and the axes keep the nominal orientation. ``D`` is
+    centre of mass, and the axes are those of the simulation frame (inertial, Hill or spinning),
+    in which the nominal shape is at rest. ``D`` is
     ``initial_displacement`` and ``V`` is ``initial_velocity``.
 
     | index | observation | unit |
@@ -66,8 +70,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
     - ``reward_vibration = -vibration_weight * E_vib / E_scale``.
       - ``E_vib`` is the vibration energy: kinetic energy relative to the rigid translation and
-        rotation, plus strain energy, plus the bias-thrust potential ``-p_bias . (x - X)``,
-        measured from the nominal state.
+        rotation, plus strain energy, plus the bias-thrust potential ``-p_bias . (x - X)``, plus
+        in a turning frame the centrifugal/tidal potential of the shape about its centre of
+        mass, measured from the nominal state.
       - ``E_scale`` is the mean ``E_vib`` of the reset distribution (64 fixed-seed draws).
     - ``reward_propellant = -propellant_weight * sum_j |F_j| dt / (F_full dt)``: the thrust
       impulse of the interval, as a fraction of full thrust on every thruster.
@@ -83,13 +88,29 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     ``self.np_random``. ``randomize={"masses": 0.2, ...}`` also draws the masses, EA, damping or
     N0 within ``+-spread`` of nominal at each reset, and the bias is recomputed to match.
     ``reset(options={"positions": X0, "velocities": V0})`` sets exact (n, 3) initial conditions
-    instead.
+    instead. ``difficulty`` (in [0, 1], or ``set_difficulty(d)`` between episodes) scales the
+    initial conditions, the randomisation spreads and the disturbances together, for curricula.
+
+    ## Disturbances and Faults
+
+    All off by default; each cluster draws its own from ``self.np_random``.
+    - ``impulse_magnitude`` (N*s) kicks at Poisson rate ``impulse_rate`` (1/s), each on one random
+      satellite in a random direction, applied over one control interval.
+    - ``periodic_amplitude`` (N): ``A d_i sin(2 pi t / periodic_period + phi_i)`` on every
+      satellite, random unit direction and phase per satellite and episode.
+    - ``thrust_noise``: Gaussian error on each delivered thrust component, as a fraction of
+      ``max_thrust``; ``thrust_delay``: actions act that many control intervals late.
+    - ``thruster_failure_probability``: one random thruster fails (delivers nothing) at a time
+      drawn in ``thruster_failure_window`` (s).
+    - Cables always break past their breaking load and stay broken until reset;
+      ``cable_failure="terminate"`` (default) ends the episode there, ``"continue"`` lets the
+      cluster go on without them.
 
     ## Episode End
 
     - ``terminated``: the formation is lost (a satellite farther than ``max_deviation`` from its
-      nominal place), a cable's tension passes its breaking load at any sub-step of the interval,
-      or the numerics diverge.
+      nominal place), a cable's tension passes its breaking load at any sub-step of the interval
+      (unless ``cable_failure="continue"``), or the numerics diverge.
       ``info["end_reason"]`` says which.
     - ``truncated``: the registered time limit (``max_episode_steps``) is reached. A failure always
       sets ``terminated``, never ``truncated`` alone; one on the very last step sets both, as
@@ -102,10 +123,12 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     - the reward terms;
     - ``substeps``, ``step_min`` and ``step_max`` (s) of the interval, and ``peak_tension``
       ((c,) N, each cable's largest tension within it);
-    - ``vibration_energy``, ``kinetic_energy``, ``strain_energy``, ``dissipated_energy``,
-      ``external_work`` and ``energy_residual`` (J);
-    - ``tensions`` (N), ``slack_count``, and ``propellant_used`` (N*s, cumulative);
-    - ``thrust`` ((n, 3) N, the agent's part);
+    - ``vibration_energy``, ``kinetic_energy``, ``strain_energy``, ``frame_potential``,
+      ``dissipated_energy``, ``external_work`` and ``energy_residual`` (J);
+    - ``tensions`` (N), ``slack_count``, ``broken_cables`` ((c,) bool), and ``propellant_used``
+      (N*s, cumulative);
+    - ``thrust`` ((n, 3) N, the agent's part as delivered, noise included), ``disturbance``
+      ((n, 3) N, the external disturbance of the interval) and ``thruster_ok`` ((k,) bool);
     - ``time`` (s) and ``end_reason``.
 
     ## Arguments
@@ -117,7 +140,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     | ``cluster`` | ``None`` | a :class:`~tether_gym.Cluster` to use instead of a preset |
     | ``render_mode`` | ``None`` | ``"rgb_array"`` or ``"human"`` |
     | ``render_exaggeration`` | 100 | displacements from nominal are drawn this many times larger |
-    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor`` |
+    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor``, and the disturbance, fault and ``difficulty`` options above |
 
     ## Version History
 
