@@ -455,29 +455,38 @@ class DampingTask:
         self._evaluate()
 
     def _disturb(self, mask: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
-        """Add this interval's disturbance force and thrust noise to the active clusters' force."""
+        """Add this interval's disturbance force and thrust noise to the active clusters' force.
+
+        Each cluster makes at most one draw per kind from its own generator (so it gets the same
+        numbers in any batch); the rest is vectorised over the batch."""
         config = self.config
         interval = config.control_interval
         n = self.cluster.num_nodes
-        kick_chance = 1.0 - math.exp(-config.impulse_rate * interval)
-        midpoint = self.sim.time + 0.5 * interval
-        for b in np.flatnonzero(mask):
-            rng = rngs[b]
-            disturbance = np.zeros((n, 3))
-            if config.periodic_amplitude:
-                wave = np.sin(2.0 * math.pi * midpoint[b] / config.periodic_period + self.periodic_phase[b])
-                disturbance += self.difficulty * config.periodic_amplitude * wave[:, None] * self.periodic_direction[b]
-            if config.impulse_magnitude and rng.random() < kick_chance:
-                node = rng.integers(n)
-                direction = rng.standard_normal(3)
-                disturbance[node] += self.difficulty * config.impulse_magnitude / interval * direction / np.linalg.norm(direction)
-            if config.thrust_noise:
-                noise = rng.standard_normal((self.thrusters.size, 3))
-                noise *= (self.difficulty * config.thrust_noise * self.max_thrust * self.thruster_ok[b])[:, None]
-                self.thrust[b, self.thrusters] += noise
-                self.force[b, self.thrusters] += noise
-            self.disturbance[b] = disturbance
-            self.force[b] += disturbance
+        active = np.flatnonzero(mask)
+        scale = self.difficulty
+        disturbance = np.zeros((active.size, n, 3))
+        if config.periodic_amplitude:
+            midpoint = self.sim.time[active] + 0.5 * interval
+            wave = np.sin(2.0 * math.pi * midpoint[:, None] / config.periodic_period + self.periodic_phase[active])
+            disturbance += scale * config.periodic_amplitude * wave[:, :, None] * self.periodic_direction[active]
+        if config.impulse_magnitude:
+            # Per cluster: whether a kick comes, which satellite, and a direction uniform on the sphere.
+            draws = np.array([rngs[b].random(4) for b in active]).reshape(-1, 4)
+            kicked = np.flatnonzero(draws[:, 0] < 1.0 - math.exp(-config.impulse_rate * interval))
+            node = np.minimum((draws[kicked, 1] * n).astype(np.int64), n - 1)
+            z = 2.0 * draws[kicked, 2] - 1.0
+            azimuth = 2.0 * math.pi * draws[kicked, 3]
+            radius = np.sqrt(1.0 - z * z)
+            direction = np.stack([radius * np.cos(azimuth), radius * np.sin(azimuth), z], axis=1)
+            disturbance[kicked, node] += scale * config.impulse_magnitude / interval * direction
+        if config.thrust_noise:
+            k = self.thrusters.size
+            noise = np.array([rngs[b].standard_normal((k, 3)) for b in active]).reshape(-1, k, 3)
+            noise *= (scale * config.thrust_noise * self.max_thrust[None, :] * self.thruster_ok[active])[:, :, None]
+            self.thrust[active[:, None], self.thrusters[None, :]] += noise
+            self.force[active[:, None], self.thrusters[None, :]] += noise
+        self.disturbance[active] = disturbance
+        self.force[active] += disturbance
 
     # ------------------------------------------------------------------ results
     def observe(self, rngs: Sequence[np.random.Generator], indices: np.ndarray | None = None) -> np.ndarray:
