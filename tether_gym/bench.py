@@ -145,6 +145,13 @@ def ppo_env_share(env_id: str, num_envs: int, timesteps: int) -> tuple[float, fl
     return times[0], times[1], inside, inside / times[0]
 
 
+#: Every disturbance and fault of the task switched on (for the cost of drawing them).
+ALL_FAULTS = {
+    "impulse_magnitude": 1.0, "periodic_amplitude": 0.2, "thrust_noise": 0.1, "thrust_delay": 1,
+    "thruster_failure_probability": 0.5,
+}
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=30_000, help="timed steps per measurement")
@@ -161,17 +168,21 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{env_id:<24}{policy:<10}{best:>12,.0f}")
     print()
     print(f"vector envs, random actions, env steps/s (sub-env steps summed), best of {args.repeats}")
-    print(f"{'id':<24}{'vectorisation':<34}{'N':>6}{'steps/s':>14}")
+    print(f"{'id':<24}{'vectorisation':<38}{'N':>6}{'steps/s':>14}")
     for env_id in ENV_IDS if args.all_ids else [DEFAULT_ENV_ID]:
         cases = [("native", n, {}) for n in (1, 64, 1024, 4096)]
-        cases += [("native, safety_factor 0.2", 1024, {"safety_factor": 0.2}), ("SyncVectorEnv", 64, {})]
+        cases += [
+            ("native, safety_factor 0.2", 1024, {"safety_factor": 0.2}),
+            ("native, every disturbance and fault", 1024, ALL_FAULTS),
+            ("SyncVectorEnv", 64, {}),
+        ]
         for label, n, kwargs in cases:
             steps = max(20, min(2000, 200_000 // n))
             best = max(
                 vector_env_steps_per_second(env_id, n, steps, sync=label == "SyncVectorEnv", **kwargs)
                 for _ in range(args.repeats)
             )
-            print(f"{env_id:<24}{label:<34}{n:>6}{best:>14,.0f}")
+            print(f"{env_id:<24}{label:<38}{n:>6}{best:>14,.0f}")
     try:
         import stable_baselines3  # noqa: F401
     except ImportError:
