@@ -172,6 +172,12 @@ _cable_forces_undamped = _make_cable_forces(False)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _largest_tidal(tidal: np.ndarray) -> float:
+    """``max |T_d|`` of a frame's tidal diagonal (3,), 1/s^2: the frame's share of omega_max^2."""
+    return max(abs(tidal[0]), abs(tidal[1]), abs(tidal[2]))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _solve_gyroscopic(lhs: float, gyro: float, rx: float, ry: float) -> tuple[float, float]:
     """Solve ``lhs vx - gyro vy = rx, lhs vy + gyro vx = ry``: the in-plane part of a velocity
     update whose Coriolis term is taken at the centred velocity (a Cayley rotation, which, like
@@ -276,7 +282,7 @@ def _advance_clusters(
         cb = damping[b]
         wb = frame_rate[b]
         tb = frame_tidal[b]
-        tidal_max = max(abs(tb[0]), abs(tb[1]), abs(tb[2]))
+        tidal_max = _largest_tidal(tb)
         turning = wb != 0.0 or tidal_max != 0.0
         viscous = False
         for c in range(axial_damping.shape[1]):
@@ -472,9 +478,10 @@ def evaluate_batch(
     finite (B,)."""
     peak = np.empty(cables.shape[0])
     for b in range(x.shape[0]):
+        # may_break=False: the breaking-load argument is never read, any (m,) array will do.
         omega2_cables, finite[b], _, _ = cable_forces(
             x[b], v[b], reference[b], cables, stiffness[b], L0[b], N0[b], axial_damping[b],
             inv_split_mass_sum[b], stiffness[b], intact[b], linearised, taut_branch, False, f_int[b],
             tension[b], peak,
         )
-        omega2[b] = omega2_cables + max(abs(frame_tidal[b, 0]), abs(frame_tidal[b, 1]), abs(frame_tidal[b, 2]))
+        omega2[b] = omega2_cables + _largest_tidal(frame_tidal[b])

@@ -429,12 +429,19 @@ class BatchSimulator:
         at rest at ``positions`` needs the external force ``p = f_int`` to stay there; see
         :meth:`equilibrium_force` for turning frames.
         """
+        return self._forces_at(positions, indices)[2]
+
+    def _forces_at(
+        self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None, intact: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(idx, x, f_int)``: the checked cluster indices and (k, n, 3) positions, and the elastic
+        forces there with the cables ``intact`` (default: each cluster's current state)."""
         idx = self._indices(indices)
         x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
-        f_int, _, _, finite = self._evaluate(x, idx)
+        f_int, _, _, finite = self._evaluate(x, idx, intact=intact)
         if not finite.all():
             raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
-        return f_int
+        return idx, x, f_int
 
     def equilibrium_force(
         self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None
@@ -445,11 +452,8 @@ class BatchSimulator:
         It is zero (to round-off) for a cluster whose shape is an equilibrium of its frame, such as
         a radial chain in the Hill frame or a spinning formation in its rotating frame.
         """
-        idx = self._indices(indices)
-        x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
-        f_int, _, _, finite = self._evaluate(x, idx, intact=np.ones((idx.size, self.num_cables), dtype=np.bool_))
-        if not finite.all():
-            raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
+        all_intact = np.ones((self._indices(indices).size, self.num_cables), dtype=np.bool_)
+        idx, x, f_int = self._forces_at(positions, indices, intact=all_intact)
         return f_int - self.masses[idx][:, :, None] * self.frame_tidal[idx][:, None, :] * x
 
     def critical_time_step(self, method: CriticalStepMethod = "closed-form") -> np.ndarray:
