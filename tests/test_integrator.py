@@ -268,9 +268,11 @@ def test_a_diverging_cluster_is_frozen_and_flagged_without_disturbing_the_batch(
     x0 = np.stack([c.positions] * 3)
     v0 = np.zeros_like(x0)
     v0[:, 0, 0] = 0.5
-    v0[1] = 1e307  # overflows within the first sub-step
     batch = tg.BatchSimulator(c, 3)
     batch.reset(x0, v0)
+    # Validated inputs cannot overflow any more (reset refuses speeds past tether_gym.limits), so
+    # cluster 1's state is poisoned directly: it overflows within the first sub-step.
+    batch._v_half[1] = 1e307
     alone = tg.BatchSimulator(c, 1)
     alone.reset(x0[:1], v0[:1])
     stats = batch.advance(0.1)
@@ -288,10 +290,26 @@ def test_a_diverging_cluster_is_frozen_and_flagged_without_disturbing_the_batch(
     assert batch.advance(0.1).status.tolist() == [0, 0, 0]
 
 
-def test_sub_step_limit_flags_the_cluster() -> None:
+def test_sub_step_limit_flags_the_cluster_before_it_steps() -> None:
     batch = tg.BatchSimulator(tg.make_cluster("triangle"), 2, max_substeps=50)
+    batch.reset(batch.positions + 0.01)
+    before = (batch.positions.copy(), batch.velocities.copy(), batch.time.copy())
     stats = batch.advance(6.0)  # needs about 215 sub-steps
-    assert stats.status.tolist() == [2, 2] and stats.substeps.tolist() == [50, 50]
+    assert stats.status.tolist() == [2, 2] and stats.substeps.tolist() == [0, 0]
+    assert all(np.array_equal(a, b) for a, b in zip(before, (batch.positions, batch.velocities, batch.time)))
+    assert batch.advance(0.1).substeps.tolist() == [0, 0]  # frozen until reset
+
+
+@pytest.mark.parametrize("duration", [1e6, 1e300, np.finfo(float).max])
+def test_durations_beyond_the_sub_step_budget_never_take_a_giant_step(duration: float) -> None:
+    """The sub-step count once overflowed its integer for huge durations, and the cluster took
+    the whole duration in one step; now it is flagged and left untouched."""
+    sim = tg.Simulator(tg.make_cluster("triangle"))
+    sim.reset(sim.cluster.positions + 0.01)
+    x = sim.positions.copy()
+    with pytest.raises(tg.SimulationDiverged, match="max_substeps"):
+        sim.advance(duration)
+    assert np.array_equal(sim.positions, x) and sim.time == 0.0
 
 
 def test_single_simulator_raises_on_divergence() -> None:
@@ -360,11 +378,18 @@ def test_work_and_dissipation_close_the_energy_balance_at_second_order() -> None
         (lambda s: s.advance(0.0), "duration must be a finite number of seconds > 0"),
         (lambda s: s.advance(-1.0), "duration must be"),
         (lambda s: s.advance(float("nan")), "duration must be"),
-        (lambda s: s.advance("soon"), "duration must be a number"),
+        (lambda s: s.advance("soon"), "duration must be a finite number of seconds"),
         (lambda s: s.advance(0.1, np.zeros((3, 3))), r"force must have shape \(4, 3\)"),
-        (lambda s: s.advance(0.1, np.full((4, 3), np.nan)), "force contains NaN or inf"),
+        (lambda s: s.advance(0.1, np.full((4, 3), np.nan)), "force contains NaN"),
+        (lambda s: s.advance(0.1, np.full((4, 3), 1e13)), r"force must lie in \[0, 1e\+12\] N"),
+        (lambda s: s.advance(0.1, [["a"] * 3] * 4), "force must be made of real numbers"),
+        (lambda s: s.advance(0.1, record_steps=-1), "record_steps must be a whole number"),
+        (lambda s: s.advance(True), "duration must be a finite number"),
+        (lambda s: s.reset(velocities=np.full((4, 3), 1e7)), r"velocities must lie in \[0, 1e\+06\] m/s"),
+        (lambda s: s.critical_time_step("finite-difference") and s.batch.element_omega2_finite_difference(0.0),
+         "relative_perturbation must lie in"),
         (lambda s: s.reset(np.zeros((4, 2))), r"positions must have shape \(4, 3\)"),
-        (lambda s: s.reset(velocities=np.full((4, 3), np.inf)), "velocities contains NaN or inf"),
+        (lambda s: s.reset(velocities=np.full((4, 3), np.inf)), "velocities contains an infinite value"),
         (lambda s: s.reset(np.zeros((4, 3))), "zero-length cable"),
         (lambda s: s.critical_time_step("magic"), "method must be"),
     ],
@@ -377,7 +402,7 @@ def test_bad_simulator_input_gets_a_clear_error(call, message: str) -> None:
 
 def test_bad_simulator_arguments() -> None:
     c = tg.make_cluster("tetrahedron")
-    with pytest.raises(ValueError, match=r"safety_factor must be in \(0, 1\]"):
+    with pytest.raises(ValueError, match=r"safety_factor \(a fraction of the critical step\) must lie in \(0, 1\]"):
         tg.Simulator(c, safety_factor=1.5)
     with pytest.raises(ValueError, match="elongation must be"):
         tg.Simulator(c, elongation="small")
@@ -385,13 +410,44 @@ def test_bad_simulator_arguments() -> None:
         tg.Simulator("tetrahedron")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="different topology"):
         tg.BatchSimulator([c, tg.make_cluster("triangle")])
-    with pytest.raises(ValueError, match="num_clusters must be a positive integer"):
+    with pytest.raises(ValueError, match="num_clusters must be a whole number"):
         tg.BatchSimulator(c, 0)
     batch = tg.BatchSimulator(c, 2)
     with pytest.raises(ValueError, match="cluster indices must be in 0..1"):
         batch.reset(c.positions[None], indices=[2])
     with pytest.raises(ValueError, match="active must be a boolean array"):
         batch.advance(0.1, active=[1, 0])
+    with pytest.raises(ValueError, match="safety_factor"):
+        tg.Simulator(c, safety_factor="small")
+    with pytest.raises(ValueError, match="max_substeps must be a whole number"):
+        tg.Simulator(c, max_substeps=10**30)
+    with pytest.raises(ValueError, match="num_clusters must be a whole number"):
+        tg.BatchSimulator(c, True)
+
+
+def test_refused_updates_leave_the_batch_unchanged() -> None:
+    """Validate first, then change state: a refused call must not half-apply."""
+    c = tg.make_cluster("tetrahedron")
+    batch = tg.BatchSimulator(c, 3)
+    batch.reset(np.stack([c.positions + 0.01 * k for k in range(3)]))
+    batch.advance(0.3)
+    snapshot = {name: np.copy(getattr(batch, name)) for name in vars(batch) if isinstance(getattr(batch, name), np.ndarray)}
+    clusters = list(batch.clusters)
+    other = c.replace(masses=20.0)
+    for call in (
+        lambda: batch.set_cluster(3, other),
+        lambda: batch.set_cluster(-1, other),
+        lambda: batch.set_cluster(0, "tetrahedron"),  # type: ignore[arg-type]
+        lambda: batch.set_cluster(0, tg.make_cluster("triangle")),
+        lambda: batch.reset(np.stack([c.positions, c.positions, np.zeros((4, 3))])),  # third has zero-length cables
+        lambda: batch.reset(np.stack([c.positions] * 3), np.full((3, 4, 3), 1e9)),
+        lambda: batch.advance(0.1, np.full((3, 4, 3), np.inf)),
+    ):
+        with pytest.raises((ValueError, TypeError)):
+            call()
+        assert batch.clusters == clusters
+        for name, value in snapshot.items():
+            assert np.array_equal(getattr(batch, name), value, equal_nan=True), name
 
 
 @pytest.mark.parametrize("safety_factor", [0.05, 0.2, 0.7])
@@ -421,3 +477,55 @@ def test_internal_forces_of_selected_clusters_use_their_own_parameters() -> None
     chosen = batch.internal_forces(x[[2, 1]], indices=[2, 1])
     assert np.array_equal(chosen, everything[[2, 1]])
     assert not np.allclose(everything[0], everything[1])
+
+
+@pytest.mark.parametrize("damping", [0.5, 10.0, 1e3])
+def test_heavily_damped_free_masses_follow_the_exact_exponential_decay(damping: float) -> None:
+    """Free masses with diagonal damping: ``v(t) = v0 exp(-c t / m)`` and
+    ``x(t) = x0 + v0 (m / c) (1 - exp(-c t / m))``.
+
+    The one cable is slack and so soft (EA = 1 uN, L0 = 1 km between satellites 10 m apart) that
+    it limits the step to over an hour: only the damping time scale m/c does.  Stepped past
+    2 m/c, the centred update would reverse the velocities; the sub-step respects
+    ``safety_factor * 2 m/c`` instead, so they decay monotonically, to second-order accuracy.
+    """
+    masses = np.array([1.0, 3.0])
+    c = tg.Cluster(positions=[[0, 0, 0], [10, 0, 0]], masses=masses, cables=[(0, 1)], EA=1e-6, L0=1e3,
+                   damping=damping * masses)  # c/m = damping for both
+    v0 = np.array([[0.3, -0.2, 0.1], [-0.1, 0.05, 0.2]])
+    interval = 1.0 / damping  # ten intervals span ten time constants
+    errors = []
+    for safety in (0.1, 0.05):
+        sim = tg.Simulator(c, safety_factor=safety)
+        sim.reset(velocities=v0)
+        previous = v0.copy()
+        worst = 0.0
+        for k in range(1, 11):
+            stats = sim.advance(interval)
+            assert stats.step_max[0] <= safety * 2.0 / damping * (1 + 1e-12)
+            t = k * interval
+            decay = math.exp(-damping * t)
+            assert np.all(np.sign(sim.velocities) == np.sign(v0)) and np.all(np.abs(sim.velocities) < np.abs(previous))
+            previous = sim.velocities.copy()
+            exact_v = v0 * decay
+            exact_x = c.positions + v0 / damping * (1.0 - decay)
+            worst = max(worst, float(np.abs(sim.velocities - exact_v).max() / np.abs(v0).max()))
+            assert np.allclose(sim.positions, exact_x, rtol=0, atol=0.01 * np.abs(v0).max() / damping)
+        errors.append(worst)
+    assert errors[0] < 0.01
+    assert 3.0 < errors[0] / errors[1] < 5.0, errors  # second order in the step
+
+
+def test_damping_never_reverses_a_velocity_once_every_cable_broke() -> None:
+    """With every cable broken nothing limits the step but the damping time scale."""
+    c = tg.Cluster(positions=[[0, 0, 0], [10, 0, 0]], masses=1.0, cables=[(0, 1)], EA=1e4, L0=9.9,
+                   breaking_load=1e-3, damping=50.0)
+    sim = tg.Simulator(c)
+    sim.reset(velocities=[[1.0, 0, 0], [0, 1.0, 0]])
+    sim.advance(0.01)
+    assert sim.batch.broken.all()
+    for _ in range(20):
+        before = sim.velocities.copy()
+        sim.advance(1.0)
+        moving = before != 0.0
+        assert np.all(np.sign(sim.velocities[moving]) == np.sign(before[moving]))

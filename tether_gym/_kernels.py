@@ -253,9 +253,11 @@ def _advance_clusters(
     ``previous_force`` and half under the new one, so it uses their time-weighted mean: the impulse
     of every force switch is then exact, instead of half a sub-step early.
 
-    Each sub-step is ``min(safety_factor * 2 / omega_est, max_step)``, re-estimated at every
-    configuration, then shortened so that the rest of the interval splits into equal steps; the
-    interval ends exactly at ``duration``.  ``omega_est^2`` is the largest element value of
+    Each sub-step is ``min(safety_factor * 2 / omega_est, safety_factor * 2 min(m/c), max_step)``,
+    re-estimated at every configuration, then shortened so that the rest of the interval splits into equal steps; the
+    interval ends exactly at ``duration``.  A cluster whose remaining sub-steps at the current step
+    size would exceed ``max_substeps`` is flagged ``STATUS_TOO_MANY_SUBSTEPS`` without taking
+    them.  ``omega_est^2`` is the largest element value of
     :func:`cable_forces` plus ``max |T|``.  Cables whose tension passes their breaking load break
     (``intact``) and the cluster goes on without them.  ``peak_tension[b]`` receives each cable's
     largest tension over the interval, N.  ``status_out[b]`` receives the cluster's status, and a
@@ -299,17 +301,32 @@ def _advance_clusters(
         tension_b = tension[b]
         for c in range(tension_b.shape[0]):
             peak[c] = tension_b[c]
+        # The centred damping update scales v by (m/h - c/2) / (m/h + c/2): stable for any h, but
+        # past h = 2 m/c it reverses the velocity, which free damped motion never does.  So the
+        # step also respects the damping time scale, with the same safety factor; it binds only
+        # where no cable limits the step more (all cables broken, or very heavy damping).
+        h_damping = math.inf
+        for i in range(n_nodes):
+            if cb[i] > 0.0 and 2.0 * mb[i] / cb[i] < h_damping:
+                h_damping = 2.0 * mb[i] / cb[i]
+        h_damping *= safety_factor
         while True:
-            if count >= max_substeps:
-                status[b] = STATUS_TOO_MANY_SUBSTEPS
-                break
             h_stable = safety_factor * 2.0 / math.sqrt(omega2[b]) if omega2[b] > 0.0 else math.inf
+            if h_stable > h_damping:
+                h_stable = h_damping
             if h_stable > max_step:
                 h_stable = max_step
             remaining = duration - elapsed
+            # The step count is compared as a float before it becomes an integer: a duration
+            # far beyond the budget would overflow the integer, and the cluster is flagged
+            # before it takes steps it could not finish.
+            steps_wanted = remaining / h_stable - 1e-9
+            if count >= max_substeps or steps_wanted > max_substeps - count:
+                status[b] = STATUS_TOO_MANY_SUBSTEPS
+                break
             # Spread what remains evenly over the fewest steps no longer than h_stable: equal steps
             # within an interval, and no sliver step before its end.
-            steps_left = math.ceil(remaining / h_stable - 1e-9)
+            steps_left = math.ceil(steps_wanted)
             if steps_left <= 1:
                 h = remaining
                 last = True
@@ -388,12 +405,15 @@ def _advance_clusters(
                 break
             elapsed += h
         h_prev[b] = h_last
-        previous_force[b, :, :] = pb
         work[b] = work_b
         dissipated[b] = dissipated_b
         substeps[b] = count
         step_min[b] = h_lo
         step_max[b] = h_hi
+        if count == 0:  # refused before its first step: the state is left exactly as it was
+            status_out[b] = status[b]
+            continue
+        previous_force[b, :, :] = pb
         # Velocity at the end of the interval, consistent with the force just applied:
         # (M + h/2 C) v_n + h M Omega x v_n = M v_{n-1/2} + h/2 (p - f_int(u_n) + M T u_n).
         half = 0.5 * h_last

@@ -21,6 +21,19 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from tether_gym.frames import Frame, FrameError
+from tether_gym.limits import (
+    MAX_COORDINATE,
+    MAX_DAMPING,
+    MAX_EA,
+    MAX_FORCE,
+    MAX_LENGTH,
+    MAX_MASS,
+    MIN_EA,
+    MIN_LENGTH,
+    MIN_MASS,
+    check_range,
+    real_array,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -34,23 +47,17 @@ class ClusterError(ValueError):
     """An invalid cluster description; the message names the problem and how to fix it."""
 
 
-def _float_array(name: str, value: ArrayLike, shape: tuple[int, ...], what: str) -> np.ndarray:
-    """Convert ``value`` to a read-only float64 array of ``shape``, broadcasting scalars."""
-    try:
-        array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ClusterError(f"{name} must be numeric ({what}); got {value!r}: {error}") from None
+def _float_array(
+    name: str, value: ArrayLike, shape: tuple[int, ...], what: str, allow_inf: bool = False
+) -> np.ndarray:
+    """Convert ``value`` to a read-only float64 array of ``shape``, broadcasting scalars; anything
+    but real numbers (strings, booleans, NaN, and infinities unless ``allow_inf``) is refused."""
+    array = real_array(name, value, ClusterError, allow_inf=allow_inf)
     if array.ndim == 0:
         array = np.full(shape, float(array))
     if array.shape != shape:
         raise ClusterError(
             f"{name} must have shape {shape} ({what}) or be a scalar; got shape {array.shape}"
-        )
-    if not np.all(np.isfinite(array)):
-        bad = np.argwhere(~np.isfinite(array))[0]
-        raise ClusterError(
-            f"{name} contains a non-finite value (NaN or inf) at index {tuple(int(i) for i in bad)}; "
-            "every entry must be a finite number"
         )
     array.setflags(write=False)
     return array
@@ -116,43 +123,37 @@ class Cluster:
     name: str = "custom"
 
     def __post_init__(self) -> None:
-        try:
-            positions = np.array(self.positions, dtype=np.float64)
-        except (TypeError, ValueError) as error:
-            raise ClusterError(f"positions must be an (n, 3) array of numbers in m: {error}") from None
+        positions = real_array("positions", self.positions, ClusterError)
         if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 2:
             raise ClusterError(
                 f"positions must have shape (n, 3) with n >= 2 satellites; got shape {positions.shape}"
             )
         n_nodes = positions.shape[0]
         positions = _float_array("positions", positions, (n_nodes, 3), "node positions in m")
+        check_range("positions", np.abs(positions), 0.0, MAX_COORDINATE, "m (absolute value)", error=ClusterError,
+                    where="satellite, axis")
         masses = _float_array("masses", self.masses, (n_nodes,), "kg per satellite")
-        if np.any(masses <= 0.0):
-            i = int(np.argmax(masses <= 0.0))
-            raise ClusterError(f"masses must be > 0 kg; satellite {i} has mass {masses[i]}")
+        check_range("masses", masses, MIN_MASS, MAX_MASS, "kg", error=ClusterError, where="satellite")
         damping = _float_array("damping", self.damping, (n_nodes,), "N*s/m per satellite")
-        if np.any(damping < 0.0):
-            i = int(np.argmax(damping < 0.0))
-            raise ClusterError(f"damping must be >= 0 N*s/m; satellite {i} has {damping[i]}")
+        check_range("damping", damping, 0.0, MAX_DAMPING, "N*s/m", error=ClusterError, where="satellite")
 
-        try:
-            cables = np.array(self.cables, dtype=np.float64)
-        except (TypeError, ValueError) as error:
-            raise ClusterError(f"cables must be a list of (i, j) node-index pairs: {error}") from None
+        cables = real_array("cables", self.cables, ClusterError)
         if cables.ndim != 2 or cables.shape[1] != 2 or cables.shape[0] < 1:
             raise ClusterError(
                 "cables must be a non-empty list of (i, j) node-index pairs, shape (m, 2); "
                 f"got shape {cables.shape}"
             )
-        if not np.all(np.isfinite(cables)) or np.any(cables != np.round(cables)):
+        if np.any(cables != np.round(cables)):
             raise ClusterError("cables must hold whole node indices (integers)")
+        outside = (cables < 0) | (cables >= n_nodes)
+        if outside.any():
+            c = int(np.argwhere(outside)[0, 0])
+            raise ClusterError(
+                f"cable {c} joins nodes {tuple(cables[c].tolist())}, but node indices must be in "
+                f"0..{n_nodes - 1} for {n_nodes} satellites"
+            )
         cables = cables.astype(np.int64)
         for c, (i, j) in enumerate(cables.tolist()):
-            if not (0 <= i < n_nodes and 0 <= j < n_nodes):
-                raise ClusterError(
-                    f"cable {c} joins nodes ({i}, {j}), but node indices must be in 0..{n_nodes - 1} "
-                    f"for {n_nodes} satellites"
-                )
             if i == j:
                 raise ClusterError(f"cable {c} joins node {i} to itself; a cable needs two distinct nodes")
         seen: dict[tuple[int, int], int] = {}
@@ -183,34 +184,26 @@ class Cluster:
             )
 
         EA = _float_array("EA", self.EA, (n_cables,), "axial stiffness in N per cable")
-        if np.any(EA <= 0.0):
-            c = int(np.argmax(EA <= 0.0))
-            raise ClusterError(f"EA must be > 0 N; cable {c} has EA = {EA[c]}")
+        check_range("EA", EA, MIN_EA, MAX_EA, "N", error=ClusterError, where="cable")
         N0 = _float_array("N0", self.N0, (n_cables,), "pretension in N per cable")
-        if np.any(N0 < 0.0):
-            c = int(np.argmax(N0 < 0.0))
-            raise ClusterError(f"N0 (pretension) must be >= 0 N; cable {c} has N0 = {N0[c]}")
+        check_range("N0 (pretension)", N0, 0.0, MAX_FORCE, "N", error=ClusterError, where="cable")
         if self.L0 is None:
+            check_range("the distance between a cable's satellites (its default L0)", lengths, MIN_LENGTH,
+                        MAX_LENGTH, "m", error=ClusterError, where="cable")
             L0 = lengths.copy()
             L0.setflags(write=False)
         else:
             L0 = _float_array("L0", self.L0, (n_cables,), "reference length in m per cable")
-            if np.any(L0 <= 0.0):
-                c = int(np.argmax(L0 <= 0.0))
-                raise ClusterError(f"L0 must be > 0 m; cable {c} has L0 = {L0[c]}")
-        breaking = np.array(self.breaking_load, dtype=np.float64)
-        if breaking.ndim == 0:
-            breaking = np.full(n_cables, float(breaking))
-        if breaking.shape != (n_cables,) or np.any(np.isnan(breaking)) or np.any(breaking <= 0.0):
-            raise ClusterError(
-                f"breaking_load must be a scalar or shape ({n_cables},) of values > 0 N (inf for "
-                f"unbreakable); got {self.breaking_load!r}"
-            )
-        breaking.setflags(write=False)
+            check_range("L0", L0, MIN_LENGTH, MAX_LENGTH, "m", error=ClusterError, where="cable")
+        breaking = _float_array("breaking_load", self.breaking_load, (n_cables,),
+                                "tension in N per cable, inf for unbreakable", allow_inf=True)
+        check_range("breaking_load", breaking, 0.0, math.inf, "N (inf: unbreakable)", low_inclusive=False,
+                    error=ClusterError, where="cable")
+        finite_breaking = np.where(np.isinf(breaking), MAX_FORCE, breaking)
+        check_range("breaking_load", finite_breaking, 0.0, MAX_FORCE, "N, or inf for unbreakable",
+                    low_inclusive=False, error=ClusterError, where="cable")
         axial_damping = _float_array("axial_damping", self.axial_damping, (n_cables,), "N*s/m per cable")
-        if np.any(axial_damping < 0.0):
-            c = int(np.argmax(axial_damping < 0.0))
-            raise ClusterError(f"axial_damping must be >= 0 N*s/m; cable {c} has {axial_damping[c]}")
+        check_range("axial_damping", axial_damping, 0.0, MAX_DAMPING, "N*s/m", error=ClusterError, where="cable")
         try:
             frame = Frame.from_dict(self.frame)
         except (FrameError, TypeError) as error:
@@ -219,9 +212,9 @@ class Cluster:
             raise ClusterError(f"name must be a string; got {self.name!r}")
 
         for field, value in (
-            ("positions", positions), ("masses", masses), ("cables", cables), ("EA", EA),
-            ("N0", N0), ("damping", damping), ("L0", L0), ("breaking_load", breaking),
-            ("axial_damping", axial_damping), ("frame", frame),
+            ("positions", positions), ("masses", masses), ("damping", damping), ("cables", cables), ("EA", EA),
+            ("N0", N0), ("L0", L0), ("breaking_load", breaking), ("axial_damping", axial_damping),
+            ("frame", frame),
         ):
             object.__setattr__(self, field, value)
 
@@ -268,8 +261,12 @@ class Cluster:
 
     # ------------------------------------------------------------------ (de)serialisation
     def to_dict(self) -> dict[str, Any]:
-        """A plain, JSON- and TOML-friendly description (lists of floats, SI units)."""
-        data: dict[str, Any] = {
+        """Every field as plain Python values (lists of floats, SI units), for JSON and TOML.
+
+        Nothing is left out, not even fields at their defaults, so that a cluster written and read
+        back is equal to the original bit for bit (``-0.0`` and unbreakable ``inf`` loads included).
+        """
+        return {
             "name": self.name,
             "positions": self.positions.tolist(),
             "masses": self.masses.tolist(),
@@ -278,22 +275,22 @@ class Cluster:
             "EA": self.EA.tolist(),
             "L0": self.L0.tolist(),
             "N0": self.N0.tolist(),
+            "breaking_load": self.breaking_load.tolist(),
+            "axial_damping": self.axial_damping.tolist(),
+            "frame": self.frame.to_dict(),
         }
-        if np.all(np.isfinite(self.breaking_load)):
-            data["breaking_load"] = self.breaking_load.tolist()
-        if np.any(self.axial_damping > 0.0):
-            data["axial_damping"] = self.axial_damping.tolist()
-        if not self.frame.is_inertial:
-            data["frame"] = self.frame.to_dict()
-        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Cluster:
         """Build a cluster from :meth:`to_dict` output (unknown keys are an error)."""
+        if not isinstance(data, Mapping):
+            raise ClusterError(f"a cluster description is a mapping of field names to values; got {type(data).__name__}")
         fields = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - fields
         if unknown:
-            raise ClusterError(f"unknown cluster key(s) {sorted(unknown)}; allowed keys are {sorted(fields)}")
+            raise ClusterError(
+                f"unknown cluster key(s) {sorted(map(str, unknown))}; allowed keys are {sorted(fields)}"
+            )
         missing = {"positions", "masses", "cables", "EA"} - set(data)
         if missing:
             raise ClusterError(f"cluster description lacks required key(s) {sorted(missing)}")
@@ -317,37 +314,70 @@ class Cluster:
         )
 
 
+#: Cluster files larger than this are refused: a cluster of 10^4 satellites fits in a few MB.
+MAX_FILE_BYTES = 64 * 2**20
+
+
+def _strict_json(data: Any) -> Any:
+    """``data`` with every infinite float written as the string ``"inf"``: strict JSON has no
+    infinity, and only breaking loads may be infinite (NaN never reaches a file)."""
+    if isinstance(data, float) and math.isinf(data):
+        return "inf" if data > 0 else "-inf"
+    if isinstance(data, list):
+        return [_strict_json(item) for item in data]
+    if isinstance(data, dict):
+        return {key: _strict_json(value) for key, value in data.items()}
+    return data
+
+
 def save_cluster(cluster: Cluster, path: str | Path) -> Path:
-    """Write ``cluster`` to ``path`` as JSON (``.json``) or TOML (``.toml``); returns the path."""
+    """Write ``cluster`` to ``path`` as JSON (``.json``) or TOML (``.toml``); returns the path.
+
+    Every field is written, and floats are written with the shortest repr that reads back to the
+    same bits, so :func:`load_cluster` returns a cluster equal to ``cluster`` bit for bit.  JSON
+    files are strict JSON (an unbreakable cable's load is the string ``"inf"``).
+    """
+    if not isinstance(cluster, Cluster):
+        raise TypeError(f"save_cluster takes a Cluster; got {type(cluster).__name__}")
     path = Path(path)
     data = cluster.to_dict()
     if path.suffix == ".json":
-        path.write_text(json.dumps(data, indent=2) + "\n")
+        text = json.dumps(_strict_json(data), indent=2, allow_nan=False) + "\n"
     elif path.suffix == ".toml":
         import tomli_w
 
-        path.write_text(tomli_w.dumps(data))
+        text = tomli_w.dumps(data)
     else:
         raise ClusterError(f"cannot save a cluster as {path.suffix!r}; use a .json or .toml file name")
+    path.write_text(text, encoding="utf-8")
     return path
 
 
 def load_cluster(path: str | Path) -> Cluster:
-    """Read a cluster written by :func:`save_cluster` (or by hand) from a JSON or TOML file."""
+    """Read a cluster written by :func:`save_cluster` (or by hand) from a UTF-8 JSON or TOML file.
+
+    Any problem with the file (missing, not UTF-8, not JSON/TOML, unknown or missing keys, values
+    that are not numbers or out of range) raises :class:`ClusterError` naming the file and the
+    field.  Loading never runs code: both formats are plain data.
+    """
     path = Path(path)
+    if path.suffix not in (".json", ".toml"):
+        raise ClusterError(f"cannot read a cluster from {path.suffix!r}; use a .json or .toml file")
     if not path.is_file():
         raise ClusterError(f"no cluster file at {str(path)!r}")
-    text = path.read_text()
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise ClusterError(f"{path} is {path.stat().st_size} bytes; cluster files are limited to {MAX_FILE_BYTES}")
     try:
-        if path.suffix == ".json":
-            data = json.loads(text)
-        elif path.suffix == ".toml":
-            data = tomllib.loads(text)
-        else:
-            raise ClusterError(f"cannot read a cluster from {path.suffix!r}; use a .json or .toml file")
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as error:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ClusterError(f"{path} is not UTF-8 text ({error}); save cluster files as UTF-8") from None
+    try:
+        data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError, RecursionError) as error:
         raise ClusterError(f"{path} is not valid {path.suffix[1:].upper()}: {error}") from None
     if not isinstance(data, Mapping):
         raise ClusterError(f"{path} must hold a table/object of cluster fields")
-    return Cluster.from_dict(data)
-
+    try:
+        return Cluster.from_dict(data)
+    except ClusterError as error:
+        raise ClusterError(f"{path}: {error}") from None

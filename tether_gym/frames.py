@@ -29,6 +29,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from tether_gym.limits import MAX_FRAME_RATE, is_real_number
+
 __all__ = ["EARTH_GM", "EARTH_RADIUS", "LEO_ORBIT_RATE", "Frame", "FrameError", "circular_orbit_rate"]
 
 #: Earth's gravitational parameter, m^3/s^2.
@@ -39,7 +41,7 @@ EARTH_RADIUS = 6.378137e6
 
 def circular_orbit_rate(altitude: float, gm: float = EARTH_GM, body_radius: float = EARTH_RADIUS) -> float:
     """Mean motion ``n = sqrt(GM / a^3)`` of a circular orbit ``altitude`` m above the body, rad/s."""
-    if not (math.isfinite(altitude) and altitude > -body_radius):
+    if not (is_real_number(altitude) and math.isfinite(altitude) and altitude > -body_radius):
         raise ValueError(f"altitude must be a finite height above the body's centre, m; got {altitude!r}")
     return math.sqrt(gm / (body_radius + altitude) ** 3)
 
@@ -70,14 +72,13 @@ class Frame:
     rate: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.kind not in ("inertial", "hill", "rotating"):
+        if not isinstance(self.kind, str) or self.kind not in ("inertial", "hill", "rotating"):
             raise FrameError(f"frame kind must be 'inertial', 'hill' or 'rotating'; got {self.kind!r}")
-        try:
-            rate = float(self.rate)
-        except (TypeError, ValueError):
-            raise FrameError(f"frame rate must be a number of rad/s; got {self.rate!r}") from None
-        if not math.isfinite(rate):
-            raise FrameError(f"frame rate must be finite (rad/s); got {self.rate!r}")
+        if not is_real_number(self.rate):
+            raise FrameError(f"frame rate must be a number of rad/s; got {self.rate!r}")
+        rate = float(self.rate)
+        if not (math.isfinite(rate) and abs(rate) <= MAX_FRAME_RATE):
+            raise FrameError(f"frame rate must be a finite number of rad/s within +-{MAX_FRAME_RATE:g}; got {self.rate!r}")
         if self.kind == "inertial" and rate != 0.0:
             raise FrameError("an inertial frame does not turn: use Frame.rotating(rate) or Frame.hill(rate)")
         if self.kind == "hill" and rate <= 0.0:
@@ -142,5 +143,5 @@ class Frame:
             raise FrameError(f"a frame is given as {{'kind': ..., 'rate': ...}}; got {data!r}")
         unknown = set(data) - {"kind", "rate"}
         if unknown:
-            raise FrameError(f"unknown frame key(s) {sorted(unknown)}; a frame has 'kind' and 'rate'")
+            raise FrameError(f"unknown frame key(s) {sorted(map(str, unknown))}; a frame has 'kind' and 'rate'")
         return cls(**dict(data))

@@ -18,18 +18,69 @@ Every preset is a function of keyword arguments returning a :class:`~tether_gym.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 
 from tether_gym.cluster import Cluster, ClusterError
-from tether_gym.frames import LEO_ORBIT_RATE, Frame
+from tether_gym.frames import LEO_ORBIT_RATE, Frame, FrameError
+from tether_gym.limits import is_real_number
 
-__all__ = ["PRESETS", "make_cluster", "preset_names"]
+__all__ = ["MAX_SATELLITES", "PRESETS", "make_cluster", "preset_names"]
+
+#: Largest satellite count a preset builds (``n``, ``spokes``): far beyond any studied formation,
+#: small enough that a cluster's arrays fit in memory many times over.
+MAX_SATELLITES = 10_000
+
+PresetBuilder = TypeVar("PresetBuilder", bound=Callable[..., Cluster])
 
 
+def _check_preset_argument(preset: str, name: str, value: object, default: object) -> None:
+    """Raise ``ClusterError`` if ``value`` is not of the kind of ``default``: a bool for a flag, a
+    whole number in 1..MAX_SATELLITES for a count, a real number for a magnitude."""
+    if isinstance(default, bool):
+        if not isinstance(value, (bool, np.bool_)):
+            raise ClusterError(f"preset {preset!r}: {name} must be True or False; got {value!r}")
+    elif isinstance(default, int):
+        if not (isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+                and 1 <= value <= MAX_SATELLITES):
+            raise ClusterError(
+                f"preset {preset!r}: {name} must be a whole number in 1..{MAX_SATELLITES}; got {value!r}"
+            )
+    elif isinstance(default, float) and not is_real_number(value):
+        raise ClusterError(f"preset {preset!r}: {name} must be a real number; got {value!r}")
+
+
+def _preset(builder: PresetBuilder) -> PresetBuilder:
+    """Check a preset's arguments against the kinds of its defaults before it runs, and name the
+    preset and its arguments in any error the cluster it builds raises (a cluster-level message
+    such as "positions must lie in ..." then says which argument put them there)."""
+    signature = inspect.signature(builder)
+
+    @functools.wraps(builder)
+    def checked(*args: object, **kwargs: object) -> Cluster:
+        try:
+            bound = signature.bind(*args, **kwargs)
+        except TypeError as error:
+            raise ClusterError(f"preset {builder.__name__!r}: {error}; its parameters are {list(signature.parameters)}") from None
+        for name, value in bound.arguments.items():
+            _check_preset_argument(builder.__name__, name, value, signature.parameters[name].default)
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):  # the cluster's own checks name the result
+                return builder(*args, **kwargs)
+        except (ClusterError, FrameError) as error:
+            given = ", ".join(f"{key}={value!r}" for key, value in bound.arguments.items())
+            raise ClusterError(f"preset {builder.__name__}({given}): {error}") from None
+
+    return checked  # type: ignore[return-value]
+
+
+
+@_preset
 def tetrahedron(
     edge: float = 100.0,
     mass: float = 10.0,
@@ -66,6 +117,7 @@ def tetrahedron(
     )
 
 
+@_preset
 def chain(
     n: int = 5,
     spacing: float = 50.0,
@@ -97,6 +149,7 @@ def chain(
     )
 
 
+@_preset
 def triangle(
     edge: float = 100.0,
     mass: float = 10.0,
@@ -124,6 +177,7 @@ def triangle(
     )
 
 
+@_preset
 def octahedron(
     edge: float = 100.0,
     mass: float = 10.0,
@@ -158,6 +212,7 @@ def octahedron(
     )
 
 
+@_preset
 def hub(
     spokes: int = 6,
     radius: float = 100.0,
@@ -215,6 +270,7 @@ def _positive(name: str, value: float, unit: str) -> float:
     return float(value)
 
 
+@_preset
 def radial_chain(
     n: int = 3,
     spacing: float = 500.0,
@@ -265,6 +321,7 @@ def radial_chain(
     )
 
 
+@_preset
 def spinning_triangle(
     edge: float = 100.0,
     mass: float = 10.0,
@@ -306,6 +363,7 @@ def spinning_triangle(
     )
 
 
+@_preset
 def spinning_hub(
     spokes: int = 6,
     radius: float = 100.0,
@@ -384,11 +442,11 @@ def make_cluster(name: str, **overrides: object) -> Cluster:
     Example: ``make_cluster("chain", n=8, EA=30e3)``.  Unknown names or parameters raise a
     :class:`ClusterError` that lists what is accepted.
     """
-    if name not in PRESETS:
+    if not isinstance(name, str) or name not in PRESETS:
         raise ClusterError(f"unknown preset {name!r}; choose one of {preset_names()}")
     builder = PRESETS[name]
     accepted = list(inspect.signature(builder).parameters)
-    unknown = sorted(set(overrides) - set(accepted))
+    unknown = sorted(map(str, set(overrides) - set(accepted)))
     if unknown:
         raise ClusterError(f"preset {name!r} has no parameter(s) {unknown}; its parameters are {accepted}")
     return builder(**overrides)

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from tether_gym import _kernels
 from tether_gym.cluster import Cluster
+from tether_gym.limits import MAX_COORDINATE, MAX_FORCE, MAX_SPEED, check_range, is_real_number, real_array
 
 __all__ = [
     "DEFAULT_SAFETY_FACTOR",
@@ -39,6 +40,14 @@ DEFAULT_SAFETY_FACTOR = 0.1
 #: Batches at least this large are integrated by the multi-threaded kernel; smaller ones by the
 #: serial kernel, whose start-up cost is lower.  Both give bit-identical results.
 PARALLEL_MIN_BATCH = 16
+
+#: Largest batch: 10^7 clusters of a tetrahedron already hold about 10 GB of state.
+MAX_BATCH = 10_000_000
+#: Largest ``max_substeps``: sub-step counts are int64 in the kernels, and 10^12 sub-steps of a
+#: cluster already take days.
+MAX_SUBSTEPS_LIMIT = 10**12
+#: Largest ``record_steps`` (the record is a (B, R) float64 array).
+MAX_RECORDED_STEPS = 10**6
 
 Elongation = Literal["exact", "linearised"]
 CriticalStepMethod = Literal["closed-form", "finite-difference"]
@@ -102,27 +111,37 @@ class EnergyReport:
         return self.kinetic + self.strain + self.frame_potential
 
 
-def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str) -> np.ndarray:
-    """A float64 C-contiguous copy of ``value`` with exactly ``shape`` and finite entries."""
-    try:
-        array = np.array(value, dtype=np.float64, order="C")
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a numeric array of shape {shape} in {unit}: {error}") from None
+def _check_array(
+    name: str, value: ArrayLike, shape: tuple[int, ...], unit: str, limit: float = math.inf
+) -> np.ndarray:
+    """A float64 C-contiguous copy of ``value`` with exactly ``shape`` and finite entries of
+    magnitude at most ``limit`` (see :mod:`tether_gym.limits`)."""
+    array = np.ascontiguousarray(real_array(name, value), dtype=np.float64)
     if array.shape != shape:
         raise ValueError(f"{name} must have shape {shape} ({unit}); got shape {array.shape}")
-    if not np.isfinite(array).all():
-        raise ValueError(f"{name} contains NaN or inf; every entry must be finite ({unit})")
+    check_range(name, np.abs(array), 0.0, limit, f"{unit} (absolute value)")
     return array
 
 
+def _check_number(name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = False) -> float:
+    """``value`` as a float, or a ``ValueError`` naming ``name`` unless it is a real number in
+    ``(low, high]`` (``[low, high]`` with ``low_inclusive``)."""
+    if not is_real_number(value):
+        raise ValueError(f"{name} must be a number ({unit}); got {value!r}")
+    check_range(name, np.float64(value), low, high, unit, low_inclusive=low_inclusive)
+    return float(value)  # type: ignore[arg-type]
+
+
 def _check_duration(duration: float) -> float:
-    try:
-        value = float(duration)
-    except (TypeError, ValueError):
-        raise ValueError(f"duration must be a number of seconds; got {duration!r}") from None
-    if not (math.isfinite(value) and value > 0.0):
+    """``duration`` as a float, > 0 and finite (its sub-step count is checked by the kernel)."""
+    if not (is_real_number(duration) and math.isfinite(duration) and duration > 0.0):  # type: ignore[arg-type]
         raise ValueError(f"duration must be a finite number of seconds > 0; got {duration!r}")
-    return value
+    return float(duration)  # type: ignore[arg-type]
+
+
+def _is_whole(value: object) -> bool:
+    """True for a Python or numpy integer that is not a boolean."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 class BatchSimulator:
@@ -157,8 +176,8 @@ class BatchSimulator:
     ) -> None:
         if isinstance(clusters, Cluster):
             count = 1 if num_clusters is None else num_clusters
-            if not isinstance(count, (int, np.integer)) or count < 1:
-                raise ValueError(f"num_clusters must be a positive integer; got {num_clusters!r}")
+            if not _is_whole(count) or not 1 <= count <= MAX_BATCH:
+                raise ValueError(f"num_clusters must be a whole number in 1..{MAX_BATCH}; got {num_clusters!r}")
             cluster_list = [clusters] * int(count)
         else:
             cluster_list = list(clusters)
@@ -168,19 +187,13 @@ class BatchSimulator:
                 raise ValueError(
                     f"num_clusters={num_clusters} disagrees with the {len(cluster_list)} clusters given"
                 )
-        if not (0.0 < float(safety_factor) <= 1.0):
-            raise ValueError(
-                f"safety_factor must be in (0, 1] (a fraction of the critical step); got {safety_factor!r}"
-            )
-        if elongation not in ("exact", "linearised"):
+        self.safety_factor = _check_number("safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, "")
+        if not isinstance(elongation, str) or elongation not in ("exact", "linearised"):
             raise ValueError(f"elongation must be 'exact' or 'linearised'; got {elongation!r}")
-        if not (float(max_step) > 0.0):
-            raise ValueError(f"max_step must be > 0 s; got {max_step!r}")
-        if int(max_substeps) < 1:
-            raise ValueError(f"max_substeps must be >= 1; got {max_substeps!r}")
-        self.safety_factor = float(safety_factor)
         self.elongation: Elongation = elongation
-        self.max_step = float(max_step)
+        self.max_step = _check_number("max_step", max_step, 0.0, math.inf, "s")
+        if not _is_whole(max_substeps) or not 1 <= max_substeps <= MAX_SUBSTEPS_LIMIT:
+            raise ValueError(f"max_substeps must be a whole number in 1..{MAX_SUBSTEPS_LIMIT:.0e}; got {max_substeps!r}")
         self.max_substeps = int(max_substeps)
 
         template = cluster_list[0]
@@ -226,8 +239,13 @@ class BatchSimulator:
     def set_cluster(self, index: int, cluster: Cluster, *, reset: bool = True) -> None:
         """Give cluster ``index`` new physical parameters (same topology), e.g. for randomisation.
 
-        With ``reset=True`` (default) it is also put at rest at its nominal positions.
+        With ``reset=True`` (default) it is also put at rest at its nominal positions.  Nothing
+        changes when the arguments are refused.
         """
+        if not _is_whole(index) or not 0 <= index < len(self.clusters):
+            raise ValueError(f"index must be a cluster index in 0..{len(self.clusters) - 1}; got {index!r}")
+        if not isinstance(cluster, Cluster):
+            raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
         if cluster.num_nodes != self.num_nodes or not np.array_equal(cluster.cables, self.cables):
             raise ValueError(
                 f"cluster {cluster.name!r} has a different topology ({cluster.num_nodes} satellites, "
@@ -306,8 +324,16 @@ class BatchSimulator:
         """
         idx = self._indices(indices)
         shape = (idx.size, self.num_nodes, 3)
-        x0 = _check_array("positions", positions, shape, "m")
-        v0 = np.zeros(shape) if velocities is None else _check_array("velocities", velocities, shape, "m/s")
+        x0 = _check_array("positions", positions, shape, "m", MAX_COORDINATE)
+        v0 = np.zeros(shape) if velocities is None else _check_array("velocities", velocities, shape, "m/s", MAX_SPEED)
+        # Everything that can refuse the state is computed before any of it is stored.
+        intact = np.ones((idx.size, self.num_cables), dtype=np.bool_)
+        f_int, tension, omega2, finite = self._evaluate(x0, idx, velocities=v0, intact=intact)
+        if not finite.all():
+            raise ValueError(
+                f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable; "
+                "two connected satellites may not occupy the same point"
+            )
         self.positions_[idx] = x0
         self._v_half[idx] = v0
         self.velocities_[idx] = v0
@@ -317,21 +343,11 @@ class BatchSimulator:
         self._dissipated[idx] = 0.0
         self.status[idx] = _kernels.STATUS_OK
         self.intact[idx] = True
-        self._refresh(idx)
-        report = self.energy()
-        self._energy0[idx] = report.total[idx]
-
-    def _refresh(self, idx: np.ndarray) -> None:
-        """Recompute forces, tensions and frequency estimates of clusters ``idx`` at their positions."""
-        f_int, tension, omega2, finite = self._evaluate(self.positions_[idx], idx, velocities=self._v_half[idx])
-        if not finite.all():
-            raise ValueError(
-                f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable; "
-                "two connected satellites may not occupy the same point"
-            )
         self._f_int[idx] = f_int
         self.tension[idx] = tension
         self._omega2[idx] = omega2
+        report = self.energy()
+        self._energy0[idx] = report.total[idx]
 
     def _evaluate(
         self,
@@ -383,13 +399,15 @@ class BatchSimulator:
         """
         duration = _check_duration(duration)
         shape = (self.num_clusters, self.num_nodes, 3)
-        p = np.zeros(shape) if force is None else _check_array("force", force, shape, "N")
+        p = np.zeros(shape) if force is None else _check_array("force", force, shape, "N", MAX_FORCE)
+        if not _is_whole(record_steps) or not 0 <= record_steps <= MAX_RECORDED_STEPS:
+            raise ValueError(f"record_steps must be a whole number in 0..{MAX_RECORDED_STEPS}; got {record_steps!r}")
         if active is None:
             mask = self._all_active
         else:
             mask = np.asarray(active)
             if mask.shape != (self.num_clusters,) or mask.dtype != np.bool_:
-                raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},)")
+                raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},); got {active!r}")
         B = self.num_clusters
         stats = AdvanceStats(
             substeps=np.zeros(B, dtype=np.int64), step_min=np.full(B, np.inf), step_max=np.zeros(B),
@@ -487,6 +505,7 @@ class BatchSimulator:
         were just taut at its current length (pretension shifted so that ``N = 0`` there): the
         stiffest it can be within a step, without the spurious compression of the linear law.
         """
+        _check_number("relative_perturbation", relative_perturbation, 0.0, 0.1, "(a fraction of the cable length)")
         B, m = self.num_clusters, self.num_cables
         x = self.positions_
         ends = np.stack([x[:, self.cables[:, 0]], x[:, self.cables[:, 1]]], axis=2)  # (B, m, 2, 3)
@@ -603,8 +622,8 @@ class Simulator:
     def reset(self, positions: ArrayLike | None = None, velocities: ArrayLike | None = None) -> None:
         """Set the state: positions (n, 3) in m (default nominal), velocities (n, 3) in m/s (default 0)."""
         n = self.cluster.num_nodes
-        x0 = self.cluster.positions if positions is None else _check_array("positions", positions, (n, 3), "m")
-        v0 = None if velocities is None else _check_array("velocities", velocities, (n, 3), "m/s")[None]
+        x0 = self.cluster.positions if positions is None else _check_array("positions", positions, (n, 3), "m", MAX_COORDINATE)
+        v0 = None if velocities is None else _check_array("velocities", velocities, (n, 3), "m/s", MAX_SPEED)[None]
         self.batch.reset(x0[None], v0)
 
     def advance(self, duration: float, force: ArrayLike | None = None, *, record_steps: int = 0) -> AdvanceStats:
@@ -613,7 +632,7 @@ class Simulator:
         Returns the :class:`AdvanceStats` of the batch of one (arrays of shape (1,)).  Raises
         :class:`SimulationDiverged` if the state became non-finite or the sub-step limit was hit.
         """
-        p = None if force is None else _check_array("force", force, (self.cluster.num_nodes, 3), "N")[None]
+        p = None if force is None else _check_array("force", force, (self.cluster.num_nodes, 3), "N", MAX_FORCE)[None]
         stats = self.batch.advance(duration, p, record_steps=record_steps)
         if stats.status[0] == _kernels.STATUS_NON_FINITE:
             raise SimulationDiverged(

@@ -180,7 +180,9 @@ def _evaluate_clusters(
     vibration_energy (J), max_deviation (m), slack_fraction, kinetic_energy (J),
     strain_energy (J), frame_potential (J)]``.  ``weights`` = ``[vibration_weight / energy_scale,
     propellant_weight / full_impulse, slack_weight, failure_penalty]``.  A cable past its
-    breaking load ends the episode only with ``terminate_on_break``.
+    breaking load ends the episode only with ``terminate_on_break``.  A cluster whose reward
+    terms would not be finite ends as numerics diverged (code 3), with those terms set to 0, so
+    the reward is finite whenever the weights are.
 
     The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension may
     hold a viscous part).  In a turning frame (``frame_tidal`` (B, 3), 1/s^2) the vibration energy
@@ -274,10 +276,19 @@ def _evaluate_clusters(
             reason = 1
         else:
             reason = 0
-        end_reason[b] = reason
         slack_fraction = slack / m
         terms_vibration = -weights[0] * vibration
         terms_propellant = -weights[1] * impulse[b]
+        if not (math.isfinite(terms_vibration) and math.isfinite(terms_propellant)):
+            # A state beyond the reward's arithmetic (an energy or a weighted term that overflows)
+            # is a divergence too: the episode ends there with a finite reward, the vibration
+            # term dropped as for a frozen cluster, never a NaN or -inf while it runs on.
+            reason = 3
+            vibration = 0.0
+            terms_vibration = 0.0
+            if not math.isfinite(terms_propellant):
+                terms_propellant = 0.0
+        end_reason[b] = reason
         terms_slack = -weights[2] * slack_fraction
         terms_failure = -weights[3] if reason > 0 else 0.0
         scalars[b, 0] = terms_vibration + terms_propellant + terms_slack + terms_failure
