@@ -11,11 +11,18 @@ import numpy as np
 from gymnasium import spaces
 
 from tether_gym.cluster import Cluster
-from tether_gym.envs.task import OBSERVATION_LIMIT, task_from_arguments
+from tether_gym.envs.task import (
+    MAX_RENDER_EXAGGERATION,
+    OBSERVATION_LIMIT,
+    RESET_OPTION_KEYS,
+    EnvArgumentError,
+    as_real_array,
+    check_number,
+    check_seed,
+    task_from_arguments,
+)
 
-__all__ = ["TetherClusterEnv"]
-
-RESET_OPTION_KEYS = ("positions", "velocities")
+__all__ = ["RESET_OPTION_KEYS", "TetherClusterEnv"]
 
 
 class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -160,7 +167,11 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     ) -> None:
         super().__init__()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None; got {render_mode!r}")
+            raise EnvArgumentError(
+                f"render_mode must be one of {self.metadata['render_modes']} or None; got {render_mode!r}"
+            )
+        exaggeration = check_number("render_exaggeration", render_exaggeration, 0.0, MAX_RENDER_EXAGGERATION,
+                                    low_open=True, fix="displacements are drawn this many times larger")
         self.task = task_from_arguments(1, preset, preset_kwargs, cluster, **task)
         self.config = self.task.config
         cluster = self.task.cluster
@@ -173,39 +184,29 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         self._index = np.zeros(1, dtype=np.int64)
         self._action_shape = (self.task.action_size,)
         self._viewer: Any = None
-        self.render_exaggeration = float(render_exaggeration)
+        self.render_exaggeration = exaggeration
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        """Start an episode (see Starting State).  ``seed``: None or an int >= 0; ``options``:
+        ``{"positions": X0, "velocities": V0}``, (n, 3) arrays in m and m/s, for exact initial
+        conditions.  Both are checked before anything changes: a bad one raises
+        :class:`~tether_gym.envs.EnvArgumentError` and leaves the env as it was."""
+        seed = check_seed("seed", seed)
+        positions, velocities = self.task.check_reset_state(options, (self.cluster.num_nodes, 3))
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTION_KEYS))
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {unknown}; accepted options are {list(RESET_OPTION_KEYS)}")
-        positions, velocities = (self._option_array(options, key) for key in RESET_OPTION_KEYS)
         self.task.reset([self.np_random], self._index, positions, velocities)
         if self.render_mode == "human":
             self.render()
         return self.task.observe([self.np_random])[0], self.task.info(0, stepped=False)
 
-    def _option_array(self, options: Mapping[str, Any], key: str) -> np.ndarray | None:
-        """A reset option as a (1, n, 3) array (None if absent); finiteness is checked downstream."""
-        if options.get(key) is None:
-            return None
-        value = np.asarray(options[key], dtype=np.float64)
-        if value.shape != (self.cluster.num_nodes, 3):
-            raise ValueError(
-                f"reset option {key!r} must be an ({self.cluster.num_nodes}, 3) array; got shape {value.shape}"
-            )
-        return value[None]
-
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
-        a = np.asarray(action, dtype=np.float64)
+        a = as_real_array("action", action, f"a ({self.task.action_size},) array of thrust commands in [-1, 1]")
         if a.shape != self._action_shape:
-            raise ValueError(
+            raise EnvArgumentError(
                 f"action must have shape ({self.task.action_size},) (3 per thruster); got shape {a.shape}"
             )
         if not np.isfinite(a).all():
-            raise ValueError("action contains NaN or inf; thrust commands must be finite numbers in [-1, 1]")
+            raise EnvArgumentError("action contains NaN or inf; thrust commands must be finite numbers in [-1, 1]")
         self.task.step(a.reshape(1, -1), rngs=[self.np_random])
         observation = self.task.observe([self.np_random])[0]
         info = self.task.info(0)

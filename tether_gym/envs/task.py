@@ -4,6 +4,11 @@
 every environment shares: the single :class:`~tether_gym.envs.TetherClusterEnv` is a batch of
 one, and a vector env is a batch of many.  Nothing here integrates dynamics; it only maps
 actions to forces, and states to observations, rewards and end flags.
+
+Every argument a user can give the environments (task settings, seeds, reset options, actions,
+difficulty) is checked here, by one helper per kind of value, before any state is built or
+changed; a bad one raises :class:`EnvArgumentError` naming it, what is allowed and the fix.  The
+ranges of the settings are the named constants below.
 """
 
 from __future__ import annotations
@@ -20,15 +25,23 @@ from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
 from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, PARALLEL_MIN_BATCH, AdvanceStats, BatchSimulator
 
-__all__ = ["END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "DampingTask", "TaskConfig", "task_from_arguments"]
+__all__ = [
+    "END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "ClusterScales", "DampingTask", "EnvArgumentError", "TaskConfig",
+    "task_from_arguments",
+]
 
 ThrustLimit = Literal["per_axis", "magnitude"]
 CableFailure = Literal["terminate", "continue"]
 
 #: ``end_reason`` codes reported in ``info`` (index into this tuple).
 END_REASONS = ("running", "formation_lost", "cable_broken", "numerics_diverged")
+#: The code of an episode whose state or reward ran away.
+DIVERGED = END_REASONS.index("numerics_diverged")
 
 RANDOMISABLE = ("masses", "EA", "damping", "N0", "axial_damping")
+
+#: Keys of ``reset(options=...)``: an exact initial state.
+RESET_OPTION_KEYS = ("positions", "velocities")
 
 #: Per-cluster quantities the task kernel writes after each step, in this column order.
 SCALARS = ("reward", "reward_vibration", "reward_propellant", "reward_slack", "reward_failure",
@@ -37,6 +50,277 @@ SCALARS = ("reward", "reward_vibration", "reward_propellant", "reward_slack", "r
 _COLUMN = {name: k for k, name in enumerate(SCALARS)}
 
 OBSERVATION_LIMIT = _task_kernels.OBSERVATION_LIMIT
+
+# ---------------------------------------------------------------------------------------------
+# Ranges of the settings.  Each limit is far beyond any physical tether cluster or thruster; the
+# limits only keep the arithmetic finite (energies, rewards, sub-step counts, float32 outputs) and
+# the task meaningful.  Limits that depend on the cluster are fractions of its scales
+# (:class:`ClusterScales`).
+
+#: Control interval range, s.  Below 0.1 ms (10 kHz) no thruster valve responds, and the
+#: propellant normaliser ``max_thrust * control_interval`` and the force of a kick held over one
+#: interval (``impulse_magnitude / control_interval``) lose their scale.  Above an hour a
+#: controller cannot act on vibrations of periods of seconds to minutes.
+CONTROL_INTERVAL_RANGE = (1e-4, 3600.0)
+
+#: Sub-step headroom.  At construction one control interval may need at most
+#: ``max_substeps / SUBSTEP_HEADROOM`` sub-steps at the cluster's nominal sub-step (for the
+#: worst case of the randomisation), because stretched cables and fast motion shorten the
+#: critical step mid-episode, and a cluster that needs ``max_substeps`` ends as
+#: ``numerics_diverged``.
+SUBSTEP_HEADROOM = 10
+
+#: Thrust range of each thruster, N: from nano-newton electric thrusters to a 1 MN rocket engine.
+#: Below 1 nN the propellant normaliser ``max_thrust * control_interval`` leaves the normal floats.
+THRUST_RANGE = (1e-9, 1e6)
+
+#: Largest reward weight and failure penalty.  The rewards of RL tasks are O(1) to O(1e3) per
+#: step; at 1e6 the reward of any state the formation check lets through stays far inside
+#: ``REWARD_LIMIT``.
+MAX_WEIGHT = 1e6
+
+#: Largest initial-displacement std, as a fraction of the shortest cable.  A 10 % deformation
+#: already stretches cables far past any breaking load; beyond it the draws fold the cluster
+#: (cables through zero length) instead of making it vibrate.  The initial-velocity std is
+#: limited likewise to ``MAX_DISPLACEMENT_FRACTION * shortest cable * omega_max``
+#: (:attr:`ClusterScales.speed_limit`): the speed of the stiffest cable mode swinging with that
+#: displacement.
+MAX_DISPLACEMENT_FRACTION = 0.1
+
+#: Smallest non-zero initial-displacement and initial-velocity std, as fractions of their upper
+#: limits.  The reward's energy scale is the mean energy at reset: a smaller one would make
+#: every later vibration reward astronomically large.  (0 is allowed: no displacement, or no
+#: velocity.)
+MIN_INITIAL_FRACTION = 1e-8
+
+#: How far an exact reset position (reset option) may lie from its nominal place, in
+#: longest-cable lengths: farther out the satellites are no longer a formation.
+MAX_RESET_DEVIATION_CABLES = 10.0
+
+#: Exact reset velocities (reset options) may reach this multiple of the initial-velocity limit.
+RESET_SPEED_FACTOR = 10.0
+
+#: A cable shorter than this fraction of its reference length in an exact reset state has its
+#: satellites on top of each other: its direction, and so its force, is undefined.
+MIN_CABLE_LENGTH_FRACTION = 1e-6
+
+#: Largest randomisation spread.  A parameter drawn at 10 % of nominal is another cluster, and as
+#: the spread nears 1 the drawn masses, and with them the sub-step, shrink without bound.
+MAX_SPREAD = 0.9
+
+#: Largest observation-noise std, in observation units (the observation is clipped at +-this).
+MAX_OBSERVATION_NOISE = OBSERVATION_LIMIT
+
+#: Largest thrust-noise std, as a multiple of the thruster's ``max_thrust``.
+MAX_THRUST_NOISE = 10.0
+
+#: Largest kick, N*s (1 MN for a second), and the largest kick rate, 1/s (a thousand kicks per
+#: second are already a continuous force).
+MAX_IMPULSE = 1e6
+MAX_IMPULSE_RATE = 1e3
+
+#: Largest periodic-force amplitude, N (as large as the largest thrust).
+MAX_PERIODIC_AMPLITUDE = THRUST_RANGE[1]
+
+#: Longest period and latest thruster-failure time, s: about four months, beyond any episode.
+MAX_TIME = 1e7
+
+#: Longest actuation delay, control intervals (each cluster holds its delay line).
+MAX_THRUST_DELAY = 1000
+
+#: A step whose |reward| exceeds this (or is NaN) ends as ``numerics_diverged`` with a finite
+#: reward.  No accepted setting gets near it unless the state has run away, and it keeps every
+#: reward finite also in float32 (max 3.4e38), as Stable-Baselines3 stores them.
+REWARD_LIMIT = 1e30
+
+#: Most sub-envs of one vector env.  Each cluster holds some kB of state; beyond this one batch
+#: outgrows a process's memory and a step's latency: run several processes instead.
+MAX_NUM_ENVS = 100_000
+
+#: Largest render exaggeration (displacements drawn this many times larger leave any figure).
+MAX_RENDER_EXAGGERATION = 1e6
+
+
+class EnvArgumentError(ValueError):
+    """A bad argument to a tether-gym environment or task: a setting, a seed, a reset option, an
+    action or a difficulty.  The message names the argument, what is allowed and the fix."""
+
+
+# ---------------------------------------------------------------------------------------------
+# One check per kind of value.  Each returns the value normalised (Python float, int, bool, str
+# or tuple) or raises EnvArgumentError naming ``name``.
+
+def _shown(value: Any) -> str:
+    """``repr(value)``, shortened for messages."""
+    text = repr(value)
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
+def _real(value: Any) -> float | None:
+    """``value`` as a float if it is a real number (not a bool, not a string), else None."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return None
+    try:
+        return float(value)
+    except OverflowError:  # an int beyond the float range
+        return math.inf
+
+
+def _interval(low: float, high: float, low_open: bool, unit: str) -> str:
+    """``"in [low, high] unit"``, or ``">= low unit"`` when there is no upper bound."""
+    if math.isinf(high):
+        text = f"{'>' if low_open else '>='} {low:g}"
+    else:
+        text = f"in {'(' if low_open else '['}{low:g}, {high:g}]"
+    return f"{text} {unit}" if unit else text
+
+
+def check_number(
+    name: str, value: Any, low: float, high: float, unit: str = "", *, low_open: bool = False, fix: str = ""
+) -> float:
+    """``value`` as a float in [low, high] (``(low, high]`` with ``low_open``), or an
+    :class:`EnvArgumentError` naming ``name``; bools, strings and NaN/inf are rejected."""
+    number = _real(value)
+    if number is not None and math.isfinite(number) and (number > low if low_open else number >= low) and number <= high:
+        return number
+    kind = "" if number is not None else f" (a {type(value).__name__})"
+    raise EnvArgumentError(
+        f"{name} must be a finite number {_interval(low, high, low_open, unit)}; got {_shown(value)}{kind}"
+        + (f"; {fix}" if fix else "")
+    )
+
+
+def check_whole(name: str, value: Any, low: int, high: int, unit: str = "") -> int:
+    """``value`` as an int in [low, high], or an :class:`EnvArgumentError` naming ``name``; bools
+    and floats (even 2.0) are rejected."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and low <= value <= high:
+        return int(value)
+    raise EnvArgumentError(
+        f"{name} must be a whole number (an int) in {low}..{high}{' ' + unit if unit else ''}; "
+        f"got {_shown(value)} (a {type(value).__name__})"
+    )
+
+
+def check_bool(name: str, value: Any) -> bool:
+    """``value`` as a bool (True/False only), or an :class:`EnvArgumentError` naming ``name``."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise EnvArgumentError(f"{name} must be True or False; got {_shown(value)}")
+
+
+def check_choice(name: str, value: Any, choices: Sequence[str]) -> str:
+    """``value`` if it is one of the strings ``choices``, or an :class:`EnvArgumentError` naming ``name``."""
+    if isinstance(value, str) and value in choices:
+        return value
+    raise EnvArgumentError(f"{name} must be one of {' or '.join(repr(c) for c in choices)}; got {_shown(value)}")
+
+
+def _items(name: str, value: Any, what: str) -> list[Any]:
+    """The elements of a list, tuple, range or 1-D array, or an error naming ``name``."""
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        return value.tolist()
+    if isinstance(value, (list, tuple, range)):
+        return list(value)
+    raise EnvArgumentError(f"{name} must be {what} (a list or tuple); got {_shown(value)}")
+
+
+def check_satellites(name: str, value: Any) -> tuple[int, ...] | None:
+    """None, or ``value`` as a non-empty tuple of distinct satellite indices >= 0 (the upper
+    bound depends on the cluster: see :meth:`TaskConfig.validate`)."""
+    if value is None:
+        return None
+    items = _items(name, value, "satellite indices, or None for all")
+    indices = tuple(check_whole(f"{name}[{k}]", item, 0, 2**31 - 1) for k, item in enumerate(items))
+    if not indices:
+        raise EnvArgumentError(f"{name} must name at least one satellite (or be None for all)")
+    if len(set(indices)) != len(indices):
+        raise EnvArgumentError(f"{name} lists a satellite twice: {list(indices)}; list each once")
+    return indices
+
+
+def check_seed(name: str, value: Any) -> int | None:
+    """None, or ``value`` as an int >= 0 (a seed for ``numpy.random.default_rng``)."""
+    if value is None:
+        return None
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value >= 0:
+        return int(value)
+    raise EnvArgumentError(f"{name} must be a whole number >= 0 (an int) or None; got {_shown(value)}")
+
+
+def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
+    """``value`` as a float64 array (any shape; the caller checks it and finiteness), or an
+    :class:`EnvArgumentError` naming ``name`` if it is not an array of real numbers: bools,
+    complex numbers, strings, None, dicts and ragged lists are rejected."""
+    if isinstance(value, np.ndarray) and value.dtype.kind in "iuf":
+        raw = value
+    else:
+        if isinstance(value, (str, bytes, Mapping)):
+            raise EnvArgumentError(f"{name} must be {what}; got {_shown(value)}")
+        try:
+            raw = np.asarray(value)
+        except (TypeError, ValueError, OverflowError) as error:
+            raise EnvArgumentError(f"{name} must be {what}; got {_shown(value)} ({error})") from None
+        if raw.dtype.kind not in "iuf":
+            raise EnvArgumentError(f"{name} must be {what}, of real numbers; got {_shown(value)} (dtype {raw.dtype})")
+    with np.errstate(over="ignore", invalid="ignore"):  # longdouble beyond float64 becomes inf: caught by the caller
+        return raw.astype(np.float64, copy=False)
+
+
+def check_difficulty(difficulty: Any) -> float:
+    """``difficulty`` as a float in [0, 1], or an :class:`EnvArgumentError`."""
+    return check_number("difficulty", difficulty, 0.0, 1.0, fix="1 is the configured task, 0 the nominal cluster at rest")
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class ClusterScales:
+    """The scales of a cluster that bound the task settings (SI units).
+
+    Attributes:
+        shortest_cable, longest_cable: reference lengths L0 of the shortest and longest cable, m.
+        critical_step: the simulator's estimated critical step at the nominal state at rest, s.
+        damping_step: ``2 m / c`` of the most heavily damped satellite, s (inf without diagonal
+            damping); the sub-step also respects it.
+        max_substeps: sub-steps the simulator allows in one advance.
+    """
+
+    shortest_cable: float
+    longest_cable: float
+    critical_step: float
+    damping_step: float
+    max_substeps: int
+
+    @classmethod
+    def of(cls, cluster: Cluster, safety_factor: float = DEFAULT_SAFETY_FACTOR) -> ClusterScales:
+        """The scales of ``cluster``, from a one-cluster simulator at its nominal state."""
+        probe = BatchSimulator(cluster, 1, safety_factor=safety_factor)
+        damped = cluster.damping > 0
+        damping_step = float((2.0 * cluster.masses[damped] / cluster.damping[damped]).min()) if damped.any() else math.inf
+        return cls(
+            shortest_cable=float(cluster.L0.min()), longest_cable=float(cluster.L0.max()),
+            critical_step=float(probe.critical_time_step()[0]), damping_step=damping_step,
+            max_substeps=probe.max_substeps,
+        )
+
+    @property
+    def omega_max(self) -> float:
+        """The fastest cable frequency at the nominal state, rad/s."""
+        return 2.0 / self.critical_step
+
+    @property
+    def displacement_limit(self) -> float:
+        """Largest initial-displacement std, m (see ``MAX_DISPLACEMENT_FRACTION``)."""
+        return MAX_DISPLACEMENT_FRACTION * self.shortest_cable
+
+    @property
+    def speed_limit(self) -> float:
+        """Largest initial-velocity std, m/s (see ``MAX_DISPLACEMENT_FRACTION``)."""
+        return self.displacement_limit * self.omega_max
+
+    @property
+    def deviation_limit(self) -> float:
+        """Farthest an exact reset position may lie from its nominal place, m."""
+        return MAX_RESET_DEVIATION_CABLES * self.longest_cable
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,14 +340,15 @@ class TaskConfig:
         slack_weight: weight of the fraction of slack cables in the cost.
         failure_penalty: one-off cost when the episode terminates on a failure.
         max_deviation: a satellite farther than this from its nominal place in the cluster
-            frame ends the episode (formation lost), m; None: 30 % of the shortest cable.
+            frame ends the episode (formation lost), m; None: 30 % of the shortest cable; inf:
+            never.
         observe_tensions: append cable tensions / breaking load to the observation.
         observation_noise: std of Gaussian noise added to the observation (its own units).
         observed_satellites: satellites whose displacements and velocities are observed (None:
             all).
         randomize: relative spread of domain randomisation per reset, e.g. ``{"masses": 0.2}``
             draws every mass uniformly within +-20 % of nominal; keys among masses, EA, damping,
-            N0, axial_damping.
+            N0, axial_damping; spreads in [0, ``MAX_SPREAD``].
         safety_factor: the simulator's sub-step as a fraction of the critical step.
         impulse_magnitude: size of random impulsive kicks, N*s (0: none).  Kicks arrive as a
             Poisson process of rate ``impulse_rate``; each hits one random satellite in a random
@@ -87,6 +372,11 @@ class TaskConfig:
             spreads and the disturbances (impulses, periodic force, thrust noise) together, for
             curriculum training; change it between episodes with ``set_difficulty``.  The
             observation units and the reward's energy scale stay those of difficulty 1.
+
+    Every field is checked on construction (type and range; ranges are the module's named
+    constants, e.g. ``CONTROL_INTERVAL_RANGE``, ``THRUST_RANGE``, ``MAX_WEIGHT``), and against a
+    cluster by :meth:`validate`; a bad value raises :class:`EnvArgumentError` naming the field.
+    Sequences are stored as tuples and numbers as Python floats and ints.
     """
 
     control_interval: float = 0.1
@@ -116,67 +406,165 @@ class TaskConfig:
     cable_failure: CableFailure = "terminate"
     difficulty: float = 1.0
 
-    def validate(self, cluster: Cluster) -> None:
-        """Raise ``ValueError`` naming any setting that does not fit ``cluster``."""
-        n = cluster.num_nodes
-        if not (math.isfinite(self.control_interval) and self.control_interval > 0):
-            raise ValueError(f"control_interval must be a finite number of seconds > 0; got {self.control_interval!r}")
-        for name, indices in (("thrusters", self.thrusters), ("observed_satellites", self.observed_satellites)):
-            if indices is None:
-                continue
-            if len(indices) == 0:
-                raise ValueError(f"{name} must name at least one satellite (or be None for all)")
-            bad = [i for i in indices if not (isinstance(i, (int, np.integer)) and 0 <= i < n)]
-            if bad:
-                raise ValueError(f"{name} {bad} are not satellites of this {n}-satellite cluster (valid: 0..{n - 1})")
-            if len(set(indices)) != len(indices):
-                raise ValueError(f"{name} lists a satellite twice: {list(indices)}")
-        count = n if self.thrusters is None else len(self.thrusters)
-        thrust = np.asarray(self.max_thrust, dtype=float)
-        if thrust.ndim > 1 or (thrust.ndim == 1 and thrust.shape[0] != count):
-            raise ValueError(f"max_thrust must be a scalar or one value per thruster ({count}); got {self.max_thrust!r}")
-        if not np.all(np.isfinite(thrust)) or np.any(thrust <= 0):
-            raise ValueError(f"max_thrust must be finite and > 0 N; got {self.max_thrust!r}")
-        if self.thrust_limit not in ("per_axis", "magnitude"):
-            raise ValueError(f"thrust_limit must be 'per_axis' or 'magnitude'; got {self.thrust_limit!r}")
-        for name in ("initial_displacement", "initial_velocity", "vibration_weight", "propellant_weight",
-                     "slack_weight", "failure_penalty", "observation_noise", "impulse_magnitude", "impulse_rate",
-                     "periodic_amplitude", "thrust_noise"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0; got {value!r}")
-        if self.max_deviation is not None and not (self.max_deviation > 0):
-            raise ValueError(f"max_deviation must be > 0 m (or None); got {self.max_deviation!r}")
-        unknown = set(self.randomize) - set(RANDOMISABLE)
+    def __post_init__(self) -> None:
+        """Check every field on its own and normalise it to plain Python values (tuples, floats,
+        ints); the checks against a cluster are in :meth:`validate`."""
+        number = check_number
+        low, high = CONTROL_INTERVAL_RANGE
+        fields: dict[str, Any] = {
+            "control_interval": number("control_interval", self.control_interval, low, high, "s"),
+            "thrusters": check_satellites("thrusters", self.thrusters),
+            "max_thrust": self._checked_thrust(),
+            "thrust_limit": check_choice("thrust_limit", self.thrust_limit, ("per_axis", "magnitude")),
+            "initial_displacement": number("initial_displacement", self.initial_displacement, 0.0, math.inf, "m"),
+            "initial_velocity": number("initial_velocity", self.initial_velocity, 0.0, math.inf, "m/s"),
+            "observe_tensions": check_bool("observe_tensions", self.observe_tensions),
+            "observation_noise": number("observation_noise", self.observation_noise, 0.0, MAX_OBSERVATION_NOISE),
+            "observed_satellites": check_satellites("observed_satellites", self.observed_satellites),
+            "randomize": self._checked_randomize(),
+            "safety_factor": number("safety_factor", self.safety_factor, 0.0, 1.0, low_open=True,
+                                    fix="a fraction of the critical step"),
+            "impulse_magnitude": number("impulse_magnitude", self.impulse_magnitude, 0.0, MAX_IMPULSE, "N*s"),
+            "impulse_rate": number("impulse_rate", self.impulse_rate, 0.0, MAX_IMPULSE_RATE, "1/s"),
+            "periodic_amplitude": number("periodic_amplitude", self.periodic_amplitude, 0.0, MAX_PERIODIC_AMPLITUDE, "N"),
+            "periodic_period": number("periodic_period", self.periodic_period, 0.0, MAX_TIME, "s", low_open=True),
+            "thrust_noise": number("thrust_noise", self.thrust_noise, 0.0, MAX_THRUST_NOISE,
+                                   fix="a multiple of max_thrust"),
+            "thrust_delay": check_whole("thrust_delay", self.thrust_delay, 0, MAX_THRUST_DELAY, "control intervals"),
+            "thruster_failure_probability": number(
+                "thruster_failure_probability", self.thruster_failure_probability, 0.0, 1.0, fix="a probability"
+            ),
+            "thruster_failure_window": self._checked_window(),
+            "cable_failure": check_choice("cable_failure", self.cable_failure, ("terminate", "continue")),
+            "difficulty": check_difficulty(self.difficulty),
+        }
+        for name in ("vibration_weight", "propellant_weight", "slack_weight", "failure_penalty"):
+            fields[name] = number(name, getattr(self, name), 0.0, MAX_WEIGHT)
+        if self.max_deviation is not None and not (_real(self.max_deviation) == math.inf):
+            fields["max_deviation"] = number("max_deviation", self.max_deviation, 0.0, math.inf, "m", low_open=True,
+                                             fix="inf never ends an episode on it, None is 30 % of the shortest cable")
+        elif self.max_deviation is not None:
+            fields["max_deviation"] = math.inf
+        if fields["periodic_amplitude"] and fields["periodic_period"] < 2.0 * fields["control_interval"]:
+            raise EnvArgumentError(
+                f"periodic_period ({fields['periodic_period']:g} s) must be at least two control intervals "
+                f"(2 x {fields['control_interval']:g} s): the periodic force is sampled once per interval, so a "
+                "shorter period aliases; raise periodic_period or lower control_interval"
+            )
+        for name, value in fields.items():
+            object.__setattr__(self, name, value)
+
+    def _checked_thrust(self) -> float | tuple[float, ...]:
+        """``max_thrust`` as a float or a tuple of floats, each within ``THRUST_RANGE``."""
+        value = self.max_thrust
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            value = value.item()
+        scalar = _real(value) is not None
+        items = [value] if scalar else _items("max_thrust", value, "a number of N or one number per thruster")
+        low, high = THRUST_RANGE
+        thrusts = []
+        for item in items:
+            thrust = _real(item)
+            if thrust is None or not (math.isfinite(thrust) and low <= thrust <= high):
+                raise EnvArgumentError(
+                    f"max_thrust must be finite and > 0 N, in [{low:g}, {high:g}] N per thruster; got {_shown(self.max_thrust)}"
+                )
+            thrusts.append(thrust)
+        return thrusts[0] if scalar else tuple(thrusts)
+
+    def _checked_randomize(self) -> dict[str, float]:
+        """``randomize`` as a dict of known keys to spreads within [0, MAX_SPREAD]."""
+        if not isinstance(self.randomize, Mapping):
+            raise EnvArgumentError(
+                f"randomize must be a dict of relative spreads, e.g. {{'masses': 0.2}}; got {_shown(self.randomize)}"
+            )
+        unknown = [key for key in self.randomize if key not in RANDOMISABLE]
         if unknown:
-            raise ValueError(f"randomize keys {sorted(unknown)} are unknown; use some of {list(RANDOMISABLE)}")
-        for key, spread in self.randomize.items():
-            if not (0 <= spread < 1):
-                raise ValueError(f"randomize[{key!r}] must be a relative spread in [0, 1); got {spread!r}")
-        if not (math.isfinite(self.periodic_period) and self.periodic_period > 0):
-            raise ValueError(f"periodic_period must be a finite number of seconds > 0; got {self.periodic_period!r}")
-        if not (isinstance(self.thrust_delay, (int, np.integer)) and 0 <= self.thrust_delay <= 1000):
-            raise ValueError(f"thrust_delay must be a whole number of control intervals in 0..1000; got {self.thrust_delay!r}")
-        if not (0.0 <= self.thruster_failure_probability <= 1.0):
-            raise ValueError(
-                f"thruster_failure_probability must be a probability in [0, 1]; got {self.thruster_failure_probability!r}"
+            raise EnvArgumentError(
+                f"randomize keys {sorted(map(repr, unknown))} are unknown; use some of {list(RANDOMISABLE)}"
             )
-        window = tuple(self.thruster_failure_window)
-        if len(window) != 2 or not all(math.isfinite(t) for t in window) or not (0 <= window[0] <= window[1]):
-            raise ValueError(
-                "thruster_failure_window must be (start, end) in s with 0 <= start <= end; "
-                f"got {self.thruster_failure_window!r}"
+        return {
+            key: check_number(f"randomize[{key!r}]", spread, 0.0, MAX_SPREAD, fix="a relative spread (0.2: +-20 %)")
+            for key, spread in self.randomize.items()
+        }
+
+    def _checked_window(self) -> tuple[float, float]:
+        """``thruster_failure_window`` as (start, end) with 0 <= start <= end <= MAX_TIME."""
+        usage = f"thruster_failure_window must be (start, end) in s with 0 <= start <= end <= {MAX_TIME:g}"
+        items = _items("thruster_failure_window", self.thruster_failure_window, "(start, end) in s")
+        times = [_real(item) for item in items]
+        if len(times) != 2 or any(t is None or not math.isfinite(t) for t in times):
+            raise EnvArgumentError(f"{usage}; got {_shown(self.thruster_failure_window)}")
+        start, end = times
+        if not (0.0 <= start <= end <= MAX_TIME):  # type: ignore[operator]
+            raise EnvArgumentError(f"{usage}; got {_shown(self.thruster_failure_window)}")
+        return (start, end)  # type: ignore[return-value]
+
+    def validate(self, cluster: Cluster) -> ClusterScales:
+        """Check the settings against ``cluster`` and return its :class:`ClusterScales`.
+
+        Raises:
+            EnvArgumentError: naming a setting that does not fit the cluster: satellite indices
+                beyond it, one ``max_thrust`` per thruster, initial conditions beyond the
+                cluster's scales, or a control interval needing more sub-steps than the
+                simulator allows.
+        """
+        n = cluster.num_nodes
+        for name, indices in (("thrusters", self.thrusters), ("observed_satellites", self.observed_satellites)):
+            bad = [i for i in indices or () if i >= n]
+            if bad:
+                raise EnvArgumentError(
+                    f"{name} {bad} are not satellites of this {n}-satellite cluster (valid: 0..{n - 1})"
+                )
+        count = n if self.thrusters is None else len(self.thrusters)
+        if isinstance(self.max_thrust, tuple) and len(self.max_thrust) != count:
+            raise EnvArgumentError(
+                f"max_thrust must be a scalar or one value per thruster ({count}); got {len(self.max_thrust)} values"
             )
-        if self.cable_failure not in ("terminate", "continue"):
-            raise ValueError(f"cable_failure must be 'terminate' or 'continue'; got {self.cable_failure!r}")
-        check_difficulty(self.difficulty)
+        scales = ClusterScales.of(cluster, self.safety_factor)
+        for name, limit, unit in (
+            ("initial_displacement", scales.displacement_limit, "m"),
+            ("initial_velocity", scales.speed_limit, "m/s"),
+        ):
+            value = getattr(self, name)
+            if value and not (MIN_INITIAL_FRACTION * limit <= value <= limit):
+                raise EnvArgumentError(
+                    f"{name} must be 0 or in [{MIN_INITIAL_FRACTION * limit:.3g}, {limit:.3g}] {unit} for this cluster; "
+                    f"got {value!r}.  The upper limit is a deformation of {MAX_DISPLACEMENT_FRACTION:.0%} of the "
+                    f"shortest cable ({scales.shortest_cable:.3g} m)"
+                    + (" swinging at the fastest cable frequency" if unit == "m/s" else "")
+                    + "; beyond it the cluster folds instead of vibrating.  The lower limit keeps the reward's energy "
+                    "scale (the mean energy at reset) meaningful"
+                )
+        self._check_substeps(scales)
+        return scales
 
-
-def check_difficulty(difficulty: float) -> float:
-    """``difficulty`` as a float, or a ``ValueError`` if it is not a number in [0, 1]."""
-    if not (isinstance(difficulty, (int, float, np.floating)) and 0.0 <= difficulty <= 1.0):
-        raise ValueError(f"difficulty must be a number in [0, 1] (1: the configured task); got {difficulty!r}")
-    return float(difficulty)
+    def _check_substeps(self, scales: ClusterScales) -> None:
+        """Raise if one control interval needs more sub-steps than the simulator allows, with
+        ``SUBSTEP_HEADROOM``, at the smallest sub-step the randomisation can give."""
+        spread = self.randomize.get
+        # The critical step scales as sqrt(m / EA) and the damping step as m / c: the worst draw is
+        # the lightest, stiffest, most damped cluster.
+        critical = scales.critical_step * math.sqrt((1.0 - spread("masses", 0.0)) / (1.0 + spread("EA", 0.0)))
+        damping = scales.damping_step * (1.0 - spread("masses", 0.0)) / (1.0 + spread("damping", 0.0))
+        substep = self.safety_factor * min(critical, damping)
+        allowed = scales.max_substeps // SUBSTEP_HEADROOM
+        needed = self.control_interval / substep if substep > 0 else math.inf
+        if needed <= allowed:
+            return
+        longest = allowed * substep
+        advice = (
+            f"lower control_interval to at most {longest:.3g} s, or raise safety_factor"
+            if longest >= CONTROL_INTERVAL_RANGE[0]
+            else "this cluster is too stiff or too light for the simulator: use softer cables (EA), heavier "
+            "satellites (masses) or longer cables (L0), or smaller randomize spreads"
+        )
+        raise EnvArgumentError(
+            f"control_interval={self.control_interval:g} s needs about {needed:.3g} sub-steps of {substep:.3g} s "
+            f"(safety_factor {self.safety_factor:g} x this cluster's smallest critical or damping step), more than "
+            f"the {allowed} allowed per interval (the simulator's max_substeps={scales.max_substeps} over a "
+            f"headroom of {SUBSTEP_HEADROOM} for stretched cables); {advice}"
+        )
 
 
 def task_from_arguments(
@@ -187,23 +575,37 @@ def task_from_arguments(
     **task: Any,
 ) -> DampingTask:
     """A :class:`DampingTask` from the environments' keyword arguments (see the env docstring):
-    a preset name with overrides, or a cluster, plus :class:`TaskConfig` fields."""
-    from tether_gym.presets import make_cluster
+    a preset name with overrides, or a cluster, plus :class:`TaskConfig` fields.
 
-    if cluster is None:
-        cluster = make_cluster(preset, **dict(preset_kwargs or {}))
-    elif not isinstance(cluster, Cluster):
-        raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
+    Every argument is checked before anything is built: the task settings first (on their own),
+    then the cluster, then the settings against the cluster.
+    """
+    from tether_gym.presets import make_cluster, preset_names
+
     fields = set(TaskConfig.__dataclass_fields__)
     unknown = sorted(set(task) - fields)
     if unknown:
         raise TypeError(f"unknown argument(s) {unknown}; task arguments are {sorted(fields)}")
-    for key in ("thrusters", "observed_satellites", "thruster_failure_window"):
-        if task.get(key) is not None:
-            task[key] = tuple(task[key])
-    if isinstance(task.get("max_thrust"), Sequence):
-        task["max_thrust"] = tuple(float(v) for v in task["max_thrust"])
-    return DampingTask(cluster, num_clusters, TaskConfig(**task))
+    config = TaskConfig(**task)
+    if preset_kwargs is not None and not isinstance(preset_kwargs, Mapping):
+        raise EnvArgumentError(
+            f"preset_kwargs must be a dict of the preset's parameters, e.g. {{'N0': 1.0}}, or None; got {_shown(preset_kwargs)}"
+        )
+    if cluster is None:
+        if not isinstance(preset, str):
+            raise EnvArgumentError(f"preset must be a preset name, one of {preset_names()}; got {_shown(preset)}")
+        keys = [key for key in preset_kwargs or {} if not isinstance(key, str)]
+        if keys:
+            raise EnvArgumentError(f"preset_kwargs keys must be parameter names (strings); got {_shown(keys)}")
+        cluster = make_cluster(preset, **dict(preset_kwargs or {}))
+    elif not isinstance(cluster, Cluster):
+        raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
+    elif preset_kwargs:
+        raise EnvArgumentError(
+            "preset_kwargs change a preset, but a cluster was given: build the cluster with the values you want "
+            "(Cluster.replace) and pass no preset_kwargs"
+        )
+    return DampingTask(cluster, num_clusters, config)
 
 
 class DampingTask:
@@ -215,14 +617,27 @@ class DampingTask:
     and strain energy in J) and ``end_reason`` (B,) (index into ``END_REASONS``; > 0 means
     terminated).  Read them before the next call.
 
+    The reward is always finite: a cluster whose reward comes out NaN, infinite or beyond
+    ``REWARD_LIMIT`` ends as ``numerics_diverged`` with the reward ``-failure_penalty`` plus its
+    (finite) propellant and slack terms.  The observation is always finite (NaN as 0, clipped to
+    +-``OBSERVATION_LIMIT``).
+
     Args:
         cluster: the nominal cluster (its positions are the nominal shape).
         num_clusters: B.
         config: the :class:`TaskConfig`.
+
+    Attributes:
+        scales: the cluster's :class:`ClusterScales`, which bound the settings and reset states.
     """
 
     def __init__(self, cluster: Cluster, num_clusters: int, config: TaskConfig) -> None:
-        config.validate(cluster)
+        if not isinstance(cluster, Cluster):
+            raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
+        if not isinstance(config, TaskConfig):
+            raise TypeError(f"config must be a TaskConfig; got {type(config).__name__}")
+        num_clusters = check_whole("num_clusters", num_clusters, 1, MAX_NUM_ENVS)
+        self.scales = config.validate(cluster)
         self.cluster = cluster
         self.config = config
         self.num_clusters = B = num_clusters
@@ -326,6 +741,27 @@ class DampingTask:
             self.sim, self.bias, self.nominal, self.nominal_strain_energy, self.stats.status,
             self.stats.peak_tension, self.impulse, self.observation, self.scalars, self.end_reason,
         )
+        # One reduction per step; NaN fails the comparison too.
+        if not np.abs(self.scalars[:, 0]).max() <= REWARD_LIMIT:
+            self._end_runaways()
+
+    def _end_runaways(self) -> None:
+        """End every cluster whose reward is NaN, infinite or beyond ``REWARD_LIMIT`` as
+        ``numerics_diverged``, with a finite reward: ``-failure_penalty`` plus its propellant and
+        slack terms (each 0 if not finite).  Its energies stay in ``info`` as computed."""
+        scalars = self.scalars
+        runaway = ~(np.abs(scalars[:, 0]) <= REWARD_LIMIT)
+        terms = scalars[runaway]
+        for name in ("reward_propellant", "reward_slack"):
+            column = terms[:, _COLUMN[name]]
+            column[~np.isfinite(column)] = 0.0
+        terms[:, _COLUMN["reward_vibration"]] = 0.0
+        terms[:, _COLUMN["reward_failure"]] = -self.config.failure_penalty
+        terms[:, _COLUMN["reward"]] = (
+            terms[:, _COLUMN["reward_propellant"]] + terms[:, _COLUMN["reward_slack"]] - self.config.failure_penalty
+        )
+        scalars[runaway] = terms
+        self.end_reason[runaway] = DIVERGED
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(
@@ -345,6 +781,78 @@ class DampingTask:
         x0 = self.cluster.positions[None] + displacement
         _task_kernels.remove_rigid_velocity(x0, velocity, np.ascontiguousarray(np.broadcast_to(self.cluster.masses, (count, n))))
         return x0, velocity
+
+    def check_reset_state(
+        self, options: Any, shape: tuple[int, ...]
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The exact initial state given as reset options, checked, without touching any state.
+
+        Args:
+            options: None or a dict with ``"positions"`` (m, in the cluster's frame) and/or
+                ``"velocities"`` (m/s, relative to the frame), each None or an array of ``shape``:
+                (n, 3) for one cluster or (k, n, 3) for k.
+
+        Returns:
+            ``(positions, velocities)``, each None or a (k, n, 3) float64 array.
+
+        Raises:
+            EnvArgumentError: naming the option: not a dict, an unknown key, not numbers, the
+                wrong shape, NaN or inf, a satellite farther than ``scales.deviation_limit`` from
+                its nominal place, a cable shorter than ``MIN_CABLE_LENGTH_FRACTION`` of its L0,
+                or a speed beyond ``RESET_SPEED_FACTOR * scales.speed_limit``.
+        """
+        if options is None:
+            return None, None
+        if not isinstance(options, Mapping):
+            raise EnvArgumentError(
+                f"options must be a dict such as {{'positions': X0, 'velocities': V0}} or None; got {_shown(options)}"
+            )
+        unknown = sorted(set(options) - set(RESET_OPTION_KEYS), key=repr)
+        if unknown:
+            raise EnvArgumentError(f"unknown reset option(s) {unknown}; accepted options are {list(RESET_OPTION_KEYS)}")
+        n = self.cluster.num_nodes
+        arrays: dict[str, np.ndarray | None] = {}
+        for key, unit in zip(RESET_OPTION_KEYS, ("m", "m/s")):
+            name = f"reset option {key!r}"
+            if options.get(key) is None:
+                arrays[key] = None
+                continue
+            array = as_real_array(name, options[key], f"an {shape} array in {unit}")
+            if array.shape != shape:
+                raise EnvArgumentError(f"{name} must be an {shape} array in {unit}; got shape {array.shape}")
+            if not np.isfinite(array).all():
+                raise EnvArgumentError(f"{name} contains NaN or inf; every entry must be a finite number ({unit})")
+            arrays[key] = array.reshape(-1, n, 3)
+        positions, velocities = arrays["positions"], arrays["velocities"]
+        scales = self.scales
+        if positions is not None:
+            deviation = float(np.linalg.norm(positions - self.cluster.positions, axis=-1).max())
+            if not deviation <= scales.deviation_limit:
+                raise EnvArgumentError(
+                    f"reset option 'positions' puts a satellite {deviation:.3g} m from its nominal place; the limit is "
+                    f"{scales.deviation_limit:.3g} m ({MAX_RESET_DEVIATION_CABLES:g} lengths of the longest cable).  Positions are "
+                    "in the cluster's frame, m; the nominal shape is env.unwrapped.cluster.positions"
+                )
+            cables = self.cluster.cables
+            lengths = np.linalg.norm(positions[:, cables[:, 1]] - positions[:, cables[:, 0]], axis=-1)
+            short = lengths < MIN_CABLE_LENGTH_FRACTION * self.cluster.L0
+            if short.any():
+                c = int(np.argwhere(short)[0, 1])
+                raise EnvArgumentError(
+                    f"reset option 'positions' puts satellites {tuple(cables[c].tolist())}, the ends of cable {c}, on "
+                    f"top of each other ({float(lengths[short][0]):.3g} m apart); a cable's direction, and so its force, "
+                    "needs distinct end positions"
+                )
+        if velocities is not None:
+            speed = float(np.linalg.norm(velocities, axis=-1).max())
+            limit = RESET_SPEED_FACTOR * scales.speed_limit
+            if not speed <= limit:
+                raise EnvArgumentError(
+                    f"reset option 'velocities' gives a satellite {speed:.3g} m/s; the limit is {limit:.3g} m/s "
+                    f"({RESET_SPEED_FACTOR:g} x the initial_velocity limit of this cluster).  Velocities are relative to "
+                    "the cluster's frame, m/s"
+                )
+        return positions, velocities
 
     def reset(
         self,

@@ -12,7 +12,16 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from tether_gym.cluster import Cluster
-from tether_gym.envs.task import END_REASONS, OBSERVATION_LIMIT, task_from_arguments
+from tether_gym.envs.task import (
+    END_REASONS,
+    MAX_NUM_ENVS,
+    OBSERVATION_LIMIT,
+    EnvArgumentError,
+    as_real_array,
+    check_seed,
+    check_whole,
+    task_from_arguments,
+)
 
 __all__ = ["TetherClusterVectorEnv"]
 
@@ -59,10 +68,13 @@ class TetherClusterVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         **task: Any,
     ) -> None:
-        if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer; got {num_envs!r}")
-        if max_episode_steps is not None and (not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1):
-            raise ValueError(f"max_episode_steps must be a positive integer or None; got {max_episode_steps!r}")
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= MAX_NUM_ENVS:
+            raise EnvArgumentError(
+                f"num_envs must be a positive integer, at most {MAX_NUM_ENVS} (run several processes for more); "
+                f"got {num_envs!r}"
+            )
+        if max_episode_steps is not None:
+            max_episode_steps = check_whole("max_episode_steps", max_episode_steps, 1, 2**62)
         self.num_envs = int(num_envs)
         self.task = task_from_arguments(self.num_envs, preset, preset_kwargs, cluster, **task)
         self.cluster = self.task.cluster
@@ -84,38 +96,47 @@ class TetherClusterVectorEnv(VectorEnv):
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Reset every sub-env. ``seed``: an int (sub-env i gets ``seed + i``), a list of N seeds
-        or Nones, or None (keep the generators). ``options``: ``positions`` and/or ``velocities``,
-        (N, n, 3) arrays, for exact initial conditions."""
-        if seed is not None:
-            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, (int, np.integer)) else list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds; got {len(seeds)} seeds")
-            for i, value in enumerate(seeds):
-                if value is not None:
-                    self._rngs[i] = seeding.np_random(int(value))[0]
-        options = dict(options or {})
-        unknown = sorted(set(options) - {"positions", "velocities"})
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {unknown}; accepted options are ['positions', 'velocities']")
-        shape = (self.num_envs, self.cluster.num_nodes, 3)
-        arrays = {}
-        for key in ("positions", "velocities"):
-            if options.get(key) is not None:
-                arrays[key] = np.asarray(options[key], dtype=np.float64)
-                if arrays[key].shape != shape:
-                    raise ValueError(f"reset option {key!r} must have shape {shape}; got {arrays[key].shape}")
-        self.task.reset(self._rngs, self._all, arrays.get("positions"), arrays.get("velocities"))
+        """Reset every sub-env. ``seed``: an int >= 0 (sub-env i gets ``seed + i``), a list of N
+        seeds (ints >= 0) or Nones, or None (keep the generators). ``options``: ``positions``
+        and/or ``velocities``, (N, n, 3) arrays in m and m/s, for exact initial conditions.
+
+        Seeds and options are checked before anything changes: a bad one raises
+        :class:`~tether_gym.envs.EnvArgumentError` and leaves every sub-env as it was."""
+        seeds = self._seeds(seed)
+        positions, velocities = self.task.check_reset_state(options, (self.num_envs, self.cluster.num_nodes, 3))
+        for i, value in enumerate(seeds):
+            if value is not None:
+                self._rngs[i] = seeding.np_random(value)[0]
+        self.task.reset(self._rngs, self._all, positions, velocities)
         self._episode_steps[:] = 0
         observation = self.task.observe(self._rngs)
         return observation, self._infos(stepped=None)
 
+    def _seeds(self, seed: Any) -> list[int | None]:
+        """The seed of each sub-env (None: keep its generator) from ``reset``'s ``seed``, checked."""
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+            first = check_seed("seed", seed)
+            return [first + i for i in range(self.num_envs)]
+        if not isinstance(seed, (list, tuple, np.ndarray)) or (isinstance(seed, np.ndarray) and seed.ndim != 1):
+            raise EnvArgumentError(
+                f"seed must be an int >= 0 (sub-env i gets seed + i), a list of {self.num_envs} seeds (ints >= 0 or "
+                f"None), or None; got {seed!r}"
+            )
+        seeds = list(seed.tolist() if isinstance(seed, np.ndarray) else seed)
+        if len(seeds) != self.num_envs:
+            raise EnvArgumentError(f"seed must be an int or a list of {self.num_envs} seeds; got {len(seeds)} seeds")
+        return [check_seed(f"seed[{i}]", value) for i, value in enumerate(seeds)]
+
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        a = np.asarray(actions, dtype=np.float64)
+        a = as_real_array("actions", actions, f"a {self._action_shape} array of thrust commands in [-1, 1]")
         if a.shape != self._action_shape:
-            raise ValueError(f"actions must have shape {self._action_shape} (num_envs, 3 per thruster); got {a.shape}")
+            raise EnvArgumentError(
+                f"actions must have shape {self._action_shape} (num_envs, 3 per thruster); got {a.shape}"
+            )
         if not np.isfinite(a).all():
-            raise ValueError("actions contain NaN or inf; thrust commands must be finite numbers in [-1, 1]")
+            raise EnvArgumentError("actions contain NaN or inf; thrust commands must be finite numbers in [-1, 1]")
         task = self.task
         task.step(np.ascontiguousarray(a), rngs=self._rngs)
         self._episode_steps += 1
