@@ -31,7 +31,7 @@ def make(**changes: object) -> Cluster:
         ({"cables": [(0, 1), (1, 3), (0, 2)]}, "node indices must be in 0..2"),
         ({"cables": [(0, 1), (-1, 2)]}, "node indices must be in 0..2"),
         ({"cables": [(0, 1.5)]}, "whole node indices"),
-        ({"positions": [[0, 0, 0], [0, 0, 0], [0, 10, 0]]}, "cable 0 has zero length"),
+        ({"positions": [[0, 0, 0], [0, 0, 0], [0, 10, 0]]}, "positions give cable 0 zero length"),
         ({"EA": [1e4, -1.0, 1e4]}, "EA must lie in [1e-06, 1e+12] N; got -1.0 (cable 1)"),
         ({"N0": -0.5}, "N0 (pretension) must lie in [0, 1e+12] N"),
         ({"damping": -1.0}, "damping must lie in [0, 1e+12] N*s/m"),

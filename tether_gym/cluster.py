@@ -172,8 +172,8 @@ class Cluster:
         if np.any(lengths <= 0.0):
             c = int(np.argmax(lengths <= 0.0))
             raise ClusterError(
-                f"cable {c} has zero length: nodes {tuple(int(k) for k in cables[c])} share the same "
-                "position; give every satellite a distinct position"
+                f"positions give cable {c} zero length: nodes {tuple(int(k) for k in cables[c])} share the "
+                "same position; give every satellite a distinct position"
             )
         reachable = _connected(n_nodes, cables)
         if not np.all(reachable):

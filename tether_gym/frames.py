@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from tether_gym.limits import MAX_FRAME_RATE, is_real_number
+from tether_gym.limits import MAX_FRAME_RATE, is_real_number, to_float
 
 __all__ = ["EARTH_GM", "EARTH_RADIUS", "LEO_ORBIT_RATE", "Frame", "FrameError", "circular_orbit_rate"]
 
@@ -41,7 +41,7 @@ EARTH_RADIUS = 6.378137e6
 
 def circular_orbit_rate(altitude: float, gm: float = EARTH_GM, body_radius: float = EARTH_RADIUS) -> float:
     """Mean motion ``n = sqrt(GM / a^3)`` of a circular orbit ``altitude`` m above the body, rad/s."""
-    if not (is_real_number(altitude) and math.isfinite(altitude) and altitude > -body_radius):
+    if not (is_real_number(altitude) and math.isfinite(to_float(altitude)) and altitude > -body_radius):
         raise ValueError(f"altitude must be a finite height above the body's centre, m; got {altitude!r}")
     return math.sqrt(gm / (body_radius + altitude) ** 3)
 
@@ -76,7 +76,7 @@ class Frame:
             raise FrameError(f"frame kind must be 'inertial', 'hill' or 'rotating'; got {self.kind!r}")
         if not is_real_number(self.rate):
             raise FrameError(f"frame rate must be a number of rad/s; got {self.rate!r}")
-        rate = float(self.rate)
+        rate = to_float(self.rate)
         if not (math.isfinite(rate) and abs(rate) <= MAX_FRAME_RATE):
             raise FrameError(f"frame rate must be a finite number of rad/s within +-{MAX_FRAME_RATE:g}; got {self.rate!r}")
         if self.kind == "inertial" and rate != 0.0:

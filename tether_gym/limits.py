@@ -37,6 +37,7 @@ __all__ = [
     "check_range",
     "is_real_number",
     "real_array",
+    "to_float",
 ]
 
 #: Largest |coordinate| of a position, m: 1e5 km, a quarter of the way to the Moon.
@@ -84,6 +85,8 @@ def real_array(name: str, value: Any, error: type[Exception] = ValueError, allow
                 raw = raw.astype(np.float64)
             except OverflowError:
                 raise error(f"{name} holds an integer too large for a float; got {_short(value)}") from None
+        if raw.dtype.kind in "iuf" and isinstance(value, (list, tuple)) and _holds_bool(value):
+            raise error(f"{name} must be made of real numbers, not booleans; got {_short(value)}")
         if raw.dtype.kind not in "iuf":
             kind = {"b": "booleans", "U": "strings", "S": "bytes", "c": "complex numbers"}.get(raw.dtype.kind, "objects")
             raise error(f"{name} must be made of real numbers, not {kind}; got {_short(value)}")
@@ -99,6 +102,15 @@ def _short(value: Any, limit: int = 120) -> str:
     """``repr(value)``, cut to ``limit`` characters for an error message."""
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _holds_bool(value: Any) -> bool:
+    """True if a nested list/tuple holds a boolean anywhere (numpy would read it as 0 or 1)."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    if isinstance(value, (list, tuple)):
+        return any(_holds_bool(item) for item in value)
+    return False
 
 
 def _read_infinities(value: Any) -> Any:
@@ -132,6 +144,15 @@ def check_range(
         bracket = "[" if low_inclusive else "("
         unit = f" {unit}" if unit else ""
         raise error(f"{name} must lie in {bracket}{low:g}, {high:g}]{unit}; got {values[index] if index else values}{at}")
+
+
+def to_float(value: Any) -> float:
+    """A real number as a float; a Python integer beyond the float range becomes +-inf (where
+    ``float()`` would raise ``OverflowError``), so that range checks can refuse it by name."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 def is_real_number(value: Any) -> bool:

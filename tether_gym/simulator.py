@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 
 from tether_gym import _kernels
 from tether_gym.cluster import Cluster
-from tether_gym.limits import MAX_COORDINATE, MAX_FORCE, MAX_SPEED, check_range, is_real_number, real_array
+from tether_gym.limits import MAX_COORDINATE, MAX_FORCE, MAX_SPEED, check_range, is_real_number, real_array, to_float
 
 __all__ = [
     "DEFAULT_SAFETY_FACTOR",
@@ -128,15 +128,17 @@ def _check_number(name: str, value: object, low: float, high: float, unit: str, 
     ``(low, high]`` (``[low, high]`` with ``low_inclusive``)."""
     if not is_real_number(value):
         raise ValueError(f"{name} must be a number ({unit}); got {value!r}")
-    check_range(name, np.float64(value), low, high, unit, low_inclusive=low_inclusive)
-    return float(value)  # type: ignore[arg-type]
+    number = to_float(value)
+    check_range(name, np.float64(number), low, high, unit, low_inclusive=low_inclusive)
+    return number
 
 
 def _check_duration(duration: float) -> float:
     """``duration`` as a float, > 0 and finite (its sub-step count is checked by the kernel)."""
-    if not (is_real_number(duration) and math.isfinite(duration) and duration > 0.0):  # type: ignore[arg-type]
+    value = to_float(duration) if is_real_number(duration) else math.nan
+    if not (math.isfinite(value) and value > 0.0):
         raise ValueError(f"duration must be a finite number of seconds > 0; got {duration!r}")
-    return float(duration)  # type: ignore[arg-type]
+    return value
 
 
 def _is_whole(value: object) -> bool:
@@ -295,13 +297,16 @@ class BatchSimulator:
     def _indices(self, indices: Sequence[int] | np.ndarray | None) -> np.ndarray:
         if indices is None:
             return np.arange(self.num_clusters)
-        idx = np.asarray(indices)
+        try:
+            idx = np.asarray(indices)
+        except (TypeError, ValueError):
+            raise ValueError(f"indices must be a 1-D sequence of cluster indices; got {indices!r}") from None
         if idx.dtype == np.bool_:
             if idx.shape != (self.num_clusters,):
-                raise ValueError(f"a boolean index must have shape ({self.num_clusters},)")
+                raise ValueError(f"indices given as a boolean mask must have shape ({self.num_clusters},); got {indices!r}")
             return np.flatnonzero(idx)
         if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer):
-            raise ValueError("indices must be a 1-D sequence of cluster indices")
+            raise ValueError(f"indices must be a 1-D sequence of cluster indices; got {indices!r}")
         if idx.size and (idx.min() < 0 or idx.max() >= self.num_clusters):
             raise ValueError(f"cluster indices must be in 0..{self.num_clusters - 1}; got {idx.tolist()}")
         return idx

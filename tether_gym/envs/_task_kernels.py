@@ -181,8 +181,8 @@ def _evaluate_clusters(
     strain_energy (J), frame_potential (J)]``.  ``weights`` = ``[vibration_weight / energy_scale,
     propellant_weight / full_impulse, slack_weight, failure_penalty]``.  A cable past its
     breaking load ends the episode only with ``terminate_on_break``.  A cluster whose reward
-    terms would not be finite ends as numerics diverged (code 3), with those terms set to 0, so
-    the reward is finite whenever the weights are.
+    terms or energies would not be finite ends as numerics diverged (code 3), with the vibration
+    term (and a non-finite propellant term) set to 0: the reward is always finite.
 
     The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension may
     hold a viscous part).  In a turning frame (``frame_tidal`` (B, 3), 1/s^2) the vibration energy
@@ -279,7 +279,8 @@ def _evaluate_clusters(
         slack_fraction = slack / m
         terms_vibration = -weights[0] * vibration
         terms_propellant = -weights[1] * impulse[b]
-        if not (math.isfinite(terms_vibration) and math.isfinite(terms_propellant)):
+        if not (math.isfinite(terms_vibration) and math.isfinite(terms_propellant) and math.isfinite(kinetic)
+                and math.isfinite(strain) and math.isfinite(frame_potential)):
             # A state beyond the reward's arithmetic (an energy or a weighted term that overflows)
             # is a divergence too: the episode ends there with a finite reward, the vibration
             # term dropped as for a frozen cluster, never a NaN or -inf while it runs on.

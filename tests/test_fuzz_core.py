@@ -1,0 +1,258 @@
+"""Property-based fuzzing of the physics core: clusters, their files, presets and the simulator.
+
+Every input ends in exactly one of two ways:
+
+* a clear error: a :class:`~tether_gym.ClusterError`, ``ValueError`` or ``TypeError`` (or, for an
+  integration that cannot be carried out, the project's :class:`~tether_gym.SimulationDiverged`)
+  whose message names the offending parameter;
+* finite, correct behaviour: a cluster that round-trips bit-exactly through JSON and TOML, a
+  simulator state that stays finite.
+
+Nothing else (a bare numpy error, a crash, NaN or inf in the state, a silently changed value) is
+allowed.  The example counts keep the file to a few seconds in CI.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+import tether_gym as tg
+from tether_gym import Cluster, ClusterError, SimulationDiverged
+
+FUZZ = settings(max_examples=150, deadline=None, derandomize=True,
+                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+#: The floats that break naive code: signed zeros, subnormals, the extremes, infinities and NaN.
+SPECIAL_FLOATS = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, 1e-7, 1.0, -1.0, 1e7, 1e12,
+                  1e13, 1e300, 1.7976931348623157e308, -1.7976931348623157e308, math.inf, -math.inf, math.nan]
+
+TRIANGLE: dict[str, Any] = dict(
+    positions=[[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]], masses=5.0, cables=[(0, 1), (1, 2), (0, 2)],
+    EA=1e4, N0=0.5, damping=0.1, breaking_load=500.0, axial_damping=0.0,
+)
+FIELD_SHAPES = {"positions": (3, 3), "masses": (3,), "damping": (3,), "EA": (3,), "N0": (3,), "L0": (3,),
+                "breaking_load": (3,), "axial_damping": (3,)}
+ACCEPTED = (ClusterError, ValueError, TypeError)
+
+special = st.sampled_from(SPECIAL_FLOATS)
+anything_float = st.floats(allow_nan=True, allow_infinity=True) | special
+junk = st.one_of(st.text(max_size=4), st.booleans(), st.none(), st.complex_numbers(max_magnitude=10),
+                 st.integers(-(10**400), 10**400), st.dictionaries(st.text(max_size=2), st.integers(), max_size=2))
+
+
+def values_for(shape: tuple[int, ...]) -> st.SearchStrategy[Any]:
+    """Scalars, arrays of the right shape with special floats, wrong shapes, and junk."""
+    size = int(np.prod(shape))
+    right = st.lists(anything_float, min_size=size, max_size=size).map(lambda v: np.reshape(v, shape).tolist())
+    wrong = st.lists(anything_float, min_size=0, max_size=size + 2).filter(lambda v: len(v) != size)
+    mixed = st.lists(st.one_of(anything_float, junk), min_size=size, max_size=size).map(
+        lambda v: [v[i : i + shape[-1]] for i in range(0, size, shape[-1])] if len(shape) == 2 else v
+    )
+    return st.one_of(anything_float, right, wrong, mixed, junk)
+
+
+def assert_names(error: BaseException, *names: str) -> None:
+    message = str(error)
+    assert any(name in message for name in names), f"{type(error).__name__}: {message!r} names none of {names}"
+
+
+def bits(value: Any) -> bytes:
+    return np.ascontiguousarray(value, dtype=np.float64).tobytes()
+
+
+def assert_identical(a: Cluster, b: Cluster) -> None:
+    """Equal to the bit (so -0.0 != 0.0 and NaN payloads would differ)."""
+    for field in ("positions", "masses", "damping", "EA", "N0", "L0", "breaking_load", "axial_damping"):
+        assert bits(getattr(a, field)) == bits(getattr(b, field)), field
+    assert np.array_equal(a.cables, b.cables) and a.cables.dtype == b.cables.dtype
+    assert a.name == b.name and a.frame.kind == b.frame.kind
+    assert bits(a.frame.rate) == bits(b.frame.rate)
+
+
+# ---------------------------------------------------------------------- construction
+@FUZZ
+@given(field=st.sampled_from(sorted(FIELD_SHAPES)), data=st.data())
+def test_one_bad_field_is_named_or_the_cluster_is_valid(field: str, data: st.DataObject) -> None:
+    value = data.draw(values_for(FIELD_SHAPES[field]), label=field)
+    try:
+        cluster = Cluster(**{**TRIANGLE, field: value})
+    except ACCEPTED as error:
+        assert_names(error, field, "the distance between a cable's satellites", "zero length",
+                     "disconnected")
+        return
+    stored = getattr(cluster, field)
+    finite = np.where(np.isinf(stored), 0.0, stored) if field == "breaking_load" else stored
+    assert np.all(np.isfinite(finite)) and np.all(np.isfinite(cluster.stiffness))
+    assert np.all(np.isfinite(cluster.inv_split_mass_sum)) and np.all(cluster.inv_split_mass_sum > 0)
+
+
+@FUZZ
+@given(cables=st.one_of(st.lists(st.tuples(st.integers(-3, 5), st.integers(-3, 5)), max_size=5),
+                        st.lists(st.lists(st.one_of(st.integers(-2, 4), special, junk), max_size=3), max_size=4),
+                        junk))
+def test_bad_cable_lists_are_named(cables: Any) -> None:
+    try:
+        cluster = Cluster(**{**TRIANGLE, "cables": cables, "EA": 1e4, "N0": 0.5, "breaking_load": 500.0,
+                             "axial_damping": 0.0})
+    except ACCEPTED as error:
+        assert_names(error, "cable", "disconnected")
+        return
+    assert cluster.num_cables >= 2 and np.all(cluster.L0 > 0)
+
+
+@FUZZ
+@given(frame=st.one_of(st.fixed_dictionaries({"kind": st.sampled_from(["inertial", "hill", "rotating", "warp"]),
+                                              "rate": st.one_of(anything_float, junk)}),
+                       st.dictionaries(st.text(max_size=5), st.one_of(anything_float, junk), max_size=3), junk))
+def test_bad_frames_are_named(frame: Any) -> None:
+    try:
+        cluster = Cluster(**{**TRIANGLE, "frame": frame})
+    except ACCEPTED as error:
+        assert_names(error, "frame")
+        return
+    assert math.isfinite(cluster.frame.rate) and np.all(np.isfinite(cluster.frame.tidal))
+
+
+# ---------------------------------------------------------------------- files
+finite_in_range = st.one_of(
+    st.sampled_from([0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, 0.1, 1.0 / 3.0]),
+    st.floats(-1e8, 1e8, allow_subnormal=True),
+)
+
+
+@st.composite
+def valid_clusters(draw: st.DrawFn) -> Cluster:
+    """Valid clusters whose every field holds awkward but legal floats (signed zeros, subnormals,
+    extremes within range, unbreakable inf loads, a turning frame)."""
+    offsets = draw(st.lists(finite_in_range, min_size=9, max_size=9))
+    positions = np.array(TRIANGLE["positions"]) * draw(st.sampled_from([1.0, 1e-3, 1e6])) + np.reshape(offsets, (3, 3)) * 1e-9
+    m = st.one_of(st.floats(1e-6, 1e9), st.sampled_from([1e-6, 1e9, 3.0]))
+    nonneg = st.one_of(st.sampled_from([0.0, -0.0, 5e-324, 1e12]), st.floats(0.0, 1e12))
+    load = st.one_of(st.sampled_from([math.inf, 1e12, 5e-324]), st.floats(1e-300, 1e12))
+    frame = draw(st.one_of(st.none(), st.builds(lambda r: {"kind": "rotating", "rate": r}, st.floats(-100, 100)),
+                           st.builds(lambda r: {"kind": "hill", "rate": r}, st.floats(1e-6, 100))))
+    return Cluster(
+        positions=positions, masses=draw(st.lists(m, min_size=3, max_size=3)), cables=TRIANGLE["cables"],
+        EA=draw(st.lists(st.floats(1e-6, 1e12), min_size=3, max_size=3)),
+        N0=draw(st.lists(nonneg, min_size=3, max_size=3)), damping=draw(st.lists(nonneg, min_size=3, max_size=3)),
+        L0=draw(st.one_of(st.none(), st.lists(st.floats(1e-6, 1e9), min_size=3, max_size=3))),
+        breaking_load=draw(st.lists(load, min_size=3, max_size=3)),
+        axial_damping=draw(st.lists(nonneg, min_size=3, max_size=3)),
+        frame=frame or tg.Frame.inertial(), name=draw(st.text(max_size=12)),
+    )
+
+
+@FUZZ
+@given(cluster=valid_clusters(), suffix=st.sampled_from([".json", ".toml"]))
+def test_every_field_round_trips_bit_exactly(tmp_path: Path, cluster: Cluster, suffix: str) -> None:
+    path = tg.save_cluster(cluster, tmp_path / f"fuzz{suffix}")
+    assert_identical(tg.load_cluster(path), cluster)
+    if suffix == ".json":
+        assert "Infinity" not in path.read_text() and "NaN" not in path.read_text()  # strict JSON
+
+
+def test_partly_infinite_breaking_loads_survive_a_file(tmp_path: Path) -> None:
+    """The case that used to lose data: a mix of unbreakable and breakable cables."""
+    cluster = tg.make_cluster("tetrahedron").replace(breaking_load=[math.inf] * 5 + [123.0])
+    for suffix in (".json", ".toml"):
+        loaded = tg.load_cluster(tg.save_cluster(cluster, tmp_path / f"c{suffix}"))
+        assert loaded.breaking_load.tolist() == [math.inf] * 5 + [123.0]
+
+
+@FUZZ
+@given(content=st.one_of(st.binary(max_size=200), st.text(max_size=200).map(str.encode),
+                         st.dictionaries(st.sampled_from(["positions", "masses", "cables", "EA", "N0", "colour"]),
+                                         st.one_of(anything_float, junk, st.lists(anything_float, max_size=3)),
+                                         max_size=6).map(lambda d: repr(d).encode())),
+       suffix=st.sampled_from([".json", ".toml", ".yaml"]))
+def test_any_file_content_loads_or_gets_a_cluster_error(tmp_path: Path, content: bytes, suffix: str) -> None:
+    path = tmp_path / f"any{suffix}"
+    path.write_bytes(content)
+    try:
+        tg.load_cluster(path)
+    except ClusterError as error:
+        assert_names(error, str(path), suffix)
+
+
+# ---------------------------------------------------------------------- presets
+@FUZZ
+@given(name=st.one_of(st.sampled_from(tg.preset_names()), st.text(max_size=6), junk),
+       overrides=st.dictionaries(
+           st.sampled_from(["edge", "mass", "EA", "N0", "n", "spokes", "rim", "spin_rate", "orbit_rate", "spacing",
+                            "radius", "damping_rate", "breaking_load", "rim_share", "axial_damping_ratio", "hub_mass",
+                            "colour"]),
+           st.one_of(anything_float, junk, st.integers(-3, 20)), max_size=3))
+def test_presets_build_or_name_the_argument(name: Any, overrides: dict[str, Any]) -> None:
+    try:
+        cluster = tg.make_cluster(name, **overrides)
+    except ClusterError as error:
+        assert_names(error, "preset", *overrides)
+        return
+    assert np.all(np.isfinite(cluster.positions)) and np.all(np.isfinite(cluster.stiffness))
+
+
+# ---------------------------------------------------------------------- simulator
+@FUZZ
+@given(cluster=valid_clusters(), duration=st.one_of(anything_float, junk, st.floats(1e-9, 1.0)),
+       kick=st.floats(-1e3, 1e3), force=st.one_of(st.none(), st.floats(-1e13, 1e13), special))
+def test_advance_stays_finite_or_refuses_clearly(cluster: Cluster, duration: Any, kick: float, force: Any) -> None:
+    sim = tg.Simulator(cluster, max_substeps=20_000)
+    sim.reset(velocities=np.full((3, 3), kick))
+    p = None if force is None else np.full((3, 3), force)
+    x, t = sim.positions.copy(), sim.time
+    try:
+        sim.advance(duration, p)
+    except (ValueError, TypeError) as error:
+        assert_names(error, "duration", "force")
+        assert np.array_equal(sim.positions, x) and sim.time == t  # refused before anything changed
+        return
+    except SimulationDiverged as error:
+        assert_names(error, "max_substeps", "non-finite")
+        return
+    assert np.all(np.isfinite(sim.positions)) and np.all(np.isfinite(sim.velocities))
+    assert sim.time == pytest.approx(float(duration))
+    report = sim.energy()
+    assert all(math.isfinite(getattr(report, k)) for k in ("kinetic", "strain", "dissipated", "work"))
+
+
+@FUZZ
+@given(positions=values_for((4, 3)), velocities=st.one_of(st.none(), values_for((4, 3))),
+       indices=st.one_of(st.none(), st.lists(st.one_of(st.integers(-2, 3), junk), max_size=3), junk))
+def test_reset_accepts_or_names_the_argument_and_changes_nothing(positions: Any, velocities: Any, indices: Any) -> None:
+    batch = tg.BatchSimulator(tg.make_cluster("tetrahedron"), 2)
+    before = (batch.positions.copy(), batch.velocities.copy(), batch.intact.copy(), batch.time.copy())
+    shaped = np.asarray(positions, dtype=object)
+    if shaped.shape == (4, 3):  # the right shape for one cluster: broadcast to the batch
+        positions = [positions, positions]
+        velocities = None if velocities is None else [velocities, velocities]
+    try:
+        batch.reset(positions, velocities, indices=indices)
+    except (ValueError, TypeError) as error:
+        assert_names(error, "positions", "velocities", "indices", "zero-length cable")
+        after = (batch.positions, batch.velocities, batch.intact, batch.time)
+        assert all(np.array_equal(a, b) for a, b in zip(before, after))
+        return
+    assume(True)
+    assert np.all(np.isfinite(batch.positions)) and np.all(np.isfinite(batch.tension))
+
+
+@FUZZ
+@given(options=st.dictionaries(st.sampled_from(["safety_factor", "max_step", "max_substeps", "elongation"]),
+                               st.one_of(anything_float, junk, st.integers(-5, 10**20), st.text(max_size=10)),
+                               max_size=3),
+       count=st.one_of(st.integers(-2, 4), junk))
+def test_simulator_options_are_named(options: dict[str, Any], count: Any) -> None:
+    try:
+        batch = tg.BatchSimulator(tg.make_cluster("triangle"), count, **options)
+    except (ValueError, TypeError) as error:
+        assert_names(error, "num_clusters", *options)
+        return
+    stats = batch.advance(0.05)
+    assert np.all(np.isfinite(batch.positions)) or np.all(stats.status != 0)
