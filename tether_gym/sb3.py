@@ -41,6 +41,10 @@ How the two APIs are matched (N = ``num_envs``):
 * **Reset infos.** ``reset_infos[i]`` holds the scalar entries of sub-env i's latest reset info:
   all N after :meth:`SB3VecEnv.reset`, and the ended sub-envs' after an autoreset (as SB3's
   ``DummyVecEnv`` does).
+* **Rewards** are checked: a reward that is not finite in float32 raises ``ValueError`` (SB3
+  would silently train on it). tether-gym's envs never return one: a step whose reward would not
+  be finite ends as ``numerics_diverged`` with a finite reward, reported in the ended sub-env's
+  info as ``end_reason``.
 * **Seeds and options** follow SB3: ``seed(s)`` schedules seeds ``s, s+1, ..., s+N-1`` for the
   next ``reset()``, which passes them to the vector env as a list, so sub-env i gets ``s + i``.
   ``set_options(...)`` schedules options for the next ``reset()``. A Gymnasium vector env takes
@@ -221,6 +225,19 @@ class SB3VecEnv(VecEnv):
         self.reset_infos = _scalar_rows(infos, self._all, self.num_envs, skip=_FINAL_KEYS)
         return obs
 
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Schedule the seeds ``seed, seed + 1, ..., seed + N - 1`` for the next :meth:`reset`
+        (None: a random base seed, as SB3 does); returns them.
+
+        Raises:
+            ValueError: ``seed`` is not None or a whole number >= 0 (nothing is scheduled).
+        """
+        if seed is not None and (
+            isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0
+        ):
+            raise ValueError(f"seed must be a whole number >= 0 (an int; sub-env i gets seed + i) or None; got {seed!r}")
+        return super().seed(None if seed is None else int(seed))
+
     def _batch_options(self) -> dict[str, Any] | None:
         """SB3's per-env options as the one options dict of a Gymnasium vector env's reset."""
         options = list(self._options) if self._options is not None else []
@@ -255,13 +272,23 @@ class SB3VecEnv(VecEnv):
         actions, self._actions = self._actions, None
         obs, rewards, terminated, truncated, infos = self.venv.step(actions)
         self.vector_infos = infos
+        with np.errstate(over="ignore"):  # a float64 reward beyond float32's range: reported below
+            rewards32 = np.asarray(rewards, dtype=np.float32)
+        if not np.isfinite(rewards32).all():
+            bad = np.flatnonzero(~np.isfinite(rewards32))
+            raise ValueError(
+                f"the vector env returned rewards that are not finite in float32 for sub-envs {bad.tolist()} "
+                f"({np.asarray(rewards)[bad].tolist()}); SB3 would train on NaN or inf. tether-gym envs end such a "
+                "step as numerics_diverged with a finite reward; for other envs, fix the reward or wrap the env in "
+                "SB3's VecCheckNan to find where it comes from"
+            )
         terminated = np.asarray(terminated, dtype=bool)
         truncated = np.asarray(truncated, dtype=bool)
         dones = terminated | truncated
         step_infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if dones.any():
             self._fill_ended(np.flatnonzero(dones), terminated, truncated, infos, step_infos)
-        return obs, np.asarray(rewards, dtype=np.float32), dones, step_infos
+        return obs, rewards32, dones, step_infos
 
     def _fill_ended(
         self,

@@ -49,8 +49,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     thruster's ``max_thrust`` (N) and held constant over the control interval. With
     ``thrust_limit="per_axis"`` (the default), each component lies within ``+-max_thrust``.
     With ``"magnitude"``, a command longer than 1 is scaled back to length 1, which bounds the
-    force's norm. Commands outside [-1, 1] are clipped. A NaN or infinite command, or one of the
-    wrong shape, raises ``ValueError``.
+    force's norm. Commands outside [-1, 1] are clipped. A NaN or infinite command, one of the
+    wrong shape, or one that is not made of real numbers (strings, booleans, complex numbers)
+    raises :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``).
 
     ## Observation Space
 
@@ -117,8 +118,11 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
     - ``terminated``: the formation is lost (a satellite farther than ``max_deviation`` from its
       nominal place), a cable's tension passes its breaking load at any sub-step of the interval
-      (unless ``cable_failure="continue"``), or the numerics diverge.
-      ``info["end_reason"]`` says which.
+      (unless ``cable_failure="continue"``), or the numerics diverge (the state became
+      non-finite, the sub-step budget ran out, or the reward would be NaN, infinite or beyond
+      ``1e30``: the step then gets the finite reward ``-failure_penalty`` plus its propellant and
+      slack terms). ``info["end_reason"]`` says which. The reward and the observation are
+      always finite.
     - ``truncated``: the registered time limit (``max_episode_steps``) is reached. A failure always
       sets ``terminated``, never ``truncated`` alone; one on the very last step sets both, as
       Gymnasium's ``TimeLimit`` does.
@@ -148,6 +152,19 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     | ``render_mode`` | ``None`` | ``"rgb_array"`` or ``"human"`` |
     | ``render_exaggeration`` | 100 | displacements from nominal are drawn this many times larger |
     | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor``, and the disturbance, fault and ``difficulty`` options above |
+
+    Every argument is checked before anything is built, and a bad one raises
+    :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``; ``TypeError`` for an unknown
+    argument) naming it, the allowed range and the fix. The ranges are named constants in
+    :mod:`tether_gym.envs.task`, generous but physical: e.g. ``control_interval`` in
+    [1e-4, 3600] s and within the simulator's sub-step budget at the cluster's critical step,
+    ``max_thrust`` in [1e-9, 1e6] N, weights and ``failure_penalty`` up to 1e6,
+    ``initial_displacement`` up to 10 % of the shortest cable, ``initial_velocity`` up to that
+    displacement times the fastest cable frequency, ``randomize`` spreads up to 0.9. Seeds are
+    ints >= 0 or None. Reset options are (n, 3) arrays of finite numbers, each satellite within
+    10 longest-cable lengths of its nominal place, no two ends of a cable on top of each other,
+    speeds up to 10 times the ``initial_velocity`` limit. A refused ``reset`` or
+    ``set_difficulty`` leaves the env as it was.
 
     ## Version History
 

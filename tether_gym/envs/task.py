@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
+from tether_gym.limits import MAX_COORDINATE, MAX_SPEED
 from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, PARALLEL_MIN_BATCH, AdvanceStats, BatchSimulator
 
 __all__ = [
@@ -314,8 +315,10 @@ class ClusterScales:
 
     @property
     def speed_limit(self) -> float:
-        """Largest initial-velocity std, m/s (see ``MAX_DISPLACEMENT_FRACTION``)."""
-        return self.displacement_limit * self.omega_max
+        """Largest initial-velocity std, m/s (see ``MAX_DISPLACEMENT_FRACTION``), and at most
+        ``MAX_SPEED / RESET_SPEED_FACTOR`` so that draws and exact resets stay within the
+        simulator's speed range."""
+        return min(self.displacement_limit * self.omega_max, MAX_SPEED / RESET_SPEED_FACTOR)
 
     @property
     def deviation_limit(self) -> float:
@@ -825,6 +828,13 @@ class DampingTask:
             arrays[key] = array.reshape(-1, n, 3)
         positions, velocities = arrays["positions"], arrays["velocities"]
         scales = self.scales
+        for key, array, limit, unit in (("positions", positions, MAX_COORDINATE, "m"),
+                                        ("velocities", velocities, MAX_SPEED, "m/s")):
+            if array is not None and not np.abs(array).max() <= limit:
+                raise EnvArgumentError(
+                    f"reset option {key!r} must have every entry within +-{limit:g} {unit} (the simulator's range); "
+                    f"got {float(np.abs(array).max()):.3g} {unit}"
+                )
         if positions is not None:
             deviation = float(np.linalg.norm(positions - self.cluster.positions, axis=-1).max())
             if not deviation <= scales.deviation_limit:
