@@ -10,6 +10,12 @@ seeded ``seed + e``. The command prints a table, and writes to ``--out``:
 * ``displacement.png``: one satellite's displacement from its nominal place over time, in the
   first episode, for every controller.
 
+The command is careful with files: it checks ``--out`` (a writable directory, not a symlink,
+not inside a file) and refuses to replace an earlier comparison there without ``--force``
+before it loads a controller or runs a rollout, and it writes each file atomically (a temporary
+file, then a rename). Trained models are read from the safe format (JSON + safetensors);
+a pickle-based SB3 model path is refused unless ``--trust-pickle`` is given.
+
 The seeds default to 10 000 and up, far from the seeds that training and its evaluation
 callback use (0 and up, and 1 000 000 and up).
 """
@@ -18,8 +24,10 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +35,10 @@ import numpy as np
 
 from agents.baselines import BASELINES
 from agents.evaluate import METRICS, EpisodeRecord, rollout, summarise
+from agents.files import OutputError, atomic_write, atomic_write_text, check_output_files, prepare_output_dir
+from agents.pickled import PickleNotTrustedError
 from agents.policies import make_controller, shipped_models
+from agents.safe_format import PolicyFormatError
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 __all__ = ["compare", "main"]
@@ -52,6 +63,17 @@ def _progress_printer(name: str) -> Any:
     return report
 
 
+#: The files a comparison writes (the plots only when plotting).
+TABLE_FILES = ("comparison.md", "comparison.csv")
+PLOT_FILES = ("energy.png", "displacement.png")
+
+
+def _check_int(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
+    return int(value)
+
+
 def compare(
     env_id: str = DEFAULT_ENV_ID,
     controllers: list[str] | None = None,
@@ -61,19 +83,41 @@ def compare(
     satellite: int = 0,
     plots: bool = True,
     env_kwargs: dict[str, Any] | None = None,
+    force: bool = False,
+    trust_pickle: bool = False,
 ) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
     """Evaluate ``controllers`` (names or model paths; default: every baseline and shipped
     model) on ``episodes`` episodes seeded ``seed, seed+1, ...``; write the table and plots to
-    ``out``. Returns the episode records and the summaries, in the controllers' order."""
+    ``out``. Returns the episode records and the summaries, in the controllers' order.
+
+    Before any rollout it checks the arguments, the output directory (``OutputError`` for a
+    file, a symlink, a path inside a file or an unwritable place; ``OutputExistsError`` for an
+    earlier comparison there unless ``force``) and loads every controller (pickle-based model
+    files only with ``trust_pickle``)."""
     import gymnasium as gym
 
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; tether-gym ids are {list(ENV_IDS)}")
-    if episodes < 2:
-        raise ValueError(f"episodes must be at least 2 (for a confidence interval); got {episodes}")
-    names = controllers or (list(BASELINES) + list(shipped_models(env_id)))
+    episodes = _check_int("episodes", episodes, 2)  # two at least, for a confidence interval
+    seed = _check_int("seed", seed, 0)
+    satellite = _check_int("satellite", satellite, 0)
+    if controllers is not None:
+        if isinstance(controllers, str) or not all(isinstance(name, str) and name for name in controllers):
+            raise ValueError(f"controllers must be a list of names or paths; got {controllers!r}")
+        if not controllers:
+            raise ValueError("controllers must name at least one controller (or be None for the default set)")
+        repeated = sorted({name for name in controllers if controllers.count(name) > 1})
+        if repeated:
+            raise ValueError(f"controllers lists {repeated} more than once: each row of the table needs its own name")
+    out = prepare_output_dir(out, argument="--out")
+    check_output_files(out, TABLE_FILES + (PLOT_FILES if plots else ()), force=force, argument="--out",
+                       what="an earlier comparison")
+    names = list(controllers) if controllers else (list(BASELINES) + list(shipped_models(env_id)))
     probe = gym.make_vec(env_id, num_envs=1, **dict(env_kwargs or {}))
-    policies = [make_controller(name, probe) for name in names]
+    num_nodes = probe.unwrapped.task.cluster.num_nodes
+    if satellite >= num_nodes:
+        raise ValueError(f"satellite must be in 0..{num_nodes - 1} for {env_id}; got {satellite}")
+    policies = [make_controller(name, probe, trust_pickle=trust_pickle) for name in names]
     probe.close()
     seeds = list(range(seed, seed + episodes))
     print(f"{env_id}: {len(names)} controllers x {episodes} episodes (seeds {seed}..{seed + episodes - 1})")
@@ -83,12 +127,10 @@ def compare(
         records.append(rollout(policy, env_id, seeds, name=label, satellite=satellite, env_kwargs=env_kwargs,
                                progress=_progress_printer(label)))
     summaries = [summarise(record) for record in records]
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     table = markdown_table(records, summaries)
     header = (f"{env_id}, {episodes} episodes per controller, seeds {seed}..{seed + episodes - 1}, "
               f"{records[0].time[-1]:.0f} s each\n\n")
-    (out / "comparison.md").write_text(header + table + "\n")
+    atomic_write_text(out / "comparison.md", header + table + "\n")
     write_csv(out / "comparison.csv", records, summaries)
     print()
     print(table)
@@ -112,11 +154,12 @@ def markdown_table(records: list[EpisodeRecord], summaries: list[dict[str, Any]]
 def write_csv(path: Path, records: list[EpisodeRecord], summaries: list[dict[str, Any]]) -> None:
     """The comparison's numbers, one row per controller."""
     keys = list(summaries[0]["values"])
-    with open(path, "w", newline="") as stream:
-        writer = csv.writer(stream)
-        writer.writerow(["controller"] + keys)
-        for record, summary in zip(records, summaries):
-            writer.writerow([record.name] + [summary["values"][key] for key in keys])
+    stream = io.StringIO(newline="")
+    writer = csv.writer(stream)
+    writer.writerow(["controller"] + keys)
+    for record, summary in zip(records, summaries):
+        writer.writerow([record.name] + [summary["values"][key] for key in keys])
+    atomic_write_text(path, stream.getvalue())
 
 
 def plot_energy(records: list[EpisodeRecord], path: Path, env_id: str) -> None:
@@ -140,7 +183,8 @@ def plot_energy(records: list[EpisodeRecord], path: Path, env_id: str) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with atomic_write(path) as temporary:
+        fig.savefig(temporary, dpi=120, format="png")
     plt.close(fig)
 
 
@@ -162,24 +206,55 @@ def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, sat
     axes[0].set_title(f"{env_id}: satellite {satellite} displacement from nominal, episode seed {records[0].seeds[0]}")
     axes[0].legend(ncol=3, fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with atomic_write(path) as temporary:
+        fig.savefig(temporary, dpi=120, format="png")
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS))
-    parser.add_argument("--controllers", nargs="+", help="baseline names, shipped model names or model paths "
+def _int_at_least(minimum: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}; got {value}")
+        return value
+
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.compare", description=__doc__.split("\n\n")[0].replace("``", ""),
+        epilog="Trust: shipped and agents.train models are JSON + safetensors and load without running code. "
+               "A pickle-based SB3 model (.zip + vecnormalize.pkl) runs any code a crafted file contains when "
+               "loaded: it is refused unless --trust-pickle is given (python -m agents.convert makes a safe copy).",
+    )
+    parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS), metavar="ID",
+                        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})")
+    parser.add_argument("--controllers", nargs="+", help="baseline names, shipped model names or policy directories "
                         "(default: every baseline and every shipped model of the id)")
-    parser.add_argument("--episodes", type=int, default=64)
-    parser.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
-    parser.add_argument("--satellite", type=int, default=0, help="satellite of the displacement plot")
-    parser.add_argument("--out", default="outputs/compare")
+    parser.add_argument("--episodes", type=_int_at_least(2), default=64)
+    parser.add_argument("--seed", type=_int_at_least(0), default=HELD_OUT_SEED, help="first held-out seed")
+    parser.add_argument("--satellite", type=_int_at_least(0), default=0, help="satellite of the displacement plot")
+    parser.add_argument("--out", default="outputs/compare", help="output directory (default outputs/compare)")
     parser.add_argument("--no-plots", action="store_true")
-    args = parser.parse_args(argv)
-    compare(env_id=args.env, controllers=args.controllers, episodes=args.episodes, seed=args.seed, out=args.out,
-            satellite=args.satellite, plots=not args.no_plots)
+    parser.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")
+    parser.add_argument("--trust-pickle", action="store_true",
+                        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
+    args = build_parser().parse_args(argv)
+    return compare(env_id=args.env, controllers=args.controllers, episodes=args.episodes, seed=args.seed,
+                   out=args.out, satellite=args.satellite, plots=not args.no_plots, force=args.force,
+                   trust_pickle=args.trust_pickle)
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError) as error:
+        sys.exit(f"agents.compare: error: {error}")

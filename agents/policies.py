@@ -1,74 +1,95 @@
-"""Controllers by name: the scripted baselines, and trained SB3 models loaded from disk."""
+"""Controllers by name: the scripted baselines, and trained policies loaded from disk.
+
+Trained policies are read from the safe format of :mod:`agents.safe_format` (JSON metadata,
+safetensors weights, JSON normalisation statistics), which cannot run code on load. The
+pickle-based SB3 files (``model.zip`` + ``vecnormalize.pkl``) are loaded only with
+``trust_pickle=True`` (see :mod:`agents.pickled`).
+"""
 
 from __future__ import annotations
 
-import pickle
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from agents.baselines import BASELINES, make_baseline
+from agents.pickled import is_pickle_model, load_pickled_model, refuse_untrusted
+from agents.safe_format import METADATA_FILE, MANIFEST_FILE, is_policy_dir, load_policy
 
-__all__ = ["MODELS_DIR", "TrainedPolicy", "make_controller", "shipped_models"]
+__all__ = ["MODELS_DIR", "TrainedPolicy", "is_shipped", "make_controller", "shipped_models"]
 
-#: Where the repository keeps its trained models: ``<env id>/<name>/model.zip``.
+#: Where the repository keeps its trained models: ``<env id>/<name>/policy.json`` and the rest of
+#: the safe format, with a ``MANIFEST.sha256`` that every load verifies.
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 
 
+def is_shipped(directory: str | Path) -> bool:
+    """Whether ``directory`` is inside the repository's :data:`MODELS_DIR` (then its manifest is
+    required and verified on load)."""
+    try:
+        Path(directory).resolve().relative_to(MODELS_DIR)
+    except ValueError:
+        return False
+    return True
+
+
 class TrainedPolicy:
-    """A trained SB3 model with its ``VecNormalize`` observation statistics, as a policy with
-    the baselines' interface (``predict(observation, deterministic=True)``, for one observation
-    or a batch).
+    """A trained SB3 policy with its ``VecNormalize`` observation statistics, as a policy with the
+    baselines' interface (``predict(observation, deterministic=True)``, for one observation or a
+    batch).
 
     Args:
-        path: a ``model.zip``, or a run directory holding ``model.zip`` (``best/best_model.zip``
-            is used when ``best=True``). ``vecnormalize.pkl`` next to the model is applied to
-            observations when present, and ``config.yml`` in the run directory names the
-            algorithm.
-        best: load ``best/best_model.zip`` of a run directory instead of the final model.
+        path: a policy directory in the safe format (a run directory written by
+            ``agents.train``, its ``best/``, a checkpoint directory, or a shipped model), or its
+            ``policy.json``. A pickle-based SB3 ``.zip`` (or a directory holding ``model.zip`` and
+            ``vecnormalize.pkl``) is loaded only with ``trust_pickle``.
+        best: load the run directory's ``best/`` policy instead of the final one.
         name: the name shown in tables (default: the algorithm, e.g. ``"ppo"``).
+        trust_pickle: allow loading pickle-based SB3 files, which can run arbitrary code; a
+            :class:`agents.pickled.PickleTrustWarning` is emitted when it happens.
+
+    Raises:
+        FileNotFoundError: nothing loadable at ``path``.
+        agents.pickled.PickleNotTrustedError: a pickle-based model without ``trust_pickle``.
+        agents.safe_format.PolicyFormatError: a malformed policy directory, or (ChecksumError) a
+            file that does not match its manifest.
     """
 
-    def __init__(self, path: str | Path, best: bool = False, name: str | None = None) -> None:
-        from agents.train import ALGORITHMS
-
+    def __init__(self, path: str | Path, best: bool = False, name: str | None = None,
+                 trust_pickle: bool = False) -> None:
         path = Path(path)
-        if path.is_dir():
-            path = path / "best" / "best_model.zip" if best else path / "model.zip"
-        if not path.is_file():
+        if path.name == METADATA_FILE and path.is_file():
+            path = path.parent
+        directory = path / "best" if best and path.is_dir() else path
+        if is_policy_dir(directory):
+            loaded = load_policy(directory, require_manifest=is_shipped(directory))
+            self.policy = loaded.policy
+            self.normalizer: Any = loaded.normalizer
+            self.algo: str = loaded.metadata["algo"]
+            self.env_id: str | None = loaded.metadata["env_id"]
+            self.metadata: dict[str, Any] = loaded.metadata
+            self.path = directory
+        elif is_pickle_model(path):
+            if not trust_pickle:
+                refuse_untrusted(path)
+            model, normalizer, config, files = load_pickled_model(path, trust_pickle=True, best=best)
+            self.policy = model.policy
+            self.normalizer = normalizer
+            self.algo = config["algo"]
+            self.env_id = config.get("env_id")
+            self.metadata = {"algo": self.algo, "env_id": self.env_id, "num_timesteps": int(model.num_timesteps)}
+            self.path = files[0]
+        elif path.exists():
             raise FileNotFoundError(
-                f"no trained model at {path}: pass a model .zip or a run directory written by agents.train"
+                f"{directory} holds no trained policy: pass a directory written by agents.train or agents.convert "
+                f"(it has {METADATA_FILE})"
             )
-        run = path.parent.parent if path.parent.name == "best" else path.parent
-        config_file = run / "config.yml"
-        config = yaml.safe_load(config_file.read_text()) if config_file.is_file() else {}
-        algo = config.get("algo")
-        if algo is None:  # not written by agents.train: try every algorithm
-            for candidate, cls in ALGORITHMS.items():
-                try:
-                    self.model = cls.load(str(path), device="cpu")
-                    algo = candidate
-                    break
-                except Exception:  # noqa: BLE001 - the wrong class fails in several ways
-                    continue
-            else:
-                raise ValueError(f"{path} is not a model of any of {sorted(ALGORITHMS)}")
         else:
-            if algo not in ALGORITHMS:
-                raise ValueError(f"{config_file} names algorithm {algo!r}; known: {sorted(ALGORITHMS)}")
-            self.model = ALGORITHMS[algo].load(str(path), device="cpu")
-        self.algo = algo
-        self.env_id = config.get("env_id")
-        self.path = path
-        self.name = name or algo
-        statistics = path.with_name("vecnormalize.pkl")
-        self.normalizer = None
-        if statistics.is_file():
-            with open(statistics, "rb") as stream:
-                self.normalizer = pickle.load(stream)  # a VecNormalize without its venv
-        self.observation_size = int(np.prod(self.model.observation_space.shape))
+            raise FileNotFoundError(f"no trained policy at {path}: no such file or directory")
+        self.name = name or self.algo
+        self.observation_shape: tuple[int, ...] = tuple(self.policy.observation_space.shape)
+        self.observation_size = int(np.prod(self.observation_shape))
 
     @property
     def saturation_fraction(self) -> float:
@@ -85,37 +106,62 @@ class TrainedPolicy:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        """SB3's ``predict`` on the normalised observation: ``(actions, state)``."""
+        """The policy's ``predict`` on the normalised observation: ``(actions, state)``.
+
+        ``observation`` is (obs_dim,) or (N, obs_dim), in the env's units; actions are
+        (act_dim,) or (N, act_dim), in [-1, 1]."""
         obs = np.asarray(observation, dtype=np.float32)
-        if obs.shape[-1] != self.observation_size or obs.ndim not in (1, 2):
+        if obs.shape[-1:] != (self.observation_size,) or obs.ndim not in (1, 2):
             raise ValueError(
                 f"observation must have shape ({self.observation_size},) or (N, {self.observation_size}) "
                 f"for this model; got {obs.shape}"
             )
         if self.normalizer is not None:
             obs = self.normalizer.normalize_obs(obs).astype(np.float32)
-        return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        return self.policy.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
 
 def shipped_models(env_id: str) -> dict[str, Path]:
-    """The repository's trained models for ``env_id``: name -> run directory."""
+    """The repository's trained models for ``env_id``: name -> policy directory (those with a
+    ``policy.json`` and a ``MANIFEST.sha256``)."""
     root = MODELS_DIR / env_id
     if not root.is_dir():
         return {}
-    return {run.name: run for run in sorted(root.iterdir()) if (run / "model.zip").is_file()}
+    return {run.name: run for run in sorted(root.iterdir())
+            if (run / METADATA_FILE).is_file() and (run / MANIFEST_FILE).is_file()}
 
 
-def make_controller(spec: str, env: Any) -> Any:
+def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
     """A controller from a name: a baseline (``passive``, ``velocity_feedback``, ``lqr``,
-    ``tension_aware``), a shipped model of the env's id (e.g. ``ppo``), or a path to a model
-    .zip or run directory."""
+    ``tension_aware``), a shipped model of the env's id (e.g. ``ppo``), or a path to a policy
+    directory (a pickle-based SB3 model only with ``trust_pickle``).
+
+    Raises ValueError naming ``spec`` when it is none of these, or when the policy's
+    observations do not fit ``env``'s."""
+    if not isinstance(spec, str) or not spec:
+        raise ValueError(f"controller must be a non-empty name or path; got {spec!r}")
     if spec in BASELINES:
         return make_baseline(spec, env)
     env_id = getattr(getattr(env, "spec", None), "id", None)
-    if env_id is not None and spec in shipped_models(env_id):
-        return TrainedPolicy(shipped_models(env_id)[spec], name=spec)
-    path = Path(spec)
-    if path.exists():
-        return TrainedPolicy(path)
-    known = sorted(BASELINES) + (sorted(shipped_models(env_id)) if env_id else [])
-    raise ValueError(f"unknown controller {spec!r}: not one of {known}, and no such file or directory")
+    shipped = shipped_models(env_id) if env_id is not None else {}
+    if spec in shipped:
+        controller = TrainedPolicy(shipped[spec], name=spec)
+    elif Path(spec).exists():
+        if is_pickle_model(spec) and not trust_pickle:
+            refuse_untrusted(spec, opt_in="--trust-pickle")
+        controller = TrainedPolicy(spec, trust_pickle=trust_pickle)
+    else:
+        known = sorted(BASELINES) + sorted(shipped)
+        raise ValueError(
+            f"unknown controller {spec!r}: not one of {known}, and no such file or directory "
+            f"(pass a baseline name, a shipped model name, or the path of a policy directory)"
+        )
+    observation_space = getattr(env, "single_observation_space", None) or getattr(env, "observation_space", None)
+    shape = tuple(getattr(observation_space, "shape", ()) or ())
+    if shape and shape != controller.observation_shape:
+        raise ValueError(
+            f"controller {spec!r} takes observations of shape {controller.observation_shape}, but "
+            f"{env_id or 'the env'} gives {shape}: pass a model trained on this id"
+            + (f" (it was trained on {controller.env_id})" if controller.env_id else "")
+        )
+    return controller

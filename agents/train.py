@@ -1,19 +1,29 @@
 """Train an SB3 agent on a tether-gym id: ``python -m agents.train --algo ppo --env TetherTetrahedron-v0``.
 
 Hyperparameters come from ``agents/hyperparams/<algo>.yml``, keyed by env id (rl-zoo style, plain
-YAML, nothing evaluated). Training runs on the native vector env through the SB3 adapter, with
-``VecNormalize`` when configured and ``VecMonitor`` for episode statistics. A run directory
-``<out>/<env>/<algo>_seed<seed>/`` receives:
+YAML, nothing evaluated). Every entry is checked before training starts: an unknown key, a missing
+``n_timesteps`` or a string where a number belongs is an error that names the key. Training runs
+on the native vector env through the SB3 adapter, with ``VecNormalize`` when configured and
+``VecMonitor`` for episode statistics. A run directory ``<out>/<env>/<algo>_seed<seed>/`` receives,
+all of it in the safe policy format (:mod:`agents.safe_format`: JSON and safetensors, no pickle):
 
 * ``config.yml``: the resolved hyperparameters, env id, seed and command line;
 * ``tensorboard/``: TensorBoard logs (``tensorboard --logdir <run>/tensorboard``);
-* ``checkpoints/``: the model and its ``VecNormalize`` statistics every ``--checkpoint-freq`` steps;
-* ``best/``: the best model on the evaluation episodes (``best_model.zip`` + ``vecnormalize.pkl``),
-  and ``evaluations.npz``;
-* ``model.zip`` and ``vecnormalize.pkl``: the final model and its normalisation statistics.
+* ``checkpoints/<algo>_<steps>_steps/``: the policy, its ``VecNormalize`` statistics and the
+  optimizer state every ``--checkpoint-freq`` steps;
+* ``best/``: the best policy on the evaluation episodes (with its statistics and optimizer
+  state), and ``evaluations.npz``;
+* ``policy.json``, ``policy.safetensors``, ``normalization.json``, ``training.*`` and
+  ``MANIFEST.sha256``: the final policy.
 
-``--resume <checkpoint.zip>`` continues a run from a checkpoint, with the ``VecNormalize``
-statistics saved next to it, and keeps counting timesteps from there.
+``--resume DIR`` continues from a checkpoint directory, ``best/`` or a run directory: the weights,
+optimizer states, timestep count and normalisation statistics are restored, and the timesteps
+keep counting from there. Resuming from a pickle-based SB3 ``.zip`` (with its ``vecnormalize.pkl``)
+needs ``--trust-pickle``, because unpickling runs any code a crafted file contains.
+
+The run directory must be new: if it holds an earlier run (same ``--out``, env, algorithm and
+seed), the command stops before any work unless ``--force`` is given, which deletes the earlier
+run's models, ``best/`` and checkpoints (TensorBoard logs are kept) and then trains.
 
 ``--curriculum START FRACTION`` (or a ``curriculum: {start: ..., fraction: ...}`` entry) trains on
 easier episodes first: the env's ``difficulty`` (initial-condition size, randomisation and
@@ -24,75 +34,375 @@ evaluation episodes are always at difficulty 1.
 from __future__ import annotations
 
 import argparse
+import difflib
+import inspect
 import shlex
+import shutil
 import sys
 import time
+import types
+import typing
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-import torch
 import yaml
-from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback, EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 import tether_gym
+from agents.files import (
+    OutputError,
+    OutputExistsError,
+    atomic_write_text,
+    check_no_symlinks_inside,
+    prepare_output_dir,
+)
+from agents.pickled import (
+    PickleNotTrustedError,
+    is_pickle_model,
+    load_pickled_model,
+    normalization_file_of,
+    refuse_untrusted,
+    sb3_model_file,
+)
+from agents.safe_format import (
+    ACTIVATIONS,
+    ALGORITHMS,
+    CLASS_KWARGS,
+    METADATA_FILE,
+    POLICY_FILES,
+    PolicyFormatError,
+    is_policy_dir,
+    load_training_state,
+    save_policy,
+)
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
-__all__ = ["ALGORITHMS", "load_hyperparameters", "make_training_env", "train"]
+__all__ = ["ACTIVATIONS", "ALGORITHMS", "HyperparameterError", "load_hyperparameters", "make_training_env", "train",
+           "validate_hyperparameters"]
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
-ACTIVATIONS: dict[str, type[torch.nn.Module]] = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}
 #: Keys of a hyperparameter entry that are not passed to the algorithm's constructor.
 RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs", "curriculum")
+#: Constructor arguments that agents.train sets itself, and where the user sets them instead.
+CONTROLLED_KEYS = {
+    "env": "the env comes from --env", "seed": "use --seed", "device": "training runs on the CPU",
+    "verbose": "use --verbose", "tensorboard_log": "logs go to <run>/tensorboard", "_init_setup_model": "internal to SB3",
+}
+#: Keys that take a number or "lin_<number>" (linear decay to 0 over training).
+SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 #: Seeds of the evaluation episodes are offset from the training seed by this much, so that they
 #: are never episodes the agent trained on.
 EVAL_SEED_OFFSET = 1_000_000
+#: Files an earlier run of agents.train may have left (this format and the pickle-based one).
+LEGACY_RUN_FILES = ("model.zip", "vecnormalize.pkl")
+LEGACY_BEST_FILES = ("best_model.zip", "vecnormalize.pkl", "evaluations.npz")
 
+
+class HyperparameterError(ValueError):
+    """A hyperparameter file or entry that cannot be trained with; the message names the key."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Hyperparameters
+# ---------------------------------------------------------------------------------------------
 
 def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The hyperparameters of ``algo`` for ``env_id``: the id's entry of the YAML file, or its
-    ``default`` entry. ``path`` overrides ``agents/hyperparams/<algo>.yml``."""
+    """The checked hyperparameters of ``algo`` for ``env_id``: the id's entry of the YAML file, or
+    its ``default`` entry. ``path`` overrides ``agents/hyperparams/<algo>.yml``.
+
+    Raises :class:`HyperparameterError` (naming the file, the entry and the key) for unreadable
+    YAML, a missing entry, a missing ``n_timesteps``, an unknown key, or a value of the wrong
+    type; FileNotFoundError if the file does not exist."""
+    if algo not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
     file = Path(path) if path is not None else HYPERPARAMS_DIR / f"{algo}.yml"
     if not file.is_file():
         raise FileNotFoundError(f"hyperparameter file {file} does not exist")
-    with open(file) as stream:
-        table = yaml.safe_load(stream) or {}
+    try:
+        table = yaml.safe_load(file.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as error:
+        raise HyperparameterError(f"{file} is not UTF-8 text ({error})") from error
+    except yaml.YAMLError as error:
+        raise HyperparameterError(f"{file} is not valid YAML: {error}") from error
+    if table is None:
+        table = {}
     if not isinstance(table, dict):
-        raise ValueError(f"{file} must map env ids to hyperparameter dicts")
-    entry = table.get(env_id, table.get("default"))
-    if entry is None:
-        raise KeyError(f"{file} has no entry for {env_id!r} and no 'default' entry; ids listed: {sorted(table)}")
-    return dict(entry)
+        raise HyperparameterError(f"{file} must map env ids (or 'default') to hyperparameter entries; "
+                                  f"got a {type(table).__name__}")
+    name = env_id if env_id in table else "default"
+    if name not in table:
+        raise HyperparameterError(
+            f"{file} has no entry for {env_id!r} and no 'default' entry; entries: {sorted(map(str, table))}"
+        )
+    entry = table[name]
+    if not isinstance(entry, dict):
+        raise HyperparameterError(f"{file}, entry {name!r}: must be a mapping of hyperparameters; got {entry!r}")
+    return validate_hyperparameters(algo, entry, where=f"{file}, entry {name!r}")
 
 
-def _schedule(value: Any, name: str) -> float | Callable[[float], float]:
-    """A number, or "lin_<number>": linear decay from that number to 0 over training."""
+def _components(annotation: Any) -> tuple[Any, ...]:
+    """The alternatives of a type annotation (``int | None`` -> ``(int, NoneType)``)."""
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        return typing.get_args(annotation)
+    return (annotation,)
+
+
+def _plain(components: tuple[Any, ...]) -> set[Any]:
+    """The annotation's alternatives reduced to what YAML can give: int, float, bool, str, None,
+    dict, tuple (for ``tuple[int, str]``)."""
+    kinds = set()
+    for component in components:
+        origin = typing.get_origin(component) or component
+        if origin in (int, float, bool, str, dict, tuple, type(None)):
+            kinds.add(origin)
+        elif origin is Mapping:
+            kinds.add(dict)
+    return kinds
+
+
+def _number_text_hint(value: str) -> str:
+    try:
+        float(value)
+    except ValueError:
+        return ""
+    return f" (YAML reads {value} as text: write it with a decimal point and a signed exponent, e.g. 1.0e+6)"
+
+
+def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
+    """``value`` checked against ``annotation`` (and converted: integral floats to int where an int
+    is expected, lists to tuples where a tuple is). Raises HyperparameterError naming ``key``."""
+    kinds = _plain(_components(annotation))
+    label = f"{where}: {key!r}"
+    if value is None:
+        if type(None) in kinds:
+            return None
+        raise HyperparameterError(f"{label} is empty; give it a value or remove the key")
+    if isinstance(value, bool):
+        if bool in kinds:
+            return value
+        raise HyperparameterError(f"{label} must be {_describe(kinds)}, not {str(value).lower()}")
+    if isinstance(value, int):
+        if int in kinds:
+            return value
+        if float in kinds:
+            return float(value)
+    elif isinstance(value, float):
+        if float in kinds:
+            return value
+        if int in kinds:
+            if value.is_integer():
+                return int(value)
+            raise HyperparameterError(f"{label} must be an integer; got {value!r}")
+    elif isinstance(value, str):
+        if str in kinds:
+            return value
+        raise HyperparameterError(f"{label} must be {_describe(kinds)}; got the text {value!r}{_number_text_hint(value)}")
+    elif isinstance(value, list) and tuple in kinds:
+        if len(value) == 2 and isinstance(value[0], int) and not isinstance(value[0], bool) and value[1] in (
+                "step", "episode"):
+            return (value[0], value[1])
+        raise HyperparameterError(f"{label} must be an integer or [integer, 'step' or 'episode']; got {value!r}")
+    elif isinstance(value, dict) and dict in kinds:
+        if not all(isinstance(name, str) for name in value):
+            raise HyperparameterError(f"{label} must have string keys; got {list(value)}")
+        return value
+    if not kinds - {type(None)}:
+        raise HyperparameterError(f"{label} cannot be set from a YAML file (it takes a Python object)")
+    raise HyperparameterError(f"{label} must be {_describe(kinds)}; got {value!r} ({type(value).__name__})")
+
+
+def _describe(kinds: set[Any]) -> str:
+    names = {int: "an integer", float: "a number", bool: "true or false", str: "text", dict: "a mapping",
+             tuple: "[integer, 'step' or 'episode']", type(None): "empty"}
+    if float in kinds:
+        kinds = kinds - {int}
+    return " or ".join(names[kind] for kind in sorted(kinds, key=lambda kind: list(names).index(kind)))
+
+
+def _unknown_key(key: str, known: list[str], where: str, what: str) -> HyperparameterError:
+    close = difflib.get_close_matches(key, known, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return HyperparameterError(f"{where}: unknown key {key!r}{hint}; {what} accepts {sorted(known)}")
+
+
+def _keyword_parameters(cls: type) -> dict[str, inspect.Parameter]:
+    keyword = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return {name: p for name, p in inspect.signature(cls.__init__).parameters.items()
+            if name != "self" and p.kind in keyword}
+
+
+def _check_range(key: str, value: Any, where: str) -> None:
+    """The ranges SB3 would otherwise reject deep inside, or silently misuse."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return
+    positive = ("n_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "buffer_size", "learning_rate",
+                "clip_range", "train_freq", "policy_delay", "target_update_interval")
+    non_negative = ("learning_starts", "vf_coef", "max_grad_norm", "target_policy_noise", "target_noise_clip")
+    unit = ("gamma", "gae_lambda", "tau")
+    if key in positive and not value > 0:
+        raise HyperparameterError(f"{where}: {key!r} must be positive; got {value!r}")
+    if key in non_negative and not value >= 0:
+        raise HyperparameterError(f"{where}: {key!r} must be >= 0; got {value!r}")
+    if key in unit and not 0 < value <= 1:
+        raise HyperparameterError(f"{where}: {key!r} must be in (0, 1]; got {value!r}")
+
+
+def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "hyperparameters") -> dict[str, Any]:
+    """A copy of ``entry`` with every key checked for ``algo`` (see :func:`load_hyperparameters`);
+    ``where`` (file and entry) starts every message."""
+    if algo not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
+    cls = ALGORITHMS[algo]
+    parameters = _keyword_parameters(cls)
+    accepted = sorted(set(parameters) - {"policy", *CONTROLLED_KEYS} | set(RUN_KEYS))
+    checked: dict[str, Any] = {}
+    policy = entry.get("policy", "MlpPolicy")
+    if not isinstance(policy, str) or policy not in cls.policy_aliases:
+        raise HyperparameterError(f"{where}: 'policy' must be one of {sorted(cls.policy_aliases)}; got {policy!r}")
+    if "n_timesteps" not in entry:
+        raise HyperparameterError(f"{where}: 'n_timesteps' is missing: add the number of env steps to train for "
+                                  f"(e.g. n_timesteps: 2000000), or pass --timesteps")
+    for key, value in entry.items():
+        if not isinstance(key, str):
+            raise HyperparameterError(f"{where}: key {key!r} is not text")
+        if key in CONTROLLED_KEYS:
+            raise HyperparameterError(f"{where}: {key!r} cannot be set in a hyperparameter file: {CONTROLLED_KEYS[key]}")
+        if key == "n_timesteps":
+            checked[key] = _check_value(key, value, int, where)
+        elif key == "n_envs":
+            checked[key] = _check_value(key, value, int, where)
+        elif key == "policy":
+            checked[key] = value
+        elif key == "normalize":
+            checked[key] = _check_normalize(value, where)
+        elif key == "env_kwargs":
+            checked[key] = _check_value(key, value, dict | None, where)
+        elif key == "curriculum":
+            checked[key] = _check_curriculum(value, where)
+        elif key == "policy_kwargs":
+            checked[key] = _check_policy_kwargs(value, cls.policy_aliases[policy], where)
+        elif key in SCHEDULE_KEYS:
+            if value is None and key == "clip_range_vf":
+                checked[key] = None
+            else:
+                _schedule(value, key, where)
+                checked[key] = value
+        elif key in parameters:
+            if key in ("ent_coef", "target_entropy") and isinstance(value, str) and algo == "sac":
+                if not (value == "auto" or key == "ent_coef" and value.startswith("auto_")
+                        and _is_number(value[5:])):
+                    raise HyperparameterError(f"{where}: {key!r} must be a number or 'auto'"
+                                              f"{' or auto_<number>' if key == 'ent_coef' else ''}; got {value!r}")
+                checked[key] = value
+            else:
+                checked[key] = _check_value(key, value, parameters[key].annotation, where)
+        else:
+            raise _unknown_key(key, accepted, where, f"{algo} (with agents.train)")
+        _check_range(key, checked[key], where)
+    return checked
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _check_normalize(value: Any, where: str) -> bool | dict[str, Any]:
+    if isinstance(value, bool):
+        return value
+    if not isinstance(value, dict):
+        raise HyperparameterError(f"{where}: 'normalize' must be true, false or a mapping of VecNormalize "
+                                  f"options; got {value!r}")
+    parameters = {name: p for name, p in _keyword_parameters(VecNormalize).items() if name not in ("venv", "training")}
+    checked = {}
+    for key, option in value.items():
+        if key not in parameters:
+            raise _unknown_key(str(key), list(parameters), f"{where}: normalize", "VecNormalize")
+        checked[key] = _check_value(f"normalize.{key}", option, parameters[key].annotation, where)
+        if key in ("clip_obs", "clip_reward", "epsilon") and not checked[key] > 0:
+            raise HyperparameterError(f"{where}: 'normalize.{key}' must be positive; got {option!r}")
+        _check_range(key, checked[key], f"{where}: normalize")
+    return checked
+
+
+def _check_curriculum(value: Any, where: str) -> dict[str, float] | None:
+    if value is None or value is False:
+        return None
+    if not isinstance(value, dict) or set(value) != {"start", "fraction"}:
+        raise HyperparameterError(f"{where}: 'curriculum' must be a mapping with exactly 'start' and 'fraction'; "
+                                  f"got {value!r}")
+    checked = {key: _check_value(f"curriculum.{key}", value[key], float, where) for key in ("start", "fraction")}
+    if not (0.0 <= checked["start"] <= 1.0 and 0.0 < checked["fraction"] <= 1.0):
+        raise HyperparameterError(f"{where}: 'curriculum' needs start in [0, 1] and fraction in (0, 1]; got {value}")
+    return checked
+
+
+def _check_net_arch(value: Any, where: str) -> Any:
+    def layers(sizes: Any, label: str) -> list[int]:
+        if not isinstance(sizes, list) or not all(isinstance(n, int) and not isinstance(n, bool) and n > 0
+                                                  for n in sizes):
+            raise HyperparameterError(f"{where}: {label!r} must be a list of positive layer sizes; got {sizes!r}")
+        return sizes
+
+    if isinstance(value, dict):
+        return {key: layers(sizes, f"policy_kwargs.net_arch.{key}") for key, sizes in value.items()}
+    return layers(value, "policy_kwargs.net_arch")
+
+
+def _check_policy_kwargs(value: Any, policy_class: type, where: str) -> dict[str, Any]:
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise HyperparameterError(f"{where}: 'policy_kwargs' must be a mapping; got {value!r}")
+    parameters = {name: p for name, p in _keyword_parameters(policy_class).items()
+                  if name not in ("observation_space", "action_space", "lr_schedule")}
+    checked = {}
+    for key, option in value.items():
+        label = f"policy_kwargs.{key}"
+        if key not in parameters:
+            raise _unknown_key(str(key), list(parameters), f"{where}: policy_kwargs", policy_class.__name__)
+        if key in CLASS_KWARGS:
+            if option not in CLASS_KWARGS[key]:
+                raise HyperparameterError(f"{where}: {label!r} must be one of {sorted(CLASS_KWARGS[key])}; got {option!r}")
+            checked[key] = option
+        elif key == "net_arch":
+            checked[key] = _check_net_arch(option, where)
+        else:
+            checked[key] = _check_value(label, option, parameters[key].annotation, where)
+    return checked
+
+
+def _schedule(value: Any, name: str, where: str = "hyperparameters") -> float | Callable[[float], float]:
+    """A positive number, or "lin_<number>": linear decay from that number to 0 over training."""
     if isinstance(value, str):
-        if not value.startswith("lin_"):
-            raise ValueError(f"{name} must be a number or 'lin_<number>'; got {value!r}")
+        if not (value.startswith("lin_") and _is_number(value[4:]) and float(value[4:]) > 0):
+            raise HyperparameterError(f"{where}: {name!r} must be a positive number or 'lin_<number>' "
+                                      f"(linear decay to 0); got {value!r}{_number_text_hint(value)}")
         start = float(value[4:])
         return lambda progress_remaining: progress_remaining * start
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        raise HyperparameterError(f"{where}: {name!r} must be a positive number or 'lin_<number>'; got {value!r}")
     return float(value)
 
 
 def _algorithm_kwargs(hyperparams: Mapping[str, Any]) -> dict[str, Any]:
-    """Constructor keyword arguments from a hyperparameter entry: schedules and policy_kwargs
-    turned into Python objects."""
+    """Constructor keyword arguments from a checked hyperparameter entry: schedules and
+    policy_kwargs' class names turned into Python objects."""
     kwargs = {key: value for key, value in hyperparams.items() if key not in RUN_KEYS}
-    for key in ("learning_rate", "clip_range"):
-        if key in kwargs:
+    for key in SCHEDULE_KEYS:
+        if kwargs.get(key) is not None:
             kwargs[key] = _schedule(kwargs[key], key)
     policy_kwargs = dict(kwargs.get("policy_kwargs") or {})
-    if "activation_fn" in policy_kwargs:
-        name = policy_kwargs["activation_fn"]
-        if name not in ACTIVATIONS:
-            raise ValueError(f"policy_kwargs.activation_fn must be one of {sorted(ACTIVATIONS)}; got {name!r}")
-        policy_kwargs["activation_fn"] = ACTIVATIONS[name]
+    for key, table in CLASS_KWARGS.items():
+        if key in policy_kwargs:
+            policy_kwargs[key] = table[policy_kwargs[key]]
     if policy_kwargs:
         kwargs["policy_kwargs"] = policy_kwargs
     return kwargs
@@ -113,19 +423,32 @@ def make_training_env(
     return venv
 
 
-class SaveNormalizationOnBest(BaseCallback):
-    """Saves the training env's ``VecNormalize`` statistics next to each new best model, so that
-    ``best/`` can be loaded on its own."""
+# ---------------------------------------------------------------------------------------------
+# Callbacks
+# ---------------------------------------------------------------------------------------------
 
-    def __init__(self, path: Path) -> None:
+class SafePolicySaver(BaseCallback):
+    """Saves the model, the training env's ``VecNormalize`` statistics and the optimizer state in
+    the safe format: into ``directory`` on every call (as EvalCallback's ``callback_on_new_best``),
+    or, with ``every`` steps, into ``directory/<prefix>_<timesteps>_steps/`` every ``every``
+    calls (checkpoints)."""
+
+    def __init__(self, directory: Path, env_id: str, provenance: Mapping[str, Any], every: int | None = None,
+                 prefix: str = "") -> None:
         super().__init__()
-        self.path = path
+        self.directory, self.env_id, self.provenance = directory, env_id, dict(provenance)
+        self.every, self.prefix = every, prefix
 
     def _on_step(self) -> bool:
-        normalizer = self.model.get_vec_normalize_env()
-        if normalizer is not None:
-            normalizer.save(str(self.path))
+        if self.every is None:
+            self._save(self.directory)
+        elif self.n_calls % self.every == 0:
+            self._save(self.directory / f"{self.prefix}_{self.num_timesteps}_steps")
         return True
+
+    def _save(self, directory: Path) -> None:
+        save_policy(directory, self.model, self.model.get_vec_normalize_env(), self.env_id, self.provenance,
+                    training_state=True)
 
 
 class DifficultyCurriculum(BaseCallback):
@@ -168,6 +491,96 @@ class DifficultyCurriculum(BaseCallback):
             self.logger.record("curriculum/difficulty", target)
 
 
+# ---------------------------------------------------------------------------------------------
+# The run directory
+# ---------------------------------------------------------------------------------------------
+
+def _earlier_run_files(run: Path) -> list[str]:
+    """What an earlier run left in ``run`` (relative names), empty for a new run directory."""
+    found = [name for name in ("config.yml", METADATA_FILE, *LEGACY_RUN_FILES) if (run / name).exists()]
+    for sub in ("best", "checkpoints"):
+        if (run / sub).is_dir() and any((run / sub).iterdir()):
+            found.append(f"{sub}/")
+    return found
+
+
+def _prepare_run_dir(out: str | Path, env_id: str, algo: str, seed: int, force: bool) -> Path:
+    """The run directory ``out/env_id/algo_seed<seed>``, checked before any work: usable, no
+    symlinks in it, and no earlier run unless ``force``."""
+    out = Path(out)
+    if out.is_symlink():
+        raise OutputError(f"--out {out} is a symlink; refusing to write through it: pass the real directory")
+    run = prepare_output_dir(out / env_id / f"{algo}_seed{seed}", argument="--out")
+    check_no_symlinks_inside(run)
+    earlier = _earlier_run_files(run)
+    if earlier and not force:
+        raise OutputExistsError(
+            f"{run} already holds a run ({', '.join(earlier)}) with the same --out, env, algorithm and seed: pass "
+            f"--force to replace it (its models, best/ and checkpoints/ are deleted; TensorBoard logs are kept), "
+            f"or choose another --seed or --out"
+        )
+    return run
+
+
+def _clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
+    """Delete what an earlier run wrote (models, best/, checkpoints/), except the paths in
+    ``keep`` (the checkpoint being resumed). TensorBoard logs stay: SB3 numbers each run's
+    subdirectory, so they do not mix."""
+    keep = {path.resolve() for path in keep}
+
+    def remove(path: Path) -> None:
+        if path.resolve() in keep or not (path.exists() or path.is_symlink()):
+            return
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+
+    if run.resolve() not in keep:
+        for name in (*POLICY_FILES, *LEGACY_RUN_FILES):
+            remove(run / name)
+    best = run / "best"
+    if best.is_dir() and best.resolve() not in keep:
+        for name in (*POLICY_FILES, *LEGACY_BEST_FILES):
+            remove(best / name)
+    checkpoints = run / "checkpoints"
+    if checkpoints.is_dir():
+        for entry in checkpoints.iterdir():
+            ours = (entry.is_dir() and (entry / METADATA_FILE).is_file()) or (
+                entry.suffix in (".zip", ".pkl") and entry.name.startswith(f"{algo}_"))
+            if ours:
+                remove(entry)
+
+
+def _resume_source(resume: str | Path, trust_pickle: bool) -> tuple[str, Path, set[Path]]:
+    """What ``--resume`` names: ``("safe", policy directory, paths)`` or ``("pickle", model .zip,
+    paths)``, checked before any work (PickleNotTrustedError for a pickle without the opt-in)."""
+    path = Path(resume)
+    if not path.exists():
+        raise FileNotFoundError(f"--resume {path} does not exist: pass a checkpoint directory "
+                                f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory")
+    if is_policy_dir(path):
+        return "safe", path, {path}
+    if is_pickle_model(path):
+        if not trust_pickle:
+            refuse_untrusted(path, opt_in="--trust-pickle")
+        model_file = sb3_model_file(path)
+        statistics = normalization_file_of(model_file)
+        return "pickle", model_file, {model_file} | ({statistics} if statistics else set())
+    raise FileNotFoundError(f"--resume {path} holds no checkpoint: pass a directory with {METADATA_FILE} "
+                            f"(or, with --trust-pickle, an SB3 .zip)")
+
+
+def _positive_int(name: str, value: Any, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
+    return value
+
+
+# ---------------------------------------------------------------------------------------------
+# Training
+# ---------------------------------------------------------------------------------------------
+
 def train(
     algo: str = "ppo",
     env_id: str = DEFAULT_ENV_ID,
@@ -184,84 +597,76 @@ def train(
     progress_bar: bool = True,
     verbose: int = 0,
     command: str | None = None,
+    force: bool = False,
+    trust_pickle: bool = False,
 ) -> Path:
     """Train ``algo`` on ``env_id`` and return the run directory (see the module docstring).
 
     ``timesteps`` and ``num_envs`` override the file's ``n_timesteps``/``n_envs``; ``overrides``
-    replaces any other entries. ``eval_freq`` and ``checkpoint_freq`` count total env steps
-    (over all envs). ``command`` is recorded in ``config.yml`` (the command line, when run as
-    ``python -m agents.train``)."""
+    replaces any other entries (and is checked like the file). ``eval_freq`` and
+    ``checkpoint_freq`` count total env steps (over all envs). ``command`` is recorded in
+    ``config.yml`` (the command line, when run as ``python -m agents.train``). ``force``
+    replaces an earlier run in the same run directory; ``trust_pickle`` allows ``resume`` to be
+    a pickle-based SB3 ``.zip``.
+
+    Every argument, the hyperparameters, the resume source and the run directory are checked
+    before any env is built: errors name the argument or key and the fix."""
     if algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; tether-gym ids are {list(ENV_IDS)}")
+    _positive_int("seed", seed, minimum=0)
+    _positive_int("eval_freq", eval_freq)
+    _positive_int("eval_episodes", eval_episodes)
+    _positive_int("checkpoint_freq", checkpoint_freq)
+    _positive_int("verbose", verbose, minimum=0)
     hyperparams = load_hyperparameters(algo, env_id, hyperparams_file)
     hyperparams.update(overrides or {})
     if timesteps is not None:
-        hyperparams["n_timesteps"] = int(timesteps)
+        hyperparams["n_timesteps"] = _positive_int("timesteps", timesteps)
     if num_envs is not None:
-        hyperparams["n_envs"] = int(num_envs)
+        hyperparams["n_envs"] = _positive_int("num_envs", num_envs)
+    hyperparams = validate_hyperparameters(algo, hyperparams, where="hyperparameters (with overrides)")
     n_envs = int(hyperparams.get("n_envs", 1))
     total = int(hyperparams["n_timesteps"])
-    if n_envs < 1 or total < 1:
-        raise ValueError(f"n_envs and n_timesteps must be positive; got {n_envs} and {total}")
-    run = Path(out) / env_id / f"{algo}_seed{seed}"
-    run.mkdir(parents=True, exist_ok=True)
+    resume_kind, resume_path, keep = _resume_source(resume, trust_pickle) if resume is not None else (None, None, set())
+    run = _prepare_run_dir(out, env_id, algo, seed, force)
+
     record = {
         "algo": algo, "env_id": env_id, "seed": seed, "hyperparams": hyperparams,
-        "command": command,
+        "command": command, "resumed_from": str(resume_path) if resume_path else None,
         "tether_gym_version": tether_gym.__version__,
     }
-    with open(run / "config.yml", "w") as stream:
-        yaml.safe_dump(record, stream, sort_keys=False)
-
     normalize = hyperparams.get("normalize", False)
     env_kwargs = hyperparams.get("env_kwargs")
     venv = make_training_env(env_id, n_envs, seed, normalize, env_kwargs)
     eval_envs = min(eval_episodes, 64)
     eval_venv = make_training_env(env_id, eval_envs, seed + EVAL_SEED_OFFSET, normalize, env_kwargs, training=False)
     cls = ALGORITHMS[algo]
-    if resume is not None:
-        checkpoint = Path(resume)
-        if not checkpoint.is_file():
-            raise FileNotFoundError(f"checkpoint {checkpoint} does not exist")
-        if normalize:
-            statistics = _normalization_file_of(checkpoint)
-            venv = VecNormalize.load(str(statistics), venv.venv if isinstance(venv, VecNormalize) else venv)
-            venv.training = True
-        model = cls.load(str(checkpoint), env=venv, device="cpu", tensorboard_log=str(run / "tensorboard"))
-        reset_num_timesteps = False
-    else:
-        model = cls(
-            hyperparams.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu", verbose=verbose,
-            tensorboard_log=str(run / "tensorboard"), **_algorithm_kwargs(hyperparams),
-        )
-        reset_num_timesteps = True
-    (run / "best").mkdir(exist_ok=True)
+    model = _build_model(cls, hyperparams, venv, seed, verbose, run, resume_kind, resume_path)
+    venv = model.get_env()  # a pickle resume wraps the statistics it loaded around the env
+    if force:
+        _clear_earlier_run(run, algo, keep)
+    atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
+    provenance = {"seed": seed, "command": command, "config": "config.yml of the run directory"}
     callback_items: list[BaseCallback] = [
-        CheckpointCallback(
-            save_freq=max(checkpoint_freq // n_envs, 1), save_path=str(run / "checkpoints"), name_prefix=algo,
-            save_vecnormalize=bool(normalize),
-        ),
+        SafePolicySaver(run / "checkpoints", env_id, provenance, every=max(checkpoint_freq // n_envs, 1), prefix=algo),
         EvalCallback(
             eval_venv, n_eval_episodes=eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
-            best_model_save_path=str(run / "best"), log_path=str(run / "best"), deterministic=True,
-            callback_on_new_best=SaveNormalizationOnBest(run / "best" / "vecnormalize.pkl") if normalize else None,
-            verbose=verbose,
+            best_model_save_path=None, log_path=str(run / "best"), deterministic=True,
+            callback_on_new_best=SafePolicySaver(run / "best", env_id, provenance), verbose=verbose,
         ),
     ]
     curriculum = hyperparams.get("curriculum")
     if curriculum:
         callback_items.append(DifficultyCurriculum(curriculum["start"], curriculum["fraction"], total))
-    callbacks = CallbackList(callback_items)
     start = time.perf_counter()
     model.learn(
-        total_timesteps=total, callback=callbacks, progress_bar=progress_bar, tb_log_name=algo,
-        reset_num_timesteps=reset_num_timesteps,
+        total_timesteps=total, callback=CallbackList(callback_items), progress_bar=progress_bar, tb_log_name=algo,
+        reset_num_timesteps=resume_kind is None,
     )
-    model.save(str(run / "model.zip"))
-    if normalize:
-        model.get_vec_normalize_env().save(str(run / "vecnormalize.pkl"))
+    save_policy(run, model, model.get_vec_normalize_env(), env_id, provenance, training_state=True,
+                extra_files=["config.yml"])
     elapsed = time.perf_counter() - start
     print(f"trained {algo} on {env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
           f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}")
@@ -270,51 +675,100 @@ def train(
     return run
 
 
-def _normalization_file_of(checkpoint: Path) -> Path:
-    """The VecNormalize statistics saved with a checkpoint: ``<prefix>_vecnormalize_<steps>_steps.pkl``
-    next to ``<prefix>_<steps>_steps.zip`` (CheckpointCallback's names), or ``vecnormalize.pkl``
-    in the same directory."""
-    stem = checkpoint.stem
-    if stem.endswith("_steps"):
-        prefix, steps = stem[: -len("_steps")].rsplit("_", 1)
-        candidate = checkpoint.with_name(f"{prefix}_vecnormalize_{steps}_steps.pkl")
-        if candidate.is_file():
-            return candidate
-    candidate = checkpoint.with_name("vecnormalize.pkl")
-    if candidate.is_file():
-        return candidate
-    raise FileNotFoundError(f"no VecNormalize statistics found next to {checkpoint}")
+def _build_model(
+    cls: type[BaseAlgorithm], hyperparams: Mapping[str, Any], venv: VecEnv, seed: int, verbose: int, run: Path,
+    resume_kind: str | None, resume_path: Path | None,
+) -> BaseAlgorithm:
+    """A new model, or one resumed from a safe checkpoint directory or (trusted) SB3 ``.zip``."""
+    if resume_kind == "pickle":
+        assert resume_path is not None
+        normalized = isinstance(venv, VecNormalize)
+        model, normalizer, _, _ = load_pickled_model(
+            resume_path, trust_pickle=True, algo=_algo_of(cls), env=venv.venv if normalized else venv,
+            tensorboard_log=str(run / "tensorboard"),
+        )
+        if normalized != (normalizer is not None):
+            raise FileNotFoundError(
+                f"--resume {resume_path}: the hyperparameters' 'normalize' is {'on' if normalized else 'off'}, but "
+                f"{'no' if normalized else 'a'} VecNormalize statistics file was found next to it"
+            )
+        if normalizer is not None:
+            normalizer.training = True
+        return model
+    model = cls(
+        hyperparams.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu", verbose=verbose,
+        tensorboard_log=str(run / "tensorboard"), **_algorithm_kwargs(hyperparams),
+    )
+    if resume_kind == "safe":
+        assert resume_path is not None
+        load_training_state(model, resume_path, venv if isinstance(venv, VecNormalize) else None)
+    return model
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def _algo_of(cls: type[BaseAlgorithm]) -> str:
+    return next(name for name, candidate in ALGORITHMS.items() if candidate is cls)
+
+
+def _int_at_least(minimum: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}; got {value}")
+        return value
+
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.train", description=__doc__.split("\n\n")[0].replace("``", ""),
+        epilog="Trust: runs are written as JSON + safetensors, which load without running code. "
+               "--resume from an SB3 .zip/.pkl unpickles it, which runs any code a crafted file contains: "
+               "it needs --trust-pickle.",
+    )
     parser.add_argument("--algo", default="ppo", choices=sorted(ALGORITHMS))
-    parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS))
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default="runs", help="parent of the run directory")
-    parser.add_argument("--timesteps", type=int, help="override n_timesteps")
-    parser.add_argument("--n-envs", type=int, help="override n_envs")
+    parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS), metavar="ID",
+                        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})")
+    parser.add_argument("--seed", type=_int_at_least(0), default=0)
+    parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/<algo>_seed<seed>")
+    parser.add_argument("--timesteps", type=_int_at_least(1), help="override n_timesteps")
+    parser.add_argument("--n-envs", type=_int_at_least(1), help="override n_envs")
     parser.add_argument("--hyperparams", help="YAML file instead of agents/hyperparams/<algo>.yml")
-    parser.add_argument("--resume", help="checkpoint .zip to continue from")
+    parser.add_argument("--resume", help="checkpoint directory (or run directory, or best/) to continue from")
+    parser.add_argument("--trust-pickle", action="store_true",
+                        help="allow --resume from a pickle-based SB3 .zip + .pkl (unpickling runs any code they hold)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace an earlier run with the same --out, env, algorithm and seed")
     parser.add_argument(
         "--curriculum", nargs=2, type=float, metavar=("START", "FRACTION"),
         help="raise the difficulty from START to 1 over the first FRACTION of the run",
     )
-    parser.add_argument("--eval-freq", type=int, default=50_000, help="env steps between evaluations")
-    parser.add_argument("--eval-episodes", type=int, default=32)
-    parser.add_argument("--checkpoint-freq", type=int, default=250_000, help="env steps between checkpoints")
+    parser.add_argument("--eval-freq", type=_int_at_least(1), default=50_000, help="env steps between evaluations")
+    parser.add_argument("--eval-episodes", type=_int_at_least(1), default=32)
+    parser.add_argument("--checkpoint-freq", type=_int_at_least(1), default=250_000,
+                        help="env steps between checkpoints")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (for logs)")
-    parser.add_argument("--verbose", type=int, default=0)
-    args = parser.parse_args(argv)
-    train(
+    parser.add_argument("--verbose", type=_int_at_least(0), default=0)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> Path:
+    args = build_parser().parse_args(argv)
+    return train(
         algo=args.algo, env_id=args.env, seed=args.seed, out=args.out, timesteps=args.timesteps,
         num_envs=args.n_envs, hyperparams_file=args.hyperparams, resume=args.resume, eval_freq=args.eval_freq,
         overrides={"curriculum": {"start": args.curriculum[0], "fraction": args.curriculum[1]}} if args.curriculum else None,
         eval_episodes=args.eval_episodes, checkpoint_freq=args.checkpoint_freq,
-        progress_bar=not args.no_progress, verbose=args.verbose,
+        progress_bar=not args.no_progress, verbose=args.verbose, force=args.force, trust_pickle=args.trust_pickle,
         command=shlex.join(["python", "-m", "agents.train", *(sys.argv[1:] if argv is None else argv)]),
     )
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (PickleNotTrustedError, OutputError, PolicyFormatError, HyperparameterError, ValueError, OSError) as error:
+        sys.exit(f"agents.train: error: {error}")

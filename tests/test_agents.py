@@ -173,28 +173,30 @@ def trained_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_training_smoke_writes_everything(trained_run: Path) -> None:
-    for name in ("config.yml", "model.zip", "vecnormalize.pkl", "best/best_model.zip", "best/vecnormalize.pkl",
-                 "best/evaluations.npz"):
+    safe = ("policy.json", "policy.safetensors", "normalization.json", "training.safetensors", "training.json",
+            "MANIFEST.sha256")
+    for name in ("config.yml", *safe, *(f"best/{name}" for name in safe), "best/evaluations.npz"):
         assert (trained_run / name).is_file(), name
     assert any((trained_run / "tensorboard").rglob("events.out.tfevents.*"))
-    assert sorted(p.name for p in (trained_run / "checkpoints").iterdir()) == [
-        "ppo_256_steps.zip", "ppo_512_steps.zip", "ppo_vecnormalize_256_steps.pkl", "ppo_vecnormalize_512_steps.pkl",
-    ]
+    assert sorted(p.name for p in (trained_run / "checkpoints").iterdir()) == ["ppo_256_steps", "ppo_512_steps"]
+    for checkpoint in (trained_run / "checkpoints").iterdir():
+        assert sorted(p.name for p in checkpoint.iterdir()) == sorted(safe)
+    # Nothing the project writes is a pickle.
+    assert not [p for p in trained_run.rglob("*") if p.suffix in (".zip", ".pkl", ".pt", ".pth")]
     policy = TrainedPolicy(trained_run)
     obs = np.zeros((3,) + gym.make("TetherTetrahedron-v0").observation_space.shape, dtype=np.float32)
     actions, _ = policy.predict(obs)
     assert actions.shape == (3, 12)
+    assert TrainedPolicy(trained_run, best=True).metadata["num_timesteps"] in (256, 512)
 
 
 def test_training_resumes_from_a_checkpoint(trained_run: Path, tmp_path: Path) -> None:
     run = train(
         "ppo", "TetherTetrahedron-v0", seed=0, out=tmp_path, timesteps=256, num_envs=4,
-        overrides={"n_steps": 64, "batch_size": 64}, resume=trained_run / "checkpoints" / "ppo_256_steps.zip",
+        overrides={"n_steps": 64, "batch_size": 64}, resume=trained_run / "checkpoints" / "ppo_256_steps",
         eval_freq=10_000, eval_episodes=2, checkpoint_freq=10_000, progress_bar=False,
     )
-    from stable_baselines3 import PPO
-
-    assert PPO.load(run / "model.zip").num_timesteps == 512  # 256 from the checkpoint + 256 more
+    assert TrainedPolicy(run).metadata["num_timesteps"] == 512  # 256 from the checkpoint + 256 more
 
 
 def test_curriculum_raises_the_training_difficulty_on_schedule(tmp_path: Path) -> None:

@@ -1,0 +1,240 @@
+"""Convert a pickle-based SB3 model to the safe policy format:
+``python -m agents.convert SRC DST --trust-pickle``.
+
+``SRC`` is an SB3 run directory (``model.zip`` and ``vecnormalize.pkl``, or with ``--best``
+``best/best_model.zip``) or a model ``.zip`` (its statistics are found next to it). Converting
+unpickles ``SRC``, which runs any code a crafted file contains, so it needs ``--trust-pickle``:
+convert only files you made or trust. The result, ``DST``, holds ``policy.json``,
+``policy.safetensors``, ``normalization.json``, the run's ``config.yml`` (provenance) and a
+``MANIFEST.sha256``, and loads without unpickling anything.
+
+Before writing, the converter loads the converted policy back and checks that its actions are
+bit-identical to the SB3 original's on ``--check-observations`` observations (env observations
+along the original's own trajectories, and draws around the normalisation statistics).
+``--reference`` also keeps those observations and actions in ``DST/reference_actions.safetensors``
+so that tests can check the shipped policy against the original long after the pickle files are
+gone. ``--training-state`` keeps the optimizer states, so that ``agents.train --resume DST``
+continues training.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from agents.files import OutputError, atomic_write_bytes, check_output_files, prepare_output_dir
+from agents.pickled import (
+    PickleNotTrustedError,
+    is_pickle_model,
+    load_pickled_model,
+    refuse_untrusted,
+    sb3_model_file,
+)
+from agents.safe_format import (
+    MANIFEST_FILE,
+    POLICY_FILES,
+    PolicyFormatError,
+    load_policy,
+    reference_observations,
+    save_policy,
+    tensor_bytes,
+    write_manifest,
+)
+
+__all__ = ["REFERENCE_FILE", "convert", "main"]
+
+REFERENCE_FILE = "reference_actions.safetensors"
+
+
+def _original_actions(model: Any, normalizer: Any, observations: np.ndarray) -> np.ndarray:
+    """The SB3 pipeline the pickle-based files were used with: ``VecNormalize.normalize_obs``,
+    then ``model.predict(deterministic=True)``."""
+    obs = observations.astype(np.float32)
+    if normalizer is not None:
+        obs = normalizer.normalize_obs(obs).astype(np.float32)
+    return model.predict(obs, deterministic=True)[0]
+
+
+def _safe_actions(directory: Path, observations: np.ndarray) -> np.ndarray:
+    loaded = load_policy(directory)
+    obs = observations.astype(np.float32)
+    if loaded.normalizer is not None:
+        obs = loaded.normalizer.normalize_obs(obs).astype(np.float32)
+    return loaded.policy.predict(obs, deterministic=True)[0]
+
+
+def _rollout(model: Any, normalizer: Any, env_id: str, env_kwargs: dict[str, Any] | None) -> Any:
+    """A function ``n -> (n, obs_dim)`` env observations along the original policy's trajectories
+    (8 episodes in parallel, seeds 0-7)."""
+    import gymnasium as gym
+
+    import tether_gym  # noqa: F401 - registers the ids
+
+    def observations(count: int) -> np.ndarray:
+        envs = gym.make_vec(env_id, num_envs=8, **dict(env_kwargs or {}))
+        try:
+            obs, _ = envs.reset(seed=list(range(8)))
+            rows = [obs]
+            while sum(len(r) for r in rows) < count:
+                obs, *_ = envs.step(_original_actions(model, normalizer, obs))
+                rows.append(obs)
+        finally:
+            envs.close()
+        return np.concatenate(rows)[:count]
+
+    return observations
+
+
+def convert(
+    source: str | Path,
+    destination: str | Path,
+    trust_pickle: bool = False,
+    best: bool = False,
+    algo: str | None = None,
+    env_id: str | None = None,
+    training_state: bool = False,
+    check_observations: int = 512,
+    reference: bool = False,
+    force: bool = False,
+) -> Path:
+    """Convert the pickle-based SB3 model ``source`` to the safe format in ``destination`` (see
+    the module docstring); returns ``destination``.
+
+    Raises :class:`agents.pickled.PickleNotTrustedError` without ``trust_pickle`` (before reading
+    anything), :class:`agents.files.OutputError` for an unusable or symlinked ``destination``,
+    :class:`agents.files.OutputExistsError` if it holds an earlier conversion and not ``force``,
+    and :class:`agents.safe_format.PolicyFormatError` if the converted policy's actions differ
+    from the original's."""
+    source, destination = Path(source), Path(destination)
+    if not source.exists():
+        raise FileNotFoundError(f"SRC {source} does not exist")
+    if not is_pickle_model(source):
+        raise ValueError(
+            f"SRC {source} is not a pickle-based SB3 model (a .zip, or a directory holding model.zip); "
+            f"a directory with policy.json is already in the safe format"
+        )
+    if isinstance(check_observations, bool) or not isinstance(check_observations, int) or check_observations < 16:
+        raise ValueError(f"check_observations must be an integer >= 16; got {check_observations!r}")
+    if not trust_pickle:
+        refuse_untrusted(source, opt_in="--trust-pickle")
+    model_file = sb3_model_file(source, best)
+    config_file = next((d / "config.yml" for d in (model_file.parent, model_file.parent.parent)
+                        if (d / "config.yml").is_file()), None)
+    prepare_output_dir(destination, argument="DST")
+    copy_config = config_file is not None and config_file.resolve() != (destination / "config.yml").resolve()
+    outputs = [*POLICY_FILES, REFERENCE_FILE] + (["config.yml"] if copy_config else [])
+    check_output_files(destination, outputs, force=force, argument="DST", what="an earlier conversion")
+
+    model, normalizer, config, files = load_pickled_model(source, trust_pickle=True, best=best, algo=algo)
+    env_id = env_id or config.get("env_id")
+    if env_id is not None:
+        import tether_gym
+
+        if env_id not in tether_gym.ENV_IDS:
+            raise ValueError(f"--env {env_id!r} is not a tether-gym id; ids are {list(tether_gym.ENV_IDS)}")
+    provenance = {
+        "converted_from": [{"file": f.name, "sha256": _sha256(f)} for f in files],
+        "seed": config.get("seed"), "command": config.get("command"),
+    }
+    rng = np.random.default_rng(0)
+    env_kwargs = (config.get("hyperparams") or {}).get("env_kwargs")
+    rollout = _rollout(model, normalizer, env_id, env_kwargs) if env_id is not None else None
+    mean, var = (normalizer.obs_rms.mean, normalizer.obs_rms.var) if normalizer is not None else (0.0, 1.0)
+    observations = reference_observations(check_observations, model.observation_space, mean, var, rng, rollout)
+    expected = _original_actions(model, normalizer, observations)
+
+    # Write into a scratch directory next to DST, check the result there, then move it in.
+    scratch = Path(tempfile.mkdtemp(dir=destination, prefix=".convert-"))
+    try:
+        save_policy(scratch, model, normalizer, env_id, provenance, training_state=training_state)
+        actual = _safe_actions(scratch, observations)
+        if actual.dtype != expected.dtype or actual.tobytes() != expected.tobytes():
+            worst = float(np.max(np.abs(actual.astype(np.float64) - expected)))
+            raise PolicyFormatError(
+                f"the converted policy's actions differ from the original's (largest difference {worst:.3g}); "
+                f"nothing was written to {destination}"
+            )
+        names = [path.name for path in scratch.iterdir() if path.name != MANIFEST_FILE]
+        for name in names:
+            shutil.move(str(scratch / name), str(destination / name))  # same file system: a rename
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    if config_file is not None:
+        if copy_config:
+            atomic_write_bytes(destination / "config.yml", config_file.read_bytes())
+        names.append("config.yml")
+    if reference:
+        atomic_write_bytes(destination / REFERENCE_FILE, tensor_bytes(
+            {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(expected))},
+            metadata={"source": ", ".join(f"{entry['file']} sha256 {entry['sha256']}"
+                                          for entry in provenance["converted_from"]),
+                      "pipeline": "VecNormalize.normalize_obs, then <Algorithm>.predict(deterministic=True)"},
+        ))
+        names.append(REFERENCE_FILE)
+    for stale in set(outputs) - set(names) - {MANIFEST_FILE, "config.yml"}:
+        (destination / stale).unlink(missing_ok=True)  # from an earlier conversion (only reached with --force)
+    write_manifest(destination, names)
+    print(f"converted {', '.join(str(f) for f in files)} -> {destination} "
+          f"({len(observations)} observations checked: identical actions)")
+    return destination
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _at_least(minimum: int) -> Any:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}; got {value}")
+        return value
+
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.convert", description=__doc__.split("\n\n")[0].replace("``", ""),
+        epilog="Converting unpickles SRC: a crafted SRC runs arbitrary code. Convert only files you trust.",
+    )
+    parser.add_argument("source", metavar="SRC", help="SB3 run directory or model .zip")
+    parser.add_argument("destination", metavar="DST", help="directory for the safe format (may be SRC's directory)")
+    parser.add_argument("--trust-pickle", action="store_true",
+                        help="required: SRC is unpickled, which runs any code it contains")
+    parser.add_argument("--best", action="store_true", help="convert SRC/best/best_model.zip")
+    parser.add_argument("--algo", choices=["ppo", "sac", "td3"], help="algorithm, if SRC has no config.yml")
+    parser.add_argument("--env", help="env id, if SRC has no config.yml")
+    parser.add_argument("--training-state", action="store_true", help="keep the optimizer states (for --resume)")
+    parser.add_argument("--check-observations", type=_at_least(16), default=512,
+                        help="observations on which the actions must be bit-identical (default 512)")
+    parser.add_argument("--reference", action="store_true",
+                        help=f"keep those observations and actions in DST/{REFERENCE_FILE}")
+    parser.add_argument("--force", action="store_true", help="replace an earlier conversion in DST")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> Path:
+    args = build_parser().parse_args(argv)
+    return convert(args.source, args.destination, trust_pickle=args.trust_pickle, best=args.best, algo=args.algo,
+                   env_id=args.env, training_state=args.training_state, check_observations=args.check_observations,
+                   reference=args.reference, force=args.force)
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError) as error:
+        sys.exit(f"agents.convert: error: {error}")
