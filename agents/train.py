@@ -76,6 +76,7 @@ from agents.safe_format import (
     PolicyFormatError,
     is_policy_dir,
     load_training_state,
+    read_metadata,
     save_policy,
 )
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
@@ -181,6 +182,8 @@ def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
         if type(None) in kinds:
             return None
         raise HyperparameterError(f"{label} is empty; give it a value or remove the key")
+    if not kinds - {type(None)}:
+        raise HyperparameterError(f"{label} cannot be set from a YAML file (it takes a Python object)")
     if isinstance(value, bool):
         if bool in kinds:
             return value
@@ -210,8 +213,6 @@ def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
         if not all(isinstance(name, str) for name in value):
             raise HyperparameterError(f"{label} must have string keys; got {list(value)}")
         return value
-    if not kinds - {type(None)}:
-        raise HyperparameterError(f"{label} cannot be set from a YAML file (it takes a Python object)")
     raise HyperparameterError(f"{label} must be {_describe(kinds)}; got {value!r} ({type(value).__name__})")
 
 
@@ -552,14 +553,27 @@ def _clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
                 remove(entry)
 
 
-def _resume_source(resume: str | Path, trust_pickle: bool) -> tuple[str, Path, set[Path]]:
+def _resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: str) -> tuple[str, Path, set[Path]]:
     """What ``--resume`` names: ``("safe", policy directory, paths)`` or ``("pickle", model .zip,
-    paths)``, checked before any work (PickleNotTrustedError for a pickle without the opt-in)."""
+    paths)``, checked before any work: PickleNotTrustedError for a pickle without the opt-in,
+    PolicyFormatError for a safe checkpoint of another algorithm or env, or without training state."""
     path = Path(resume)
     if not path.exists():
         raise FileNotFoundError(f"--resume {path} does not exist: pass a checkpoint directory "
                                 f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory")
     if is_policy_dir(path):
+        metadata = read_metadata(path)
+        if metadata["algo"] != algo:
+            raise PolicyFormatError(f"--resume {path} is a {metadata['algo']} checkpoint; resume it with --algo "
+                                    f"{metadata['algo']} (not {algo})")
+        if metadata["env_id"] != env_id:
+            raise PolicyFormatError(f"--resume {path} was trained on {metadata['env_id']}; resume it with --env "
+                                    f"{metadata['env_id']} (not {env_id})")
+        if not metadata["training_state"]:
+            raise PolicyFormatError(
+                f"--resume {path} holds a policy for inference only (no optimizer state): resume from a checkpoint "
+                f"that agents.train wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run directory)"
+            )
         return "safe", path, {path}
     if is_pickle_model(path):
         if not trust_pickle:
@@ -629,7 +643,8 @@ def train(
     hyperparams = validate_hyperparameters(algo, hyperparams, where="hyperparameters (with overrides)")
     n_envs = int(hyperparams.get("n_envs", 1))
     total = int(hyperparams["n_timesteps"])
-    resume_kind, resume_path, keep = _resume_source(resume, trust_pickle) if resume is not None else (None, None, set())
+    resume_kind, resume_path, keep = (_resume_source(resume, trust_pickle, algo, env_id) if resume is not None
+                                      else (None, None, set()))
     run = _prepare_run_dir(out, env_id, algo, seed, force)
 
     record = {
