@@ -4,4 +4,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh "plots,train"
-.venv/bin/python -m agents.compare --out outputs/compare "$@"
+# --force: outputs/compare/ is this script's own output directory, rebuilt from the committed code
+# and models on every run, so a rerun is meant to replace it (agents.compare alone refuses to
+# overwrite an earlier comparison). It applies only to that directory: if the caller picks
+# another place with --out, the command's careful default (no overwriting) stays in force there.
+force=(--force)
+for argument in "$@"; do
+    case "$argument" in --out | --out=*) force=() ;; esac
+done
+.venv/bin/python -m agents.compare --out outputs/compare ${force[@]+"${force[@]}"} "$@"
