@@ -137,6 +137,14 @@ def test_a_bad_render_mode_is_named(render_mode: object) -> None:
         TetherClusterEnv(render_mode=render_mode)  # type: ignore[arg-type]
 
 
+@pytest.mark.xfail(strict=True, reason="presets.py: a float parameter given as an int beyond the float range "
+                   "raises a bare OverflowError in the builder (/work/notes/findings-core.md, 1)")
+def test_a_huge_integer_preset_parameter_gets_a_named_error() -> None:
+    with pytest.raises((ValueError, TypeError)) as error:
+        gym.make(ENV_ID, preset_kwargs={"mass": 10**400})
+    assert_names(error, "mass")
+
+
 def test_settings_are_normalised_to_plain_values() -> None:
     config = TaskConfig(thrusters=np.array([0, 2]), max_thrust=[np.float32(2.0), 1], thruster_failure_window=[1, 2],
                         randomize={"masses": np.float64(0.2)}, thrust_delay=np.int64(3), observe_tensions=np.bool_(True))
@@ -235,14 +243,14 @@ BAD_OPTIONS = [
     ("velocities", np.full((N, 3), -np.inf), "NaN or inf"),
     ("positions", np.zeros(3), "must be an"),
     ("positions", [["a", 1, 2]] * N, "real numbers"),
-    ("positions", [[1, 2]] * 3 + [[1, 2, 3]], "must be an"),  # ragged
+    ("positions", [[1, 2]] * 3 + [[1, 2, 3]], "array of numbers"),  # ragged
     ("velocities", np.ones((N, 3), dtype=complex), "real numbers"),
     ("velocities", np.ones((N, 3), dtype=bool), "real numbers"),
     ("velocities", "fast", "must be an"),
     ("positions", 1e300 * np.ones((N, 3)), "within"),
     ("positions", np.zeros((N, 3)), "on top of each other"),  # every satellite at one point
     ("velocities", 1e5 * np.ones((N, 3)), "limit"),
-    ("velocities", np.full((N, 3), 10**400, dtype=object), "real numbers"),
+    ("velocities", np.full((N, 3), 10**400, dtype=object), "too large"),
 ]
 
 

@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
-from tether_gym.limits import MAX_COORDINATE, MAX_SPEED
+from tether_gym.limits import MAX_COORDINATE, MAX_SPEED, is_real_number, real_array, to_float
 from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, PARALLEL_MIN_BATCH, AdvanceStats, BatchSimulator
 
 __all__ = [
@@ -158,13 +158,9 @@ def _shown(value: Any) -> str:
 
 
 def _real(value: Any) -> float | None:
-    """``value`` as a float if it is a real number (not a bool, not a string), else None."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        return None
-    try:
-        return float(value)
-    except OverflowError:  # an int beyond the float range
-        return math.inf
+    """``value`` as a float if it is a real number (not a bool, not a string), else None; an int
+    beyond the float range becomes +-inf, so that the range checks refuse it by name."""
+    return to_float(value) if is_real_number(value) else None
 
 
 def _interval(low: float, high: float, low_open: bool, unit: str) -> str:
@@ -249,22 +245,16 @@ def check_seed(name: str, value: Any) -> int | None:
 
 
 def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
-    """``value`` as a float64 array (any shape; the caller checks it and finiteness), or an
-    :class:`EnvArgumentError` naming ``name`` if it is not an array of real numbers: bools,
-    complex numbers, strings, None, dicts and ragged lists are rejected."""
-    if isinstance(value, np.ndarray) and value.dtype.kind in "iuf":
-        raw = value
-    else:
-        if isinstance(value, (str, bytes, Mapping)):
-            raise EnvArgumentError(f"{name} must be {what}; got {_shown(value)}")
-        try:
-            raw = np.asarray(value)
-        except (TypeError, ValueError, OverflowError) as error:
-            raise EnvArgumentError(f"{name} must be {what}; got {_shown(value)} ({error})") from None
-        if raw.dtype.kind not in "iuf":
-            raise EnvArgumentError(f"{name} must be {what}, of real numbers; got {_shown(value)} (dtype {raw.dtype})")
-    with np.errstate(over="ignore", invalid="ignore"):  # longdouble beyond float64 becomes inf: caught by the caller
-        return raw.astype(np.float64, copy=False)
+    """``value`` as a float64 array (any shape; the caller checks the shape and that it is
+    finite), or an :class:`EnvArgumentError` naming ``name`` if it is not made of real numbers:
+    bools, complex numbers, strings, None, dicts and ragged lists are refused (by
+    :func:`tether_gym.limits.real_array`, which also refuses NaN in anything but an array)."""
+    if isinstance(value, np.ndarray) and value.dtype.kind in "iuf":  # the hot path of every step
+        with np.errstate(over="ignore", invalid="ignore"):  # longdouble beyond float64 becomes inf: caught by the caller
+            return value.astype(np.float64, copy=False)
+    if isinstance(value, (str, bytes, Mapping)):
+        raise EnvArgumentError(f"{name} must be {what}; got {_shown(value)}")
+    return real_array(name, value, EnvArgumentError, allow_inf=True)
 
 
 def check_difficulty(difficulty: Any) -> float:
@@ -537,7 +527,8 @@ class TaskConfig:
                     f"shortest cable ({scales.shortest_cable:.3g} m)"
                     + (" swinging at the fastest cable frequency" if unit == "m/s" else "")
                     + "; beyond it the cluster folds instead of vibrating.  The lower limit keeps the reward's energy "
-                    "scale (the mean energy at reset) meaningful"
+                    f"scale (the mean energy at reset) meaningful.  Pass {name} within the range (the default, "
+                    f"{TaskConfig.__dataclass_fields__[name].default:g} {unit}, suits the presets' scales)"
                 )
         self._check_substeps(scales)
         return scales
