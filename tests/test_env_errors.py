@@ -383,6 +383,25 @@ def test_bad_vector_sizes_are_named(kwargs: dict, name: str) -> None:
         TetherClusterVectorEnv(**kwargs)
 
 
+def test_the_vector_env_refuses_a_render_mode_and_a_bad_time_limit_set_later() -> None:
+    with pytest.raises(EnvArgumentError, match="render_mode must be None"):
+        gym.make_vec(ENV_ID, num_envs=2, render_mode="rgb_array")
+    env = make_sb3_vec_env(ENV_ID, 2, seed=0)
+    for steps in ("10", 0, 2.5, True):
+        with pytest.raises(EnvArgumentError, match="max_episode_steps"):
+            env.set_attr("max_episode_steps", steps)
+    env.set_attr("max_episode_steps", 2)
+    env.reset()
+    for expected in (False, True):
+        env.step_async(np.zeros((2, 12), np.float32))
+        assert env.step_wait()[2].all() == expected
+
+
+def test_validate_needs_a_cluster() -> None:
+    with pytest.raises(TypeError, match="cluster must be a tether_gym.Cluster"):
+        TaskConfig().validate("tetrahedron")  # type: ignore[arg-type]
+
+
 def test_bad_vector_actions_are_named() -> None:
     envs = TetherClusterVectorEnv(num_envs=2)
     envs.reset(seed=0)

@@ -502,6 +502,8 @@ class TaskConfig:
                 cluster's scales, or a control interval needing more sub-steps than the
                 simulator allows.
         """
+        if not isinstance(cluster, Cluster):
+            raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
         n = cluster.num_nodes
         for name, indices in (("thrusters", self.thrusters), ("observed_satellites", self.observed_satellites)):
             bad = [i for i in indices or () if i >= n]

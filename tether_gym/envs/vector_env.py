@@ -53,7 +53,9 @@ class TetherClusterVectorEnv(VectorEnv):
 
     Args:
         num_envs: N.
-        max_episode_steps: truncation after this many steps (``gym.make_vec`` passes the id's).
+        max_episode_steps: truncation after this many steps (``gym.make_vec`` passes the id's);
+            None: never. Checked whenever it is set (also through SB3's ``set_attr``).
+        render_mode: must be None (the native vector env does not render).
         preset, preset_kwargs, cluster, **task: as for :class:`~tether_gym.envs.TetherClusterEnv`.
     """
 
@@ -66,19 +68,23 @@ class TetherClusterVectorEnv(VectorEnv):
         preset_kwargs: Mapping[str, Any] | None = None,
         cluster: Cluster | None = None,
         max_episode_steps: int | None = None,
+        render_mode: str | None = None,
         **task: Any,
     ) -> None:
+        if render_mode is not None:
+            raise EnvArgumentError(
+                f"render_mode must be None: the native vector env does not render (got {render_mode!r}); render a "
+                "single env, gym.make(id, render_mode='rgb_array'), or use gym.make_vec(..., vectorization_mode='sync')"
+            )
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= MAX_NUM_ENVS:
             raise EnvArgumentError(
                 f"num_envs must be a positive integer, at most {MAX_NUM_ENVS} (run several processes for more); "
                 f"got {num_envs!r}"
             )
-        if max_episode_steps is not None:
-            max_episode_steps = check_whole("max_episode_steps", max_episode_steps, 1, 2**62)
+        self.max_episode_steps = max_episode_steps  # checked by the property
         self.num_envs = int(num_envs)
         self.task = task_from_arguments(self.num_envs, preset, preset_kwargs, cluster, **task)
         self.cluster = self.task.cluster
-        self.max_episode_steps = max_episode_steps
         self.render_mode = None
         self.single_action_space = spaces.Box(-1.0, 1.0, (self.task.action_size,), np.float32)
         self.single_observation_space = spaces.Box(
@@ -91,6 +97,16 @@ class TetherClusterVectorEnv(VectorEnv):
         self._episode_steps = np.zeros(self.num_envs, dtype=np.int64)
         self._action_shape = (self.num_envs, self.task.action_size)
         self._reason_names = np.array(END_REASONS)
+
+    @property
+    def max_episode_steps(self) -> int | None:
+        """Truncation after this many steps of a sub-env's episode (None: never)."""
+        return self._max_episode_steps
+
+    @max_episode_steps.setter
+    def max_episode_steps(self, steps: int | None) -> None:
+        # Checked on every assignment (SB3's set_attr too), so a bad value never reaches step().
+        self._max_episode_steps = None if steps is None else check_whole("max_episode_steps", steps, 1, 2**62)
 
     # ------------------------------------------------------------------ API
     def reset(
@@ -143,8 +159,8 @@ class TetherClusterVectorEnv(VectorEnv):
         rewards = task.scalars[:, 0].copy()
         terminated = task.end_reason > 0
         truncated = (
-            self._episode_steps >= self.max_episode_steps
-            if self.max_episode_steps is not None
+            self._episode_steps >= self._max_episode_steps
+            if self._max_episode_steps is not None
             else np.zeros(self.num_envs, dtype=np.bool_)
         )
         observation = task.observe(self._rngs)
