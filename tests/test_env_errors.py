@@ -137,8 +137,6 @@ def test_a_bad_render_mode_is_named(render_mode: object) -> None:
         TetherClusterEnv(render_mode=render_mode)  # type: ignore[arg-type]
 
 
-@pytest.mark.xfail(strict=True, reason="presets.py: a float parameter given as an int beyond the float range "
-                   "raises a bare OverflowError in the builder (/work/notes/findings-core.md, 1)")
 def test_a_huge_integer_preset_parameter_gets_a_named_error() -> None:
     with pytest.raises((ValueError, TypeError)) as error:
         gym.make(ENV_ID, preset_kwargs={"mass": 10**400})

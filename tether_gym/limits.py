@@ -37,6 +37,7 @@ __all__ = [
     "check_range",
     "is_real_number",
     "real_array",
+    "short_repr",
     "to_float",
 ]
 
@@ -78,18 +79,18 @@ def real_array(name: str, value: Any, error: type[Exception] = ValueError, allow
         try:
             raw = np.asarray(value)
         except (TypeError, ValueError) as exc:
-            raise error(f"{name} must be a number or an array of numbers; got {_short(value)} ({exc})") from None
+            raise error(f"{name} must be a number or an array of numbers; got {short_repr(value)} ({exc})") from None
         if raw.dtype.kind == "O" and all(is_real_number(item) for item in raw.ravel()):
             # Python integers too large for int64 land here; they are numbers all the same.
             try:
                 raw = raw.astype(np.float64)
             except OverflowError:
-                raise error(f"{name} holds an integer too large for a float; got {_short(value)}") from None
+                raise error(f"{name} holds an integer too large for a float; got {short_repr(value)}") from None
         if raw.dtype.kind in "iuf" and isinstance(value, (list, tuple)) and _holds_bool(value):
-            raise error(f"{name} must be made of real numbers, not booleans; got {_short(value)}")
+            raise error(f"{name} must be made of real numbers, not booleans; got {short_repr(value)}")
         if raw.dtype.kind not in "iuf":
             kind = {"b": "booleans", "U": "strings", "S": "bytes", "c": "complex numbers"}.get(raw.dtype.kind, "objects")
-            raise error(f"{name} must be made of real numbers, not {kind}; got {_short(value)}")
+            raise error(f"{name} must be made of real numbers, not {kind}; got {short_repr(value)}")
         array = raw.astype(np.float64)
     if np.isnan(array).any():
         raise error(f"{name} contains NaN; every entry must be a number")
@@ -98,7 +99,7 @@ def real_array(name: str, value: Any, error: type[Exception] = ValueError, allow
     return array
 
 
-def _short(value: Any, limit: int = 120) -> str:
+def short_repr(value: Any, limit: int = 120) -> str:
     """``repr(value)``, cut to ``limit`` characters for an error message."""
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."

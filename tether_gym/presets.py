@@ -28,7 +28,7 @@ import numpy as np
 
 from tether_gym.cluster import Cluster, ClusterError
 from tether_gym.frames import LEO_ORBIT_RATE, Frame, FrameError
-from tether_gym.limits import is_real_number
+from tether_gym.limits import is_real_number, short_repr, to_float
 
 __all__ = ["MAX_SATELLITES", "PRESETS", "make_cluster", "preset_names"]
 
@@ -44,15 +44,18 @@ def _check_preset_argument(preset: str, name: str, value: object, default: objec
     whole number in 1..MAX_SATELLITES for a count, a real number for a magnitude."""
     if isinstance(default, bool):
         if not isinstance(value, (bool, np.bool_)):
-            raise ClusterError(f"preset {preset!r}: {name} must be True or False; got {value!r}")
+            raise ClusterError(f"preset {preset!r}: {name} must be True or False; got {short_repr(value)}")
     elif isinstance(default, int):
         if not (isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
                 and 1 <= value <= MAX_SATELLITES):
             raise ClusterError(
                 f"preset {preset!r}: {name} must be a whole number in 1..{MAX_SATELLITES}; got {value!r}"
             )
-    elif isinstance(default, float) and not is_real_number(value):
-        raise ClusterError(f"preset {preset!r}: {name} must be a real number; got {value!r}")
+    elif isinstance(default, float):
+        if not is_real_number(value):
+            raise ClusterError(f"preset {preset!r}: {name} must be a real number; got {short_repr(value)}")
+        if abs(to_float(value)) == math.inf and not (name == "breaking_load" and to_float(value) > 0):
+            raise ClusterError(f"preset {preset!r}: {name} must be finite (only breaking_load may be inf); got {short_repr(value)}")
 
 
 def _preset(builder: PresetBuilder) -> PresetBuilder:
@@ -73,7 +76,7 @@ def _preset(builder: PresetBuilder) -> PresetBuilder:
             with np.errstate(over="ignore", invalid="ignore"):  # the cluster's own checks name the result
                 return builder(*args, **kwargs)
         except (ClusterError, FrameError) as error:
-            given = ", ".join(f"{key}={value!r}" for key, value in bound.arguments.items())
+            given = ", ".join(f"{key}={short_repr(value, 40)}" for key, value in bound.arguments.items())
             raise ClusterError(f"preset {builder.__name__}({given}): {error}") from None
 
     return checked  # type: ignore[return-value]
@@ -266,7 +269,7 @@ def _axial_damping(cables: np.ndarray, masses: np.ndarray, stiffness: np.ndarray
 
 def _positive(name: str, value: float, unit: str) -> float:
     if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0):
-        raise ClusterError(f"{name} must be a finite number > 0 {unit}; got {value!r}")
+        raise ClusterError(f"{name} must be a finite number > 0 {unit}; got {short_repr(value)}")
     return float(value)
 
 
