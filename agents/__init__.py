@@ -2,8 +2,12 @@
 
 * :mod:`agents.baselines`: passive, velocity feedback, LQR and a tension-aware energy law, each
   a policy with Stable-Baselines3's ``predict`` interface.
-* :mod:`agents.policies`: load a trained SB3 model (with its ``VecNormalize`` statistics) as a
+* :mod:`agents.policies`: load a trained SB3 policy (with its ``VecNormalize`` statistics) as a
   policy of the same interface; look up controllers by name.
+* :mod:`agents.safe_format`: the policy files (JSON, safetensors, a checksum manifest), which
+  load without running code; :mod:`agents.pickled`: SB3's pickle-based files, only on opt-in;
+  :mod:`agents.convert`: ``python -m agents.convert``, from the second to the first.
+* :mod:`agents.files`: the commands' careful output files (checked first, atomic, no symlinks).
 * :mod:`agents.train`: ``python -m agents.train``, SB3 training driven by ``agents/hyperparams``.
 * :mod:`agents.evaluate`: rollouts on held-out seeds and the comparison metrics.
 * :mod:`agents.compare`: ``python -m agents.compare``, the side-by-side table and plots.

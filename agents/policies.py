@@ -15,7 +15,7 @@ import numpy as np
 
 from agents.baselines import BASELINES, make_baseline
 from agents.pickled import is_pickle_model, load_pickled_model, refuse_untrusted
-from agents.safe_format import METADATA_FILE, MANIFEST_FILE, is_policy_dir, load_policy
+from agents.safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
 
 __all__ = ["MODELS_DIR", "TrainedPolicy", "is_shipped", "make_controller", "shipped_models"]
 
@@ -59,8 +59,10 @@ class TrainedPolicy:
     def __init__(self, path: str | Path, best: bool = False, name: str | None = None,
                  trust_pickle: bool = False) -> None:
         path = Path(path)
-        if path.name == METADATA_FILE and path.is_file():
-            path = path.parent
+        if path.is_file() and is_policy_dir(path.parent) and path.suffix not in (".zip", ".pkl"):
+            path = path.parent  # policy.json, policy.safetensors, ...: their directory
+        if best and path.is_dir() and not (path / "best").is_dir():
+            raise FileNotFoundError(f"{path} has no best/ directory: pass best=False for its final policy")
         directory = path / "best" if best and path.is_dir() else path
         if is_policy_dir(directory):
             loaded = load_policy(directory, require_manifest=is_shipped(directory))
@@ -116,6 +118,8 @@ class TrainedPolicy:
                 f"observation must have shape ({self.observation_size},) or (N, {self.observation_size}) "
                 f"for this model; got {obs.shape}"
             )
+        if not np.all(np.isfinite(obs)):
+            raise ValueError("observation has NaN or infinite entries: the policy's actions would be garbage")
         if self.normalizer is not None:
             obs = self.normalizer.normalize_obs(obs).astype(np.float32)
         return self.policy.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)

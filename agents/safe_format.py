@@ -131,10 +131,18 @@ def _reject_constant(name: str) -> None:
     raise ValueError(f"non-finite number {name} is not allowed here")
 
 
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text} overflows a float")
+    return value
+
+
 def _parse_json(data: bytes, where: Path) -> Any:
-    """Strict JSON (UTF-8, no NaN/Infinity literals) with errors that name the file."""
+    """Strict JSON (UTF-8, no NaN/Infinity literals, no numbers that overflow to inf) with errors
+    that name the file."""
     try:
-        return json.loads(data.decode("utf-8"), parse_constant=_reject_constant)
+        return json.loads(data.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float)
     except (UnicodeDecodeError, ValueError) as error:
         raise PolicyFormatError(f"{where} is not valid JSON ({error}): restore or re-create the file") from error
 
@@ -742,7 +750,7 @@ def load_policy(directory: str | Path, require_manifest: bool = False, device: s
         # Building the policy draws its random initial weights: keep the caller's torch RNG as it was.
         with torch.random.fork_rng(devices=[]):
             policy = policy_class(observation_space, action_space, _constant_schedule, **kwargs)
-    except (TypeError, ValueError, AssertionError, KeyError) as error:
+    except Exception as error:  # noqa: BLE001 - only allow-listed classes run here; any failure is bad kwargs
         raise PolicyFormatError(f"{where}: policy_kwargs do not build a {policy_class.__name__}: {error}") from error
     weights = load_tensors(reader.read(WEIGHTS_FILE), directory / WEIGHTS_FILE)
     _load_state_dict(policy, weights, directory / WEIGHTS_FILE)

@@ -212,6 +212,10 @@ def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
     elif isinstance(value, dict) and dict in kinds:
         if not all(isinstance(name, str) for name in value):
             raise HyperparameterError(f"{label} must have string keys; got {list(value)}")
+        for name, entry in value.items():
+            if isinstance(entry, str) and _number_text_hint(entry):
+                raise HyperparameterError(f"{where}: '{key}.{name}' is the text {entry!r}, not a number"
+                                          f"{_number_text_hint(entry)}")
         return value
     raise HyperparameterError(f"{label} must be {_describe(kinds)}; got {value!r} ({type(value).__name__})")
 

@@ -201,6 +201,17 @@ def test_policy_metadata_cannot_name_arbitrary_code(
         load_policy(directory)
 
 
+def test_policy_metadata_numbers_must_be_finite(sb3_model: tuple[PPO, object], tmp_path: Path) -> None:
+    model, venv = sb3_model
+    directory = save_policy(tmp_path / "policy", model, venv, ENV)
+    text = (directory / "policy.json").read_text()
+    assert '"log_std_init": -1.0' in text
+    (directory / "policy.json").write_text(text.replace('"log_std_init": -1.0', '"log_std_init": -1e999'))
+    (directory / "MANIFEST.sha256").unlink()
+    with pytest.raises(PolicyFormatError, match="overflows"):
+        load_policy(directory)
+
+
 # ---------------------------------------------------------------------------------------------
 # The safe format: round trips, conversion, the shipped models and their checksums
 # ---------------------------------------------------------------------------------------------
@@ -451,6 +462,8 @@ def test_resume_refuses_a_checkpoint_that_does_not_fit(tmp_path: Path) -> None:
     ("default: {n_timesteps: 1000, normalize: {clip_ob: 5}}", "unknown key 'clip_ob'"),
     ("default: {n_timesteps: 1000, curriculum: {start: 0.2}}", "'curriculum' must be a mapping with exactly"),
     ("default: {n_timesteps: 1000, rollout_buffer_class: RolloutBuffer}", "'rollout_buffer_class' cannot be set"),
+    ("default: {n_timesteps: 1000, policy_kwargs: {optimizer_kwargs: {eps: 1e-5}}}",
+     "'policy_kwargs.optimizer_kwargs.eps' is the text '1e-5', not a number"),
     ("default: [1, 2]", "entry 'default': must be a mapping"),
     ("TetherChain-v0: {n_timesteps: 5}", "no entry for 'TetherTetrahedron-v0' and no 'default'"),
     ("default: {n_timesteps: [1000", "not valid YAML"),
@@ -489,9 +502,18 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
         (lambda: make_controller(str(shipped_models("TetherSpinningTriangle-v0")["ppo"]), gym.make_vec(ENV, num_envs=1)),
          "takes observations of shape .21,., but TetherTetrahedron-v0 gives .30,."),
     ]
+    shipped = TrainedPolicy(shipped_models(ENV)["ppo"])
+    cases += [
+        (lambda: shipped.predict(np.full(30, np.nan)), "NaN"),
+        (lambda: shipped.predict(np.zeros(29)), r"shape \(30,\) or \(N, 30\)"),
+    ]
     for attempt, message in cases:
         with pytest.raises(ValueError, match=message):
             attempt()
+    with pytest.raises(FileNotFoundError, match="has no best/ directory"):
+        TrainedPolicy(shipped_models(ENV)["ppo"], best=True)
+    with pytest.raises(FileNotFoundError, match="no trained policy at"):
+        TrainedPolicy(tmp_path / "nowhere")
     for main, argv, argument in [
         (agents.compare.main, ["--episodes", "-3"], "--episodes"),
         (agents.compare.main, ["--env", "Nope-v0"], "--env"),
