@@ -395,6 +395,11 @@ def test_the_vector_env_refuses_a_render_mode_and_a_bad_time_limit_set_later() -
         assert env.step_wait()[2].all() == expected
 
 
+def test_a_delay_line_too_long_for_memory_is_refused_by_name() -> None:
+    with pytest.raises(EnvArgumentError, match="lower thrust_delay or num_envs"):
+        TetherClusterVectorEnv(num_envs=100_000, thrust_delay=1000)
+
+
 def test_validate_needs_a_cluster() -> None:
     with pytest.raises(TypeError, match="cluster must be a tether_gym.Cluster"):
         TaskConfig().validate("tetrahedron")  # type: ignore[arg-type]

@@ -129,6 +129,10 @@ MAX_TIME = 1e7
 #: Longest actuation delay, control intervals (each cluster holds its delay line).
 MAX_THRUST_DELAY = 1000
 
+#: Most numbers the delay lines of a whole batch may hold (``num_envs * thrust_delay *
+#: action size``): 1e8 float64 are 800 MB, beyond which the delay alone outgrows memory.
+MAX_DELAY_LINE = 10**8
+
 #: A step whose |reward| exceeds this (or is NaN) ends as ``numerics_diverged`` with a finite
 #: reward.  No accepted setting gets near it unless the state has run away, and it keeps every
 #: reward finite also in float32 (max 3.4e38), as Stable-Baselines3 stores them.
@@ -634,6 +638,13 @@ class DampingTask:
             raise TypeError(f"config must be a TaskConfig; got {type(config).__name__}")
         num_clusters = check_whole("num_clusters", num_clusters, 1, MAX_NUM_ENVS)
         self.scales = config.validate(cluster)
+        action_size = 3 * (cluster.num_nodes if config.thrusters is None else len(config.thrusters))
+        if num_clusters * config.thrust_delay * action_size > MAX_DELAY_LINE:
+            raise EnvArgumentError(
+                f"thrust_delay={config.thrust_delay} with {num_clusters} clusters of {action_size} commands needs a delay "
+                f"line of {num_clusters * config.thrust_delay * action_size:.3g} numbers, more than {MAX_DELAY_LINE:.0e} "
+                "(800 MB); lower thrust_delay or num_envs"
+            )
         self.cluster = cluster
         self.config = config
         self.num_clusters = B = num_clusters
