@@ -144,8 +144,14 @@ def test_a_huge_integer_preset_parameter_gets_a_named_error() -> None:
 
 
 def test_settings_are_normalised_to_plain_values() -> None:
-    config = TaskConfig(thrusters=np.array([0, 2]), max_thrust=[np.float32(2.0), 1], thruster_failure_window=[1, 2],
-                        randomize={"masses": np.float64(0.2)}, thrust_delay=np.int64(3), observe_tensions=np.bool_(True))
+    config = TaskConfig(
+        thrusters=np.array([0, 2]),
+        max_thrust=[np.float32(2.0), 1],
+        thruster_failure_window=[1, 2],
+        randomize={"masses": np.float64(0.2)},
+        thrust_delay=np.int64(3),
+        observe_tensions=np.bool_(True),
+    )
     assert config.thrusters == (0, 2) and type(config.thrusters[0]) is int
     assert config.max_thrust == (2.0, 1.0) and all(type(v) is float for v in config.max_thrust)
     assert config.thruster_failure_window == (1.0, 2.0)
@@ -166,14 +172,20 @@ def test_the_sub_step_budget_names_the_longest_control_interval_and_it_is_accept
     cluster = tg.make_cluster("tetrahedron")
     scales = ClusterScales.of(cluster)
     safety = 1e-6
-    longest = scales.max_substeps // SUBSTEP_HEADROOM * safety * min(scales.critical_step, scales.damping_step)
-    with pytest.raises(EnvArgumentError, match=r"control_interval=1 s needs about .* lower control_interval to at most") as error:
+    longest = (
+        scales.max_substeps // SUBSTEP_HEADROOM * safety * min(scales.critical_step, scales.damping_step)
+    )
+    with pytest.raises(
+        EnvArgumentError, match=r"control_interval=1 s needs about .* lower control_interval to at most"
+    ) as error:
         TetherClusterEnv(safety_factor=safety, control_interval=1.0)
     assert f"{longest:.3g} s" in str(error.value)
     TaskConfig(safety_factor=safety, control_interval=0.99 * longest).validate(cluster)
     # The worst randomised cluster (light, stiff) needs smaller sub-steps still.
     with pytest.raises(EnvArgumentError, match="control_interval"):
-        TaskConfig(safety_factor=safety, control_interval=0.99 * longest, randomize={"masses": 0.5}).validate(cluster)
+        TaskConfig(safety_factor=safety, control_interval=0.99 * longest, randomize={"masses": 0.5}).validate(
+            cluster
+        )
 
 
 def test_the_damping_time_scale_counts_in_the_sub_step_budget() -> None:
@@ -192,19 +204,30 @@ def test_a_cluster_too_stiff_for_any_interval_is_named_as_such() -> None:
 def test_limits_are_generous_enough_for_the_edges_of_their_ranges() -> None:
     """The ends of every range build and step finitely."""
     scales = ClusterScales.of(tg.make_cluster("tetrahedron"))
-    edge = dict(max_thrust=THRUST_RANGE[1], initial_displacement=scales.displacement_limit,
-                initial_velocity=scales.speed_limit, vibration_weight=1e6, failure_penalty=1e6,
-                randomize={"masses": MAX_SPREAD, "EA": MAX_SPREAD}, max_deviation=math.inf)
+    edge = {
+        "max_thrust": THRUST_RANGE[1],
+        "initial_displacement": scales.displacement_limit,
+        "initial_velocity": scales.speed_limit,
+        "vibration_weight": 1e6,
+        "failure_penalty": 1e6,
+        "randomize": {"masses": MAX_SPREAD, "EA": MAX_SPREAD},
+        "max_deviation": math.inf,
+    }
     env = gym.make(ENV_ID, **edge)
     env.reset(seed=0)
     for _ in range(5):
-        obs, reward, terminated, truncated, info = env.step(np.ones(12))
+        obs, reward, terminated, _, info = env.step(np.ones(12))
         assert np.isfinite(obs).all() and math.isfinite(reward)
         if terminated:
             assert info["end_reason"] in tg.envs.END_REASONS[1:]
             break
-    env = gym.make(ENV_ID, max_thrust=THRUST_RANGE[0], initial_displacement=0.0, initial_velocity=0.0,
-                   control_interval=CONTROL_INTERVAL_RANGE[0])
+    env = gym.make(
+        ENV_ID,
+        max_thrust=THRUST_RANGE[0],
+        initial_displacement=0.0,
+        initial_velocity=0.0,
+        control_interval=CONTROL_INTERVAL_RANGE[0],
+    )
     env.reset(seed=0)
     obs, reward, *_ = env.step(np.ones(12))
     assert np.isfinite(obs).all() and math.isfinite(reward)
@@ -218,7 +241,9 @@ def test_bad_seeds_are_named(seed: object) -> None:
         env.reset(seed=seed)
 
 
-@pytest.mark.parametrize("seed", [1.5, "abc", True, -1, [0, 1.0], [0, "1"], [0, -1], [0], np.zeros((2, 1), int), {0: 1}])
+@pytest.mark.parametrize(
+    "seed", [1.5, "abc", True, -1, [0, 1.0], [0, "1"], [0, -1], [0], np.zeros((2, 1), int), {0: 1}]
+)
 def test_bad_vector_seeds_are_named(seed: object) -> None:
     envs = TetherClusterVectorEnv(num_envs=2)
     with pytest.raises(EnvArgumentError, match="seed"):
@@ -252,7 +277,9 @@ BAD_OPTIONS = [
 ]
 
 
-@pytest.mark.parametrize(("key", "value", "why"), BAD_OPTIONS, ids=[f"{k}-{w}-{i}" for i, (k, _, w) in enumerate(BAD_OPTIONS)])
+@pytest.mark.parametrize(
+    ("key", "value", "why"), BAD_OPTIONS, ids=[f"{k}-{w}-{i}" for i, (k, _, w) in enumerate(BAD_OPTIONS)]
+)
 def test_bad_reset_options_are_named_and_change_nothing(key: str, value: object, why: str) -> None:
     env = gym.make(ENV_ID)
     env.reset(seed=0)
@@ -286,7 +313,9 @@ BAD_ACTIONS = [
 ]
 
 
-@pytest.mark.parametrize(("action", "why"), BAD_ACTIONS, ids=[f"{w}-{i}" for i, (_, w) in enumerate(BAD_ACTIONS)])
+@pytest.mark.parametrize(
+    ("action", "why"), BAD_ACTIONS, ids=[f"{w}-{i}" for i, (_, w) in enumerate(BAD_ACTIONS)]
+)
 def test_bad_actions_are_named_and_change_nothing(action: object, why: str) -> None:
     env = gym.make(ENV_ID)
     env.reset(seed=0)
@@ -299,7 +328,13 @@ def test_bad_actions_are_named_and_change_nothing(action: object, why: str) -> N
 
 def test_actions_of_any_real_dtype_act_alike_and_huge_ones_are_clipped() -> None:
     results = []
-    for action in (np.ones(12, np.float32), np.ones(12, np.int8), [1] * 12, np.ones(12, np.float16), np.full(12, 1e300)):
+    for action in (
+        np.ones(12, np.float32),
+        np.ones(12, np.int8),
+        [1] * 12,
+        np.ones(12, np.float16),
+        np.full(12, 1e300),
+    ):
         env = TetherClusterEnv()
         env.reset(seed=0)
         results.append(env.step(action)[:2])
@@ -312,9 +347,14 @@ def snapshot(env: TetherClusterEnv | TetherClusterVectorEnv) -> dict:
     task = env.task
     rngs = [env.np_random] if isinstance(env, TetherClusterEnv) else env._rngs
     return {
-        "positions": task.sim.positions.copy(), "velocities": task.sim.velocities.copy(), "time": task.sim.time.copy(),
-        "masses": task.sim.masses.copy(), "observation": task.observation.copy(), "scalars": task.scalars.copy(),
-        "propellant": task.propellant.copy(), "difficulty": task.difficulty,
+        "positions": task.sim.positions.copy(),
+        "velocities": task.sim.velocities.copy(),
+        "time": task.sim.time.copy(),
+        "masses": task.sim.masses.copy(),
+        "observation": task.observation.copy(),
+        "scalars": task.scalars.copy(),
+        "propellant": task.propellant.copy(),
+        "difficulty": task.difficulty,
         "rngs": [rng.bit_generator.state for rng in rngs],
     }
 
@@ -372,9 +412,14 @@ def test_a_refused_difficulty_keeps_the_old_one(difficulty: object) -> None:
 
 @pytest.mark.parametrize(
     ("kwargs", "name"),
-    [({"num_envs": True}, "num_envs"), ({"num_envs": 2.0}, "num_envs"), ({"num_envs": 10**9}, "num_envs"),
-     ({"num_envs": "2"}, "num_envs"), ({"num_envs": 2, "max_episode_steps": True}, "max_episode_steps"),
-     ({"num_envs": 2, "max_episode_steps": 1.5}, "max_episode_steps")],
+    [
+        ({"num_envs": True}, "num_envs"),
+        ({"num_envs": 2.0}, "num_envs"),
+        ({"num_envs": 10**9}, "num_envs"),
+        ({"num_envs": "2"}, "num_envs"),
+        ({"num_envs": 2, "max_episode_steps": True}, "max_episode_steps"),
+        ({"num_envs": 2, "max_episode_steps": 1.5}, "max_episode_steps"),
+    ],
 )
 def test_bad_vector_sizes_are_named(kwargs: dict, name: str) -> None:
     with pytest.raises(EnvArgumentError, match=name):
@@ -408,8 +453,13 @@ def test_validate_needs_a_cluster() -> None:
 def test_bad_vector_actions_are_named() -> None:
     envs = TetherClusterVectorEnv(num_envs=2)
     envs.reset(seed=0)
-    for actions, why in (("x", "actions"), ([["a"] * 12] * 2, "real numbers"), (np.ones((2, 12), complex), "real numbers"),
-                         (np.zeros(24), "shape"), (np.full((2, 12), np.nan), "NaN or inf")):
+    for actions, why in (
+        ("x", "actions"),
+        ([["a"] * 12] * 2, "real numbers"),
+        (np.ones((2, 12), complex), "real numbers"),
+        (np.zeros(24), "shape"),
+        (np.full((2, 12), np.nan), "NaN or inf"),
+    ):
         with pytest.raises(EnvArgumentError, match=why) as error:
             envs.step(actions)
         assert_names(error, "actions")
@@ -435,17 +485,19 @@ def test_a_runaway_reward_ends_the_episode_as_diverged_with_a_finite_reward(how:
     env = gym.make(ENV_ID)
     env.reset(seed=0)
     runaway(env.unwrapped.task, how)
-    obs, reward, terminated, truncated, info = env.step(np.zeros(12))
+    obs, reward, terminated, _, info = env.step(np.zeros(12))
     assert terminated and info["end_reason"] == "numerics_diverged"
     assert math.isfinite(reward) and abs(reward) <= REWARD_LIMIT and np.isfinite(obs).all()
     assert env.observation_space.contains(obs)
     assert info["reward_vibration"] == 0.0 and info["reward_failure"] == -100.0
-    assert reward == pytest.approx(sum(info[k] for k in ("reward_vibration", "reward_propellant", "reward_slack",
-                                                          "reward_failure")), rel=1e-12)
+    assert reward == pytest.approx(
+        sum(info[k] for k in ("reward_vibration", "reward_propellant", "reward_slack", "reward_failure")),
+        rel=1e-12,
+    )
 
 
 @pytest.mark.parametrize("how", ["huge", "infinite"])
-def test_vector_and_sb3_runaways_end_alone_with_finite_rewards(how: str) -> None:
+def test_vector_and_sb3_runaways_end_with_finite_rewards(how: str) -> None:
     envs = gym.make_vec(ENV_ID, num_envs=3)
     envs.reset(seed=0)
     single = gym.make(ENV_ID)
@@ -453,9 +505,10 @@ def test_vector_and_sb3_runaways_end_alone_with_finite_rewards(how: str) -> None
     task = envs.unwrapped.task
     for t in (task, single.unwrapped.task):
         runaway(t, how)
-    obs, rewards, terminated, truncated, infos = envs.step(np.zeros((3, 12)))
+    obs, rewards, terminated, _, infos = envs.step(np.zeros((3, 12)))
     s_obs, s_reward, s_terminated, _, s_info = single.step(np.zeros(12))
     assert terminated.all() and np.isfinite(rewards).all() and np.isfinite(obs).all()
+    assert s_terminated and s_info["end_reason"] == "numerics_diverged"
     assert list(infos["final_info"]["end_reason"]) == ["numerics_diverged"] * 3
     # Bit-identical to the single env seeded alike.
     assert rewards[1] == s_reward and np.array_equal(infos["final_obs"][1], s_obs)
@@ -465,7 +518,9 @@ def test_vector_and_sb3_runaways_end_alone_with_finite_rewards(how: str) -> None
     runaway(sb3.venv.unwrapped.task, how)
     sb3.step_async(np.zeros((3, 12), np.float32))
     obs, rewards, dones, infos = sb3.step_wait()
-    assert dones.all() and rewards.dtype == np.float32 and np.isfinite(rewards).all() and np.isfinite(obs).all()
+    assert (
+        dones.all() and rewards.dtype == np.float32 and np.isfinite(rewards).all() and np.isfinite(obs).all()
+    )
     assert [info["end_reason"] for info in infos] == ["numerics_diverged"] * 3
     assert all(np.isfinite(info["terminal_observation"]).all() for info in infos)
 

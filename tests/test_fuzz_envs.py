@@ -39,26 +39,57 @@ def fuzz(examples: int) -> settings:
     """Settings of one property: ``examples`` examples (times ``TETHER_GYM_FUZZ_SCALE``, 1 in CI;
     raise it with the ``explore`` profile to hunt for new failures)."""
     scale = int(os.environ.get("TETHER_GYM_FUZZ_SCALE", "1"))
-    return settings(max_examples=examples * scale, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much])
+    return settings(
+        max_examples=examples * scale,
+        deadline=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much],
+    )
 
 
 #: Small clusters only (3-5 satellites): the properties are about arguments, not size.
-SMALL_IDS = ["TetherTetrahedron-v0", "TetherTriangle-v0", "TetherChain-v0", "TetherSpinningTriangle-v0",
-             "TetherRadialChain-v0"]
+SMALL_IDS = [
+    "TetherTetrahedron-v0",
+    "TetherTriangle-v0",
+    "TetherChain-v0",
+    "TetherSpinningTriangle-v0",
+    "TetherRadialChain-v0",
+]
 
 #: Gymnasium re-raises a TypeError from an env's constructor with every keyword argument appended
 #: ("... was raised from the environment creator for ... with kwargs (...)"); that suffix would
 #: name any argument, so only the message before it counts.
 GYMNASIUM_SUFFIX = " was raised from the environment creator"
 
-SPECIAL_FLOATS = [0.0, -0.0, 5e-324, -5e-324, 1e-300, 1e-7, 1.0, -1.0, 0.5, 1e7, 1e300, 1.7976931348623157e308,
-                  -1.7976931348623157e308, math.inf, -math.inf, math.nan]
+SPECIAL_FLOATS = [
+    0.0,
+    -0.0,
+    5e-324,
+    -5e-324,
+    1e-300,
+    1e-7,
+    1.0,
+    -1.0,
+    0.5,
+    1e7,
+    1e300,
+    1.7976931348623157e308,
+    -1.7976931348623157e308,
+    math.inf,
+    -math.inf,
+    math.nan,
+]
 special = st.sampled_from(SPECIAL_FLOATS)
 junk = st.one_of(
-    st.text(max_size=3), st.booleans(), st.none(), st.complex_numbers(max_magnitude=2, allow_nan=False),
-    st.integers(-(10**30), 10**30), st.integers(-(10**400), 10**400), st.lists(st.integers(-2, 5), max_size=3),
-    st.dictionaries(st.text(max_size=2), st.floats(0, 1), max_size=2), st.just(np.float32(0.5)), st.just(np.int64(2)),
+    st.text(max_size=3),
+    st.booleans(),
+    st.none(),
+    st.complex_numbers(max_magnitude=2, allow_nan=False),
+    st.integers(-(10**30), 10**30),
+    st.integers(-(10**400), 10**400),
+    st.lists(st.integers(-2, 5), max_size=3),
+    st.dictionaries(st.text(max_size=2), st.floats(0, 1), max_size=2),
+    st.just(np.float32(0.5)),
+    st.just(np.int64(2)),
 )
 
 
@@ -71,9 +102,13 @@ def floats(low: float, high: float) -> st.SearchStrategy[float]:
     return st.floats(low, high, allow_nan=False, allow_infinity=False)
 
 
-indices = st.one_of(st.none(), st.lists(st.integers(0, 4), min_size=1, max_size=4, unique=True),
-                    st.lists(st.integers(-1, 6), max_size=4), st.lists(floats(0, 3), min_size=1, max_size=2),
-                    hnp.arrays(np.int64, st.integers(1, 3), elements=st.integers(0, 3), unique=True))
+indices = st.one_of(
+    st.none(),
+    st.lists(st.integers(0, 4), min_size=1, max_size=4, unique=True),
+    st.lists(st.integers(-1, 6), max_size=4),
+    st.lists(floats(0, 3), min_size=1, max_size=2),
+    hnp.arrays(np.int64, st.integers(1, 3), elements=st.integers(0, 3), unique=True),
+)
 
 #: Plausible values of every TaskConfig field: inside or near its range (the edges included), but
 #: not all valid for every cluster or in every combination.
@@ -112,11 +147,19 @@ assert set(PLAUSIBLE) == set(TaskConfig.__dataclass_fields__), "fuzz every TaskC
 #: Overrides of the presets' parameters (some presets lack some of them: that is an error too).
 PRESET_KWARGS = st.one_of(
     st.none(),
-    st.fixed_dictionaries({}, optional={
-        "EA": field(floats(1e2, 1e6)), "N0": field(floats(0, 10)), "mass": field(floats(0.1, 100)),
-        "breaking_load": field(st.one_of(floats(1, 1e4), st.just(math.inf))), "damping_rate": field(floats(0, 10)),
-        "edge": field(floats(1, 1e3)), "n": field(st.integers(-1, 6)), "spin_rate": field(floats(1e-3, 1)),
-    }),
+    st.fixed_dictionaries(
+        {},
+        optional={
+            "EA": field(floats(1e2, 1e6)),
+            "N0": field(floats(0, 10)),
+            "mass": field(floats(0.1, 100)),
+            "breaking_load": field(st.one_of(floats(1, 1e4), st.just(math.inf))),
+            "damping_rate": field(floats(0, 10)),
+            "edge": field(floats(1, 1e3)),
+            "n": field(st.integers(-1, 6)),
+            "spin_rate": field(floats(1e-3, 1)),
+        },
+    ),
     junk,
 )
 
@@ -151,7 +194,9 @@ def assert_clear_error(error: BaseException, names: set[str]) -> None:
     event("clear error")
 
 
-def assert_step_ok(space: gym.Space, obs: Any, reward: Any, terminated: Any, truncated: Any, info: dict) -> None:
+def assert_step_ok(
+    space: gym.Space, obs: Any, reward: Any, terminated: Any, truncated: Any, info: dict
+) -> None:
     """Outcome (b) for one single-env step."""
     event("stepped")
     assert isinstance(obs, np.ndarray) and obs.dtype == np.float32 and np.isfinite(obs).all()
@@ -179,8 +224,10 @@ def rollout(env: gym.Env, seed: int, steps: int, data: st.DataObject) -> None:
     obs, info = quietly(lambda: env.reset(seed=seed))
     assert_reset_ok(env.observation_space, obs, info)
     for _ in range(steps):
-        action = data.draw(hnp.arrays(np.float32, env.action_space.shape, elements=floats(-2, 2)), label="action")
-        obs, reward, terminated, truncated, info = quietly(lambda: env.step(action))
+        action = data.draw(
+            hnp.arrays(np.float32, env.action_space.shape, elements=floats(-2, 2)), label="action"
+        )
+        obs, reward, terminated, truncated, info = quietly(lambda action=action: env.step(action))
         assert_step_ok(env.observation_space, obs, reward, terminated, truncated, info)
         if terminated or truncated:
             break
@@ -194,7 +241,9 @@ def test_make_with_any_task_arguments(env_id: str, kwargs: dict, data: st.DataOb
 
 
 @fuzz(250)
-@given(env_id=st.sampled_from(SMALL_IDS), kwargs=st.fixed_dictionaries({}, optional=PLAUSIBLE), data=st.data())
+@given(
+    env_id=st.sampled_from(SMALL_IDS), kwargs=st.fixed_dictionaries({}, optional=PLAUSIBLE), data=st.data()
+)
 def test_make_with_plausible_task_arguments(env_id: str, kwargs: dict, data: st.DataObject) -> None:
     """The same, with values near their ranges: mostly accepted, so the rollouts are exercised."""
     make_and_roll_out(env_id, kwargs, data)
@@ -210,15 +259,28 @@ def make_and_roll_out(env_id: str, kwargs: dict, data: st.DataObject) -> None:
 
 
 @fuzz(120)
-@given(env_id=st.sampled_from(SMALL_IDS), preset_kwargs=PRESET_KWARGS,
-       extra=st.fixed_dictionaries({}, optional={
-           "render_exaggeration": field(floats(1e-3, 1e6)), "render_mode": st.sampled_from([None, "rgb_array", "ascii", 3]),
-           "preset": field(st.sampled_from(tg.preset_names())), "control_interval": TASK_FIELDS["control_interval"],
-       }), data=st.data())
-def test_make_with_any_preset_arguments(env_id: str, preset_kwargs: Any, extra: dict, data: st.DataObject) -> None:
+@given(
+    env_id=st.sampled_from(SMALL_IDS),
+    preset_kwargs=PRESET_KWARGS,
+    extra=st.fixed_dictionaries(
+        {},
+        optional={
+            "render_exaggeration": field(floats(1e-3, 1e6)),
+            "render_mode": st.sampled_from([None, "rgb_array", "ascii", 3]),
+            "preset": field(st.sampled_from(tg.preset_names())),
+            "control_interval": TASK_FIELDS["control_interval"],
+        },
+    ),
+    data=st.data(),
+)
+def test_make_with_any_preset_arguments(
+    env_id: str, preset_kwargs: Any, extra: dict, data: st.DataObject
+) -> None:
     kwargs = dict(extra, preset_kwargs=preset_kwargs)
     try:
-        env = quietly(lambda: TetherClusterEnv(**kwargs))  # directly: gym.make trips over a non-str render_mode
+        env = quietly(
+            lambda: TetherClusterEnv(**kwargs)
+        )  # directly: gym.make trips over a non-str render_mode
     except Exception as error:  # noqa: BLE001
         assert_clear_error(error, names_of(kwargs) | {"preset"})
         return
@@ -228,18 +290,46 @@ def test_make_with_any_preset_arguments(env_id: str, preset_kwargs: Any, extra: 
 
 # ------------------------------------------------------------------ gym.make_vec and SB3
 num_envs = st.one_of(st.integers(1, 4), st.integers(-2, 0), st.just(2.0), st.just(True), st.text(max_size=1))
-vector_seeds = st.one_of(st.none(), st.integers(0, 2**40), st.integers(-3, -1), floats(0, 3), st.booleans(),
-                         st.text(max_size=2), st.lists(st.one_of(st.none(), st.integers(-1, 9), floats(0, 2)), max_size=4))
+vector_seeds = st.one_of(
+    st.none(),
+    st.integers(0, 2**40),
+    st.integers(-3, -1),
+    floats(0, 3),
+    st.booleans(),
+    st.text(max_size=2),
+    st.lists(st.one_of(st.none(), st.integers(-1, 9), floats(0, 2)), max_size=4),
+)
 
 
 @fuzz(120)
-@given(env_id=st.sampled_from(SMALL_IDS), kwargs=st.fixed_dictionaries({}, optional={
-    key: PLAUSIBLE[key] for key in ("control_interval", "max_thrust", "thrusters", "initial_velocity", "randomize",
-                                      "observation_noise", "impulse_magnitude", "thrust_delay", "difficulty",
-                                      "max_deviation", "thrust_noise")}),
-       count=num_envs, seed=vector_seeds, data=st.data())
-def test_make_vec_with_any_arguments_and_seeds(env_id: str, kwargs: dict, count: Any, seed: Any,
-                                               data: st.DataObject) -> None:
+@given(
+    env_id=st.sampled_from(SMALL_IDS),
+    kwargs=st.fixed_dictionaries(
+        {},
+        optional={
+            key: PLAUSIBLE[key]
+            for key in (
+                "control_interval",
+                "max_thrust",
+                "thrusters",
+                "initial_velocity",
+                "randomize",
+                "observation_noise",
+                "impulse_magnitude",
+                "thrust_delay",
+                "difficulty",
+                "max_deviation",
+                "thrust_noise",
+            )
+        },
+    ),
+    count=num_envs,
+    seed=vector_seeds,
+    data=st.data(),
+)
+def test_make_vec_with_any_arguments_and_seeds(
+    env_id: str, kwargs: dict, count: Any, seed: Any, data: st.DataObject
+) -> None:
     try:
         envs = quietly(lambda: gym.make_vec(env_id, num_envs=count, **kwargs))
     except Exception as error:  # noqa: BLE001
@@ -253,8 +343,10 @@ def test_make_vec_with_any_arguments_and_seeds(env_id: str, kwargs: dict, count:
     assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
     event("vector stepped")
     for _ in range(3):
-        actions = data.draw(hnp.arrays(np.float64, envs.action_space.shape, elements=floats(-3, 3)), label="actions")
-        obs, rewards, terminated, truncated, infos = quietly(lambda: envs.step(actions))
+        actions = data.draw(
+            hnp.arrays(np.float64, envs.action_space.shape, elements=floats(-3, 3)), label="actions"
+        )
+        obs, rewards, terminated, truncated, infos = quietly(lambda actions=actions: envs.step(actions))
         assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
         assert rewards.dtype == np.float64 and rewards.shape == (count,) and np.isfinite(rewards).all()
         assert terminated.dtype == np.bool_ and truncated.dtype == np.bool_
@@ -264,8 +356,17 @@ def test_make_vec_with_any_arguments_and_seeds(env_id: str, kwargs: dict, count:
 
 
 @fuzz(60)
-@given(seed=st.one_of(st.none(), st.integers(0, 2**40), st.integers(-3, -1), floats(0, 3), st.booleans(),
-                      st.text(max_size=2)), data=st.data())
+@given(
+    seed=st.one_of(
+        st.none(),
+        st.integers(0, 2**40),
+        st.integers(-3, -1),
+        floats(0, 3),
+        st.booleans(),
+        st.text(max_size=2),
+    ),
+    data=st.data(),
+)
 def test_sb3_adapter_with_any_seed(seed: Any, data: st.DataObject) -> None:
     env = SB3
     try:
@@ -290,10 +391,17 @@ SB3 = make_sb3_vec_env("TetherTetrahedron-v0", 2, seed=0)
 #: One env per shape of action space, built once: the properties below are about one call each.
 ENVS = {
     "all": gym.make("TetherTetrahedron-v0"),
-    "two thrusters, magnitude": gym.make("TetherTetrahedron-v0", thrusters=[1, 3], thrust_limit="magnitude",
-                                         max_thrust=[2.0, 0.5]),
-    "faults": gym.make("TetherTriangle-v0", thrust_delay=1, thrust_noise=0.1, impulse_magnitude=1.0,
-                       observation_noise=0.01, cable_failure="continue"),
+    "two thrusters, magnitude": gym.make(
+        "TetherTetrahedron-v0", thrusters=[1, 3], thrust_limit="magnitude", max_thrust=[2.0, 0.5]
+    ),
+    "faults": gym.make(
+        "TetherTriangle-v0",
+        thrust_delay=1,
+        thrust_noise=0.1,
+        impulse_magnitude=1.0,
+        observation_noise=0.01,
+        cable_failure="continue",
+    ),
 }
 for _env in ENVS.values():
     _env.reset(seed=0)
@@ -302,10 +410,17 @@ for _env in ENVS.values():
 def snapshot(env: gym.Env) -> dict[str, Any]:
     inner = env.unwrapped
     task = inner.task
-    return {"positions": task.sim.positions.copy(), "velocities": task.sim.velocities.copy(),
-            "time": task.sim.time.copy(), "masses": task.sim.masses.copy(), "observation": task.observation.copy(),
-            "propellant": task.propellant.copy(), "queue": task.action_queue.copy(), "difficulty": task.difficulty,
-            "rng": inner.np_random.bit_generator.state}
+    return {
+        "positions": task.sim.positions.copy(),
+        "velocities": task.sim.velocities.copy(),
+        "time": task.sim.time.copy(),
+        "masses": task.sim.masses.copy(),
+        "observation": task.observation.copy(),
+        "propellant": task.propellant.copy(),
+        "queue": task.action_queue.copy(),
+        "difficulty": task.difficulty,
+        "rng": inner.np_random.bit_generator.state,
+    }
 
 
 def assert_unchanged(before: dict[str, Any], after: dict[str, Any]) -> None:
@@ -316,8 +431,19 @@ def assert_unchanged(before: dict[str, Any], after: dict[str, Any]) -> None:
 
 def action_like(size: int) -> st.SearchStrategy[Any]:
     """Arrays of every dtype and many shapes (the right one often), lists, scalars and junk."""
-    dtypes = st.sampled_from([np.float64, np.float32, np.float16, np.int8, np.int64, np.uint8, np.bool_,
-                              np.complex128, np.longdouble])
+    dtypes = st.sampled_from(
+        [
+            np.float64,
+            np.float32,
+            np.float16,
+            np.int8,
+            np.int64,
+            np.uint8,
+            np.bool_,
+            np.complex128,
+            np.longdouble,
+        ]
+    )
     shapes = st.one_of(st.just((size,)), hnp.array_shapes(min_dims=0, max_dims=3, max_side=size + 1))
     arrays = st.one_of(
         hnp.arrays(st.just(np.float64), st.just((size,)), elements=st.one_of(floats(-1e300, 1e300), special)),
@@ -349,24 +475,51 @@ def state_like(shape: tuple[int, ...], nominal: np.ndarray | None) -> st.SearchS
     shapes, wrong dtypes, junk."""
     offsets = hnp.arrays(np.float64, shape, elements=st.one_of(floats(-5, 5), floats(-1e4, 1e4), special))
     near = offsets.map(lambda x: x + nominal) if nominal is not None else offsets
-    return st.one_of(near, near, near, hnp.arrays(np.float64, hnp.array_shapes(max_dims=3, max_side=5)),
-                     hnp.arrays(st.sampled_from([np.int64, np.bool_, np.complex128, object]), shape, elements=st.integers(0, 1)),
-                     near.map(lambda x: x.tolist()), special, junk)
+    return st.one_of(
+        near,
+        near,
+        near,
+        hnp.arrays(np.float64, hnp.array_shapes(max_dims=3, max_side=5)),
+        hnp.arrays(
+            st.sampled_from([np.int64, np.bool_, np.complex128, object]), shape, elements=st.integers(0, 1)
+        ),
+        near.map(lambda x: x.tolist()),
+        special,
+        junk,
+    )
 
 
 @fuzz(250)
-@given(name=st.sampled_from(list(ENVS)), seed=st.one_of(st.none(), st.integers(0, 2**64), st.integers(-2, -1),
-                                                         floats(0, 2), st.text(max_size=1), st.booleans()),
-       data=st.data())
+@given(
+    name=st.sampled_from(list(ENVS)),
+    seed=st.one_of(
+        st.none(),
+        st.integers(0, 2**64),
+        st.integers(-2, -1),
+        floats(0, 2),
+        st.text(max_size=1),
+        st.booleans(),
+    ),
+    data=st.data(),
+)
 def test_reset_with_any_options_and_seed(name: str, seed: Any, data: st.DataObject) -> None:
     env = ENVS[name]
     nominal = env.unwrapped.cluster.positions
-    options = data.draw(st.one_of(
-        st.none(), junk,
-        st.fixed_dictionaries({}, optional={"positions": state_like(nominal.shape, nominal),
-                                            "velocities": state_like(nominal.shape, None),
-                                            "speed": st.floats()}),
-    ), label="options")
+    options = data.draw(
+        st.one_of(
+            st.none(),
+            junk,
+            st.fixed_dictionaries(
+                {},
+                optional={
+                    "positions": state_like(nominal.shape, nominal),
+                    "velocities": state_like(nominal.shape, None),
+                    "speed": st.floats(),
+                },
+            ),
+        ),
+        label="options",
+    )
     before = snapshot(env)
     try:
         obs, info = quietly(lambda: env.reset(seed=seed, options=options))
@@ -376,14 +529,18 @@ def test_reset_with_any_options_and_seed(name: str, seed: Any, data: st.DataObje
         return
     assert_reset_ok(env.observation_space, obs, info)
     if isinstance(options, Mapping) and options.get("positions") is not None:
-        assert np.array_equal(env.unwrapped.task.sim.positions[0], np.asarray(options["positions"], dtype=float))
+        assert np.array_equal(
+            env.unwrapped.task.sim.positions[0], np.asarray(options["positions"], dtype=float)
+        )
     rollout_from_here(env, data)
 
 
 def rollout_from_here(env: gym.Env, data: st.DataObject) -> None:
     for _ in range(2):
-        action = data.draw(hnp.arrays(np.float32, env.action_space.shape, elements=floats(-1, 1)), label="action")
-        result = quietly(lambda: env.step(action))
+        action = data.draw(
+            hnp.arrays(np.float32, env.action_space.shape, elements=floats(-1, 1)), label="action"
+        )
+        result = quietly(lambda action=action: env.step(action))
         assert_step_ok(env.observation_space, *result)
         if result[2] or result[3]:
             env.reset(seed=0)

@@ -235,7 +235,9 @@ class SB3VecEnv(VecEnv):
         if seed is not None and (
             isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0
         ):
-            raise ValueError(f"seed must be a whole number >= 0 (an int; sub-env i gets seed + i) or None; got {seed!r}")
+            raise ValueError(
+                f"seed must be a whole number >= 0 (an int; sub-env i gets seed + i) or None; got {seed!r}"
+            )
         return super().seed(None if seed is None else int(seed))
 
     def _batch_options(self) -> dict[str, Any] | None:
@@ -358,7 +360,7 @@ class SB3VecEnv(VecEnv):
     def _require_all(self, indices: VecEnvIndices, what: str) -> None:
         if indices is None:
             return
-        requested = set(int(i) for i in self._get_indices(indices))
+        requested = {int(i) for i in self._get_indices(indices)}
         if requested != set(range(self.num_envs)):
             raise ValueError(
                 f"{what} acts on the whole batch (one vector env object shared by all {self.num_envs} "

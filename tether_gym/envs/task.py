@@ -182,8 +182,9 @@ def check_number(
     """``value`` as a float in [low, high] (``(low, high]`` with ``low_open``), or an
     :class:`EnvArgumentError` naming ``name``; bools, strings and NaN/inf are rejected."""
     number = _real(value)
-    if number is not None and math.isfinite(number) and (number > low if low_open else number >= low) and number <= high:
-        return number
+    above = number is not None and (number > low if low_open else number >= low)
+    if above and math.isfinite(number) and number <= high:  # type: ignore[arg-type]
+        return number  # type: ignore[return-value]
     kind = "" if number is not None else f" (a {type(value).__name__})"
     raise EnvArgumentError(
         f"{name} must be a finite number {_interval(low, high, low_open, unit)}; got {_shown(value)}{kind}"
@@ -254,7 +255,8 @@ def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
     bools, complex numbers, strings, None, dicts and ragged lists are refused (by
     :func:`tether_gym.limits.real_array`, which also refuses NaN in anything but an array)."""
     if isinstance(value, np.ndarray) and value.dtype.kind in "iuf":  # the hot path of every step
-        with np.errstate(over="ignore", invalid="ignore"):  # longdouble beyond float64 becomes inf: caught by the caller
+        # A longdouble beyond float64 becomes inf, which the caller refuses.
+        with np.errstate(over="ignore", invalid="ignore"):
             return value.astype(np.float64, copy=False)
     if isinstance(value, (str, bytes, Mapping)):
         raise EnvArgumentError(f"{name} must be {what}; got {_shown(value)}")
@@ -263,7 +265,8 @@ def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
 
 def check_difficulty(difficulty: Any) -> float:
     """``difficulty`` as a float in [0, 1], or an :class:`EnvArgumentError`."""
-    return check_number("difficulty", difficulty, 0.0, 1.0, fix="1 is the configured task, 0 the nominal cluster at rest")
+    return check_number("difficulty", difficulty, 0.0, 1.0,
+                        fix="1 is the configured task, 0 the nominal cluster at rest")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -290,7 +293,9 @@ class ClusterScales:
         """The scales of ``cluster``, from a one-cluster simulator at its nominal state."""
         probe = BatchSimulator(cluster, 1, safety_factor=safety_factor)
         damped = cluster.damping > 0
-        damping_step = float((2.0 * cluster.masses[damped] / cluster.damping[damped]).min()) if damped.any() else math.inf
+        damping_step = math.inf
+        if damped.any():
+            damping_step = float((2.0 * cluster.masses[damped] / cluster.damping[damped]).min())
         return cls(
             shortest_cable=float(cluster.L0.min()), longest_cable=float(cluster.L0.max()),
             critical_step=float(probe.critical_time_step()[0]), damping_step=damping_step,
@@ -423,7 +428,8 @@ class TaskConfig:
                                     fix="a fraction of the critical step"),
             "impulse_magnitude": number("impulse_magnitude", self.impulse_magnitude, 0.0, MAX_IMPULSE, "N*s"),
             "impulse_rate": number("impulse_rate", self.impulse_rate, 0.0, MAX_IMPULSE_RATE, "1/s"),
-            "periodic_amplitude": number("periodic_amplitude", self.periodic_amplitude, 0.0, MAX_PERIODIC_AMPLITUDE, "N"),
+            "periodic_amplitude": number("periodic_amplitude", self.periodic_amplitude, 0.0,
+                                         MAX_PERIODIC_AMPLITUDE, "N"),
             "periodic_period": number("periodic_period", self.periodic_period, 0.0, MAX_TIME, "s", low_open=True),
             "thrust_noise": number("thrust_noise", self.thrust_noise, 0.0, MAX_THRUST_NOISE,
                                    fix="a multiple of max_thrust"),
@@ -437,7 +443,7 @@ class TaskConfig:
         }
         for name in ("vibration_weight", "propellant_weight", "slack_weight", "failure_penalty"):
             fields[name] = number(name, getattr(self, name), 0.0, MAX_WEIGHT)
-        if self.max_deviation is not None and not (_real(self.max_deviation) == math.inf):
+        if self.max_deviation is not None and _real(self.max_deviation) != math.inf:
             fields["max_deviation"] = number("max_deviation", self.max_deviation, 0.0, math.inf, "m", low_open=True,
                                              fix="inf never ends an episode on it, None is 30 % of the shortest cable")
         elif self.max_deviation is not None:
@@ -464,7 +470,8 @@ class TaskConfig:
             thrust = _real(item)
             if thrust is None or not (math.isfinite(thrust) and low <= thrust <= high):
                 raise EnvArgumentError(
-                    f"max_thrust must be finite and > 0 N, in [{low:g}, {high:g}] N per thruster; got {_shown(self.max_thrust)}"
+                    f"max_thrust must be finite and > 0 N, in [{low:g}, {high:g}] N per thruster; "
+                    f"got {_shown(self.max_thrust)}"
                 )
             thrusts.append(thrust)
         return thrusts[0] if scalar else tuple(thrusts)
@@ -589,7 +596,8 @@ def task_from_arguments(
     config = TaskConfig(**task)
     if preset_kwargs is not None and not isinstance(preset_kwargs, Mapping):
         raise EnvArgumentError(
-            f"preset_kwargs must be a dict of the preset's parameters, e.g. {{'N0': 1.0}}, or None; got {_shown(preset_kwargs)}"
+            "preset_kwargs must be a dict of the preset's parameters, e.g. {'N0': 1.0}, or None; "
+            f"got {_shown(preset_kwargs)}"
         )
     if cluster is None:
         if not isinstance(preset, str):
@@ -639,11 +647,12 @@ class DampingTask:
         num_clusters = check_whole("num_clusters", num_clusters, 1, MAX_NUM_ENVS)
         self.scales = config.validate(cluster)
         action_size = 3 * (cluster.num_nodes if config.thrusters is None else len(config.thrusters))
-        if num_clusters * config.thrust_delay * action_size > MAX_DELAY_LINE:
+        delay_line = num_clusters * config.thrust_delay * action_size
+        if delay_line > MAX_DELAY_LINE:
             raise EnvArgumentError(
-                f"thrust_delay={config.thrust_delay} with {num_clusters} clusters of {action_size} commands needs a delay "
-                f"line of {num_clusters * config.thrust_delay * action_size:.3g} numbers, more than {MAX_DELAY_LINE:.0e} "
-                "(800 MB); lower thrust_delay or num_envs"
+                f"thrust_delay={config.thrust_delay} with {num_clusters} clusters of {action_size} commands needs "
+                f"a delay line of {delay_line:.3g} numbers, more than {MAX_DELAY_LINE:.0e} (800 MB); lower "
+                "thrust_delay or num_envs"
             )
         self.cluster = cluster
         self.config = config
@@ -843,9 +852,10 @@ class DampingTask:
             deviation = float(np.linalg.norm(positions - self.cluster.positions, axis=-1).max())
             if not deviation <= scales.deviation_limit:
                 raise EnvArgumentError(
-                    f"reset option 'positions' puts a satellite {deviation:.3g} m from its nominal place; the limit is "
-                    f"{scales.deviation_limit:.3g} m ({MAX_RESET_DEVIATION_CABLES:g} lengths of the longest cable).  Positions are "
-                    "in the cluster's frame, m; the nominal shape is env.unwrapped.cluster.positions"
+                    f"reset option 'positions' puts a satellite {deviation:.3g} m from its nominal place; the "
+                    f"limit is {scales.deviation_limit:.3g} m ({MAX_RESET_DEVIATION_CABLES:g} lengths of the "
+                    "longest cable).  Positions are in the cluster's frame, m; the nominal shape is "
+                    "env.unwrapped.cluster.positions"
                 )
             cables = self.cluster.cables
             lengths = np.linalg.norm(positions[:, cables[:, 1]] - positions[:, cables[:, 0]], axis=-1)
@@ -853,18 +863,18 @@ class DampingTask:
             if short.any():
                 c = int(np.argwhere(short)[0, 1])
                 raise EnvArgumentError(
-                    f"reset option 'positions' puts satellites {tuple(cables[c].tolist())}, the ends of cable {c}, on "
-                    f"top of each other ({float(lengths[short][0]):.3g} m apart); a cable's direction, and so its force, "
-                    "needs distinct end positions"
+                    f"reset option 'positions' puts satellites {tuple(cables[c].tolist())}, the ends of cable "
+                    f"{c}, on top of each other ({float(lengths[short][0]):.3g} m apart); a cable's direction, and "
+                    "so its force, needs distinct end positions"
                 )
         if velocities is not None:
             speed = float(np.linalg.norm(velocities, axis=-1).max())
             limit = RESET_SPEED_FACTOR * scales.speed_limit
             if not speed <= limit:
                 raise EnvArgumentError(
-                    f"reset option 'velocities' gives a satellite {speed:.3g} m/s; the limit is {limit:.3g} m/s "
-                    f"({RESET_SPEED_FACTOR:g} x the initial_velocity limit of this cluster).  Velocities are relative to "
-                    "the cluster's frame, m/s"
+                    f"reset option 'velocities' gives a satellite {speed:.3g} m/s; the limit is {limit:.3g} "
+                    f"m/s ({RESET_SPEED_FACTOR:g} x the initial_velocity limit of this cluster).  Velocities are "
+                    "relative to the cluster's frame, m/s"
                 )
         return positions, velocities
 

@@ -73,10 +73,12 @@ class TetherClusterVectorEnv(VectorEnv):
     ) -> None:
         if render_mode is not None:
             raise EnvArgumentError(
-                f"render_mode must be None: the native vector env does not render (got {render_mode!r}); render a "
-                "single env, gym.make(id, render_mode='rgb_array'), or use gym.make_vec(..., vectorization_mode='sync')"
+                f"render_mode must be None: the native vector env does not render (got {render_mode!r}); render "
+                "a single env, gym.make(id, render_mode='rgb_array'), or use gym.make_vec(..., "
+                "vectorization_mode='sync')"
             )
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= MAX_NUM_ENVS:
+        whole = isinstance(num_envs, (int, np.integer)) and not isinstance(num_envs, (bool, np.bool_))
+        if not (whole and 1 <= num_envs <= MAX_NUM_ENVS):
             raise EnvArgumentError(
                 f"num_envs must be a positive integer, at most {MAX_NUM_ENVS} (run several processes for more); "
                 f"got {num_envs!r}"
