@@ -889,7 +889,8 @@ class DampingTask:
         ``rngs[k]``: randomise its parameters (if configured), then draw its initial conditions,
         or use the given (k, n, 3) positions/velocities; then draw its episode's disturbances and
         faults (if configured).  Each cluster draws only from its own generator, so a cluster
-        reset in a batch matches the same cluster reset alone."""
+        reset in a batch matches the same cluster reset alone.  Exact states must come from
+        :meth:`check_reset_state` (the envs call it before they reseed anything)."""
         for rng, b in zip(rngs, indices):
             if self.config.randomize:
                 self._set_nominal(int(b), self._randomised_cluster(rng))
