@@ -147,24 +147,30 @@ def test_no_loader_or_command_unpickles_without_the_opt_in(crafted: tuple[Path, 
 
 
 def test_opting_in_loads_pickle_files_with_a_warning(crafted: tuple[Path, Path], tmp_path: Path) -> None:
+    """With the opt-in, every path loads the crafted files -- and so runs their code, which is
+    what the warning is about."""
     run, marker = crafted
-    with pytest.warns(PickleTrustWarning, match="runs any code"):
-        policy = TrainedPolicy(run, trust_pickle=True)
-    assert marker.exists()  # what the user opted in to
-    assert policy.predict(np.zeros((2, 30), dtype=np.float32))[0].shape == (2, 12)
-    marker.unlink()
-    with pytest.warns(PickleTrustWarning):
-        records, _ = compare(ENV, controllers=["passive", str(run)], episodes=2, out=tmp_path / "compare",
-                             plots=False, env_kwargs=SHORT, trust_pickle=True)
-    assert [r.name for r in records] == ["passive", str(run)] and marker.exists()
-
-
-def test_trusted_resume_from_an_sb3_zip_keeps_counting(sb3_run: Path, tmp_path: Path) -> None:
-    with pytest.warns(PickleTrustWarning):
-        run = train("ppo", ENV, out=tmp_path, timesteps=64, num_envs=4, overrides={"n_steps": 64, "batch_size": 64},
-                    resume=sb3_run / "model.zip", trust_pickle=True, eval_freq=10_000, eval_episodes=2,
-                    checkpoint_freq=10_000, progress_bar=False)
-    assert TrainedPolicy(run).metadata["num_timesteps"] == 512  # 256 in the zip + one rollout of 4 x 64
+    env = gym.make_vec(ENV, num_envs=1)
+    attempts = [
+        lambda: TrainedPolicy(run, trust_pickle=True).predict(np.zeros((2, 30), dtype=np.float32)),
+        lambda: make_controller(str(run), env, trust_pickle=True),
+        lambda: agents.compare.main(["--controllers", "passive", str(run), "--episodes", "2", "--no-plots",
+                                     "--trust-pickle", "--out", str(tmp_path / "compare")]),
+        lambda: agents.train.main(["--resume", str(run / "model.zip"), "--trust-pickle", "--out", str(tmp_path / "runs"),
+                                   "--timesteps", "64", "--n-envs", "4", "--no-progress", "--eval-freq", "100000",
+                                   "--checkpoint-freq", "100000", "--eval-episodes", "2"]),
+        lambda: agents.convert.main([str(run), str(tmp_path / "converted"), "--trust-pickle"]),
+    ]
+    for attempt in attempts:
+        with pytest.warns(PickleTrustWarning, match="runs any code"):
+            attempt()
+        assert marker.exists()
+        marker.unlink()
+    assert f"| {run} |" in (tmp_path / "compare" / "comparison.md").read_text()
+    resumed = TrainedPolicy(tmp_path / "runs" / ENV / "ppo_seed0")
+    assert resumed.metadata["num_timesteps"] == 512  # 256 in the zip + one rollout of 4 x 64, counted on
+    TrainedPolicy(tmp_path / "converted")  # the converted copy loads without the opt-in
+    assert not marker.exists()
 
 
 def test_safe_files_that_hold_pickle_payloads_are_rejected(sb3_model: tuple[PPO, object], tmp_path: Path) -> None:
