@@ -109,6 +109,12 @@ def compare(
         repeated = sorted({name for name in controllers if controllers.count(name) > 1})
         if repeated:
             raise ValueError(f"controllers lists {repeated} more than once: each row of the table needs its own name")
+    if plots:
+        try:
+            import matplotlib  # noqa: F401 - checked now, not after every rollout
+        except ImportError as error:
+            raise ImportError("the plots need matplotlib: pip install 'tether-gym[plots]', or pass --no-plots "
+                              "(plots=False)") from error
     out = prepare_output_dir(out, argument="--out")
     check_output_files(out, TABLE_FILES + (PLOT_FILES if plots else ()), force=force, argument="--out",
                        what="an earlier comparison")
@@ -256,5 +262,5 @@ def main(argv: list[str] | None = None) -> tuple[list[EpisodeRecord], list[dict[
 if __name__ == "__main__":
     try:
         main()
-    except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError) as error:
+    except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError, ImportError) as error:
         sys.exit(f"agents.compare: error: {error}")
