@@ -70,7 +70,13 @@ def rollout(
     seed on ``gym.make_vec(env_id, num_envs=len(seeds), **env_kwargs)``.
 
     ``progress`` is an optional callable ``progress(steps_done, steps_total)``."""
-    seeds = np.asarray(list(seeds), dtype=np.int64)
+    seed_list = list(seeds)
+    bad = [s for s in seed_list if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0]
+    if bad:
+        raise ValueError(f"seeds must be non-negative integers; got {bad[:5]}")
+    if isinstance(satellite, bool) or not isinstance(satellite, (int, np.integer)):
+        raise ValueError(f"satellite must be an integer index; got {satellite!r}")
+    seeds = np.asarray(seed_list, dtype=np.int64)
     count = seeds.size
     if count == 0:
         raise ValueError("seeds must name at least one episode")

@@ -31,6 +31,7 @@ import agents.policies
 import agents.train
 from agents.compare import compare
 from agents.convert import REFERENCE_FILE, convert
+from agents.evaluate import rollout
 from agents.files import OutputError, OutputExistsError, atomic_write_text
 from agents.pickled import PickleNotTrustedError, PickleTrustWarning
 from agents.policies import MODELS_DIR, TrainedPolicy, make_controller, shipped_models
@@ -500,6 +501,8 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
         (lambda: compare(ENV, controllers=["lqr", "lqr"], out=out), r"\['lqr'\] more than once"),
         (lambda: compare(ENV, controllers=[], out=out), "at least one controller"),
         (lambda: compare(ENV, satellite=9, out=out, episodes=2), r"satellite must be in 0\.\.3"),
+        (lambda: rollout(make_controller("passive", gym.make_vec(ENV, num_envs=1)), ENV, [1.5]),
+         r"seeds must be non-negative integers; got \[1\.5\]"),
         (lambda: train("ppo", ENV, seed=-1, out=out), "seed must be an integer >= 0"),
         (lambda: train("ppo", ENV, eval_episodes=0, out=out), "eval_episodes must be an integer >= 1"),
         (lambda: train("ppo", ENV, timesteps=0, out=out), "timesteps must be an integer >= 1"),
