@@ -277,14 +277,15 @@ def test_make_with_any_preset_arguments(
     env_id: str, preset_kwargs: Any, extra: dict, data: st.DataObject
 ) -> None:
     kwargs = dict(extra, preset_kwargs=preset_kwargs)
+    if kwargs.get("render_mode") in (None, "rgb_array"):
+        make = lambda: gym.make(env_id, **kwargs)
+    else:  # gym.make itself warns about, or trips over, a render mode the env does not list
+        make = lambda: TetherClusterEnv(**{**gym.spec(env_id).kwargs, **kwargs})
     try:
-        env = quietly(
-            lambda: TetherClusterEnv(**kwargs)
-        )  # directly: gym.make trips over a non-str render_mode
+        env = quietly(make)
     except Exception as error:  # noqa: BLE001
         assert_clear_error(error, names_of(kwargs) | {"preset"})
         return
-    env.render_mode = None  # no figures in a fuzz run
     rollout(env, seed=1, steps=2, data=data)
 
 
@@ -562,6 +563,89 @@ def test_set_difficulty_with_any_value(name: str, difficulty: Any) -> None:
     obs, info = quietly(lambda: env.reset(seed=0))
     assert_reset_ok(env.observation_space, obs, info)
     env.unwrapped.set_difficulty(1.0)
+
+
+VECTOR = gym.make_vec("TetherTriangle-v0", num_envs=3, randomize={"masses": 0.1}, thrust_delay=1)
+VECTOR.reset(seed=0)
+
+
+def vector_snapshot(envs: gym.vector.VectorEnv) -> dict[str, Any]:
+    inner = envs.unwrapped
+    task = inner.task
+    return {
+        "positions": task.sim.positions.copy(),
+        "velocities": task.sim.velocities.copy(),
+        "time": task.sim.time.copy(),
+        "masses": task.sim.masses.copy(),
+        "queue": task.action_queue.copy(),
+        "steps": inner._episode_steps.copy(),
+        "rngs": [rng.bit_generator.state for rng in inner._rngs],
+    }
+
+
+@fuzz(150)
+@given(data=st.data())
+def test_vector_step_with_any_actions(data: st.DataObject) -> None:
+    envs = VECTOR
+    shape = envs.action_space.shape
+    actions = data.draw(
+        st.one_of(
+            hnp.arrays(np.float64, shape, elements=st.one_of(floats(-1e300, 1e300), special)),
+            hnp.arrays(
+                st.sampled_from([np.float32, np.int16, np.bool_, np.complex64, object]),
+                st.one_of(st.just(shape), hnp.array_shapes(max_dims=3, max_side=10)),
+                elements=st.integers(0, 1),
+            ),
+            st.lists(
+                st.lists(st.one_of(floats(-2, 2), special, junk), min_size=8, max_size=10),
+                min_size=2,
+                max_size=4,
+            ),
+            special,
+            junk,
+        ),
+        label="actions",
+    )
+    before = vector_snapshot(envs)
+    try:
+        obs, rewards, terminated, truncated, _ = quietly(lambda: envs.step(actions))
+    except Exception as error:  # noqa: BLE001
+        assert_clear_error(error, {"actions"})
+        assert_unchanged(before, vector_snapshot(envs))
+        return
+    assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
+    assert np.isfinite(rewards).all() and terminated.dtype == np.bool_ and truncated.dtype == np.bool_
+
+
+@fuzz(150)
+@given(seed=vector_seeds, data=st.data())
+def test_vector_reset_with_any_options_and_seeds(seed: Any, data: st.DataObject) -> None:
+    envs = VECTOR
+    nominal = np.broadcast_to(envs.unwrapped.cluster.positions, (3, 3, 3))
+    options = data.draw(
+        st.one_of(
+            st.none(),
+            junk,
+            st.fixed_dictionaries(
+                {},
+                optional={
+                    "positions": state_like(nominal.shape, nominal),
+                    "velocities": state_like(nominal.shape, None),
+                    "mask": st.booleans(),
+                },
+            ),
+        ),
+        label="options",
+    )
+    before = vector_snapshot(envs)
+    try:
+        obs, infos = quietly(lambda: envs.reset(seed=seed, options=options))
+    except Exception as error:  # noqa: BLE001
+        assert_clear_error(error, {"seed", "options", "option", "positions", "velocities"})
+        assert_unchanged(before, vector_snapshot(envs))
+        return
+    assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
+    assert np.isfinite(infos["vibration_energy"]).all()
 
 
 @pytest.mark.parametrize("env_id", SMALL_IDS)
