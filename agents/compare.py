@@ -27,13 +27,13 @@ import csv
 import io
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from agents.baselines import BASELINES
+from agents.cli import int_at_least
 from agents.evaluate import METRICS, EpisodeRecord, rollout, summarise
 from agents.files import OutputError, atomic_write, atomic_write_text, check_output_files, prepare_output_dir
 from agents.pickled import PickleNotTrustedError
@@ -217,18 +217,6 @@ def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, sat
     plt.close(fig)
 
 
-def _int_at_least(minimum: int) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}; got {value}")
-        return value
-
-    return parse
-
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
@@ -241,9 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})")
     parser.add_argument("--controllers", nargs="+", help="baseline names, shipped model names or policy directories "
                         "(default: every baseline and every shipped model of the id)")
-    parser.add_argument("--episodes", type=_int_at_least(2), default=64)
-    parser.add_argument("--seed", type=_int_at_least(0), default=HELD_OUT_SEED, help="first held-out seed")
-    parser.add_argument("--satellite", type=_int_at_least(0), default=0, help="satellite of the displacement plot")
+    parser.add_argument("--episodes", type=int_at_least(2), default=64)
+    parser.add_argument("--seed", type=int_at_least(0), default=HELD_OUT_SEED, help="first held-out seed")
+    parser.add_argument("--satellite", type=int_at_least(0), default=0, help="satellite of the displacement plot")
     parser.add_argument("--out", default="outputs/compare", help="output directory (default outputs/compare)")
     parser.add_argument("--no-plots", action="store_true")
     parser.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from agents.cli import int_at_least
 from agents.files import OutputError, atomic_write_bytes, check_output_files, prepare_output_dir
 from agents.pickled import (
     PickleNotTrustedError,
@@ -192,18 +193,6 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _at_least(minimum: int) -> Any:
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}; got {value}")
-        return value
-
-    return parse
-
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
@@ -218,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--algo", choices=["ppo", "sac", "td3"], help="algorithm, if SRC has no config.yml")
     parser.add_argument("--env", help="env id, if SRC has no config.yml")
     parser.add_argument("--training-state", action="store_true", help="keep the optimizer states (for --resume)")
-    parser.add_argument("--check-observations", type=_at_least(16), default=512,
+    parser.add_argument("--check-observations", type=int_at_least(16), default=512,
                         help="observations on which the actions must be bit-identical (default 512)")
     parser.add_argument("--reference", action="store_true",
                         help=f"keep those observations and actions in DST/{REFERENCE_FILE}")

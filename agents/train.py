@@ -52,6 +52,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalC
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 import tether_gym
+from agents.cli import int_at_least
 from agents.files import (
     OutputError,
     OutputExistsError,
@@ -728,18 +729,6 @@ def _algo_of(cls: type[BaseAlgorithm]) -> str:
     return next(name for name, candidate in ALGORITHMS.items() if candidate is cls)
 
 
-def _int_at_least(minimum: int) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}; got {value}")
-        return value
-
-    return parse
-
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
@@ -751,10 +740,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--algo", default="ppo", choices=sorted(ALGORITHMS))
     parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS), metavar="ID",
                         help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})")
-    parser.add_argument("--seed", type=_int_at_least(0), default=0)
+    parser.add_argument("--seed", type=int_at_least(0), default=0)
     parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/<algo>_seed<seed>")
-    parser.add_argument("--timesteps", type=_int_at_least(1), help="override n_timesteps")
-    parser.add_argument("--n-envs", type=_int_at_least(1), help="override n_envs")
+    parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps")
+    parser.add_argument("--n-envs", type=int_at_least(1), help="override n_envs")
     parser.add_argument("--hyperparams", help="YAML file instead of agents/hyperparams/<algo>.yml")
     parser.add_argument("--resume", help="checkpoint directory (or run directory, or best/) to continue from")
     parser.add_argument("--trust-pickle", action="store_true",
@@ -765,12 +754,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--curriculum", nargs=2, type=float, metavar=("START", "FRACTION"),
         help="raise the difficulty from START to 1 over the first FRACTION of the run",
     )
-    parser.add_argument("--eval-freq", type=_int_at_least(1), default=50_000, help="env steps between evaluations")
-    parser.add_argument("--eval-episodes", type=_int_at_least(1), default=32)
-    parser.add_argument("--checkpoint-freq", type=_int_at_least(1), default=250_000,
+    parser.add_argument("--eval-freq", type=int_at_least(1), default=50_000, help="env steps between evaluations")
+    parser.add_argument("--eval-episodes", type=int_at_least(1), default=32)
+    parser.add_argument("--checkpoint-freq", type=int_at_least(1), default=250_000,
                         help="env steps between checkpoints")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (for logs)")
-    parser.add_argument("--verbose", type=_int_at_least(0), default=0)
+    parser.add_argument("--verbose", type=int_at_least(0), default=0)
     return parser
 
 
