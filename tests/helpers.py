@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 import tether_gym as tg
@@ -45,3 +47,33 @@ def reference_internal_forces(cluster: tg.Cluster, x: np.ndarray) -> np.ndarray:
 def separation(x: np.ndarray) -> float:
     """Distance between the first two satellites, m."""
     return float(np.linalg.norm(x[1] - x[0]))
+
+
+def env_state(env: Any) -> dict[str, Any]:
+    """Copies of every piece of state a reset or a step of a single or vector env could change
+    (its task's simulator state and books, its generators, a vector env's step counters)."""
+    inner = env.unwrapped
+    task = inner.task
+    vector = hasattr(inner, "_rngs")
+    state: dict[str, Any] = {
+        "positions": task.sim.positions.copy(),
+        "velocities": task.sim.velocities.copy(),
+        "time": task.sim.time.copy(),
+        "masses": task.sim.masses.copy(),
+        "observation": task.observation.copy(),
+        "scalars": task.scalars.copy(),
+        "propellant": task.propellant.copy(),
+        "queue": task.action_queue.copy(),
+        "difficulty": task.difficulty,
+        "rngs": [rng.bit_generator.state for rng in (inner._rngs if vector else [inner.np_random])],
+    }
+    if vector:
+        state["steps"] = inner._episode_steps.copy()
+    return state
+
+
+def assert_unchanged(before: dict[str, Any], after: dict[str, Any]) -> None:
+    """Fail naming the first piece of :func:`env_state` that a refused call changed."""
+    for key, value in before.items():
+        same = np.array_equal(value, after[key]) if isinstance(value, np.ndarray) else value == after[key]
+        assert same, f"a refused call changed {key}"

@@ -11,6 +11,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from helpers import assert_unchanged, env_state
 
 import tether_gym as tg
 from tether_gym.envs import EnvArgumentError, TaskConfig, TetherClusterEnv, TetherClusterVectorEnv
@@ -285,11 +286,11 @@ def test_bad_reset_options_are_named_and_change_nothing(key: str, value: object,
     env.reset(seed=0)
     for _ in range(3):
         env.step(np.full(12, 0.5))
-    before = snapshot(env.unwrapped)
+    before = env_state(env.unwrapped)
     with pytest.raises(EnvArgumentError, match=why) as error:
         env.reset(seed=99, options={key: value})
     assert_names(error, key)
-    assert_unchanged(before, snapshot(env.unwrapped))
+    assert_unchanged(before, env_state(env.unwrapped))
 
 
 @pytest.mark.parametrize("options", ["positions", ["positions"], 3, {"speed": 1}, {1: 2}])
@@ -319,11 +320,11 @@ BAD_ACTIONS = [
 def test_bad_actions_are_named_and_change_nothing(action: object, why: str) -> None:
     env = gym.make(ENV_ID)
     env.reset(seed=0)
-    before = snapshot(env.unwrapped)
+    before = env_state(env.unwrapped)
     with pytest.raises(EnvArgumentError, match=why) as error:
         env.step(action)
     assert_names(error, "action")
-    assert_unchanged(before, snapshot(env.unwrapped))
+    assert_unchanged(before, env_state(env.unwrapped))
 
 
 def test_actions_of_any_real_dtype_act_alike_and_huge_ones_are_clipped() -> None:
@@ -342,29 +343,8 @@ def test_actions_of_any_real_dtype_act_alike_and_huge_ones_are_clipped() -> None
         assert np.array_equal(obs, results[0][0]) and reward == results[0][1]
 
 
-def snapshot(env: TetherClusterEnv | TetherClusterVectorEnv) -> dict:
-    """Every piece of state a reset or step could change."""
-    task = env.task
-    rngs = [env.np_random] if isinstance(env, TetherClusterEnv) else env._rngs
-    return {
-        "positions": task.sim.positions.copy(),
-        "velocities": task.sim.velocities.copy(),
-        "time": task.sim.time.copy(),
-        "masses": task.sim.masses.copy(),
-        "observation": task.observation.copy(),
-        "scalars": task.scalars.copy(),
-        "propellant": task.propellant.copy(),
-        "difficulty": task.difficulty,
-        "rngs": [rng.bit_generator.state for rng in rngs],
-    }
 
 
-def assert_unchanged(before: dict, after: dict) -> None:
-    for key, value in before.items():
-        if isinstance(value, np.ndarray):
-            assert np.array_equal(value, after[key]), key
-        else:
-            assert value == after[key], key
 
 
 def test_a_refused_reset_leaves_the_generator_as_it_was() -> None:
@@ -382,7 +362,7 @@ def test_a_refused_vector_reset_changes_nothing() -> None:
     envs = TetherClusterVectorEnv(num_envs=3, randomize={"masses": 0.2})
     envs.reset(seed=0)
     envs.step(np.full((3, 12), 0.3))
-    before = snapshot(envs)
+    before = env_state(envs)
     good = np.stack([envs.cluster.positions] * 3)
     bad_positions = good.copy()
     bad_positions[2, 0] = np.nan
@@ -395,7 +375,7 @@ def test_a_refused_vector_reset_changes_nothing() -> None:
     ):
         with pytest.raises(EnvArgumentError):
             envs.reset(seed=seed, options=options)
-        assert_unchanged(before, snapshot(envs))
+        assert_unchanged(before, env_state(envs))
 
 
 @pytest.mark.parametrize("difficulty", [-0.1, 1.5, math.nan, "0.5", True, None, [0.5]])

@@ -25,6 +25,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from helpers import assert_unchanged, env_state
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -408,26 +409,8 @@ for _env in ENVS.values():
     _env.reset(seed=0)
 
 
-def snapshot(env: gym.Env) -> dict[str, Any]:
-    inner = env.unwrapped
-    task = inner.task
-    return {
-        "positions": task.sim.positions.copy(),
-        "velocities": task.sim.velocities.copy(),
-        "time": task.sim.time.copy(),
-        "masses": task.sim.masses.copy(),
-        "observation": task.observation.copy(),
-        "propellant": task.propellant.copy(),
-        "queue": task.action_queue.copy(),
-        "difficulty": task.difficulty,
-        "rng": inner.np_random.bit_generator.state,
-    }
 
 
-def assert_unchanged(before: dict[str, Any], after: dict[str, Any]) -> None:
-    for key, value in before.items():
-        same = np.array_equal(value, after[key]) if isinstance(value, np.ndarray) else value == after[key]
-        assert same, f"a refused call changed {key}"
 
 
 def action_like(size: int) -> st.SearchStrategy[Any]:
@@ -459,12 +442,12 @@ def action_like(size: int) -> st.SearchStrategy[Any]:
 def test_step_with_any_action(name: str, data: st.DataObject) -> None:
     env = ENVS[name]
     action = data.draw(action_like(env.action_space.shape[0]), label="action")
-    before = snapshot(env)
+    before = env_state(env)
     try:
         result = quietly(lambda: env.step(action))
     except Exception as error:  # noqa: BLE001
         assert_clear_error(error, {"action"})
-        assert_unchanged(before, snapshot(env))
+        assert_unchanged(before, env_state(env))
         return
     assert_step_ok(env.observation_space, *result)
     if result[2] or result[3]:
@@ -490,6 +473,23 @@ def state_like(shape: tuple[int, ...], nominal: np.ndarray | None) -> st.SearchS
     )
 
 
+def reset_options(nominal: np.ndarray, unknown_key: str, unknown_values: st.SearchStrategy[Any]) -> st.SearchStrategy[Any]:
+    """Reset options: none, junk, or a dict with any of exact positions/velocities shaped like
+    ``nominal`` and a key the env does not know."""
+    return st.one_of(
+        st.none(),
+        junk,
+        st.fixed_dictionaries(
+            {},
+            optional={
+                "positions": state_like(nominal.shape, nominal),
+                "velocities": state_like(nominal.shape, None),
+                unknown_key: unknown_values,
+            },
+        ),
+    )
+
+
 @fuzz(250)
 @given(
     name=st.sampled_from(list(ENVS)),
@@ -506,27 +506,13 @@ def state_like(shape: tuple[int, ...], nominal: np.ndarray | None) -> st.SearchS
 def test_reset_with_any_options_and_seed(name: str, seed: Any, data: st.DataObject) -> None:
     env = ENVS[name]
     nominal = env.unwrapped.cluster.positions
-    options = data.draw(
-        st.one_of(
-            st.none(),
-            junk,
-            st.fixed_dictionaries(
-                {},
-                optional={
-                    "positions": state_like(nominal.shape, nominal),
-                    "velocities": state_like(nominal.shape, None),
-                    "speed": st.floats(),
-                },
-            ),
-        ),
-        label="options",
-    )
-    before = snapshot(env)
+    options = data.draw(reset_options(nominal, "speed", st.floats()), label="options")
+    before = env_state(env)
     try:
         obs, info = quietly(lambda: env.reset(seed=seed, options=options))
     except Exception as error:  # noqa: BLE001
         assert_clear_error(error, {"seed", "options", "option", "positions", "velocities"})
-        assert_unchanged(before, snapshot(env))
+        assert_unchanged(before, env_state(env))
         return
     assert_reset_ok(env.observation_space, obs, info)
     if isinstance(options, Mapping) and options.get("positions") is not None:
@@ -552,12 +538,12 @@ def rollout_from_here(env: gym.Env, data: st.DataObject) -> None:
 @given(name=st.sampled_from(list(ENVS)), difficulty=st.one_of(floats(-0.5, 1.5), special, junk))
 def test_set_difficulty_with_any_value(name: str, difficulty: Any) -> None:
     env = ENVS[name]
-    before = snapshot(env)
+    before = env_state(env)
     try:
         env.unwrapped.set_difficulty(difficulty)
     except Exception as error:  # noqa: BLE001
         assert_clear_error(error, {"difficulty"})
-        assert_unchanged(before, snapshot(env))
+        assert_unchanged(before, env_state(env))
         return
     assert env.unwrapped.task.difficulty == float(difficulty)
     obs, info = quietly(lambda: env.reset(seed=0))
@@ -569,18 +555,6 @@ VECTOR = gym.make_vec("TetherTriangle-v0", num_envs=3, randomize={"masses": 0.1}
 VECTOR.reset(seed=0)
 
 
-def vector_snapshot(envs: gym.vector.VectorEnv) -> dict[str, Any]:
-    inner = envs.unwrapped
-    task = inner.task
-    return {
-        "positions": task.sim.positions.copy(),
-        "velocities": task.sim.velocities.copy(),
-        "time": task.sim.time.copy(),
-        "masses": task.sim.masses.copy(),
-        "queue": task.action_queue.copy(),
-        "steps": inner._episode_steps.copy(),
-        "rngs": [rng.bit_generator.state for rng in inner._rngs],
-    }
 
 
 @fuzz(150)
@@ -606,12 +580,12 @@ def test_vector_step_with_any_actions(data: st.DataObject) -> None:
         ),
         label="actions",
     )
-    before = vector_snapshot(envs)
+    before = env_state(envs)
     try:
         obs, rewards, terminated, truncated, _ = quietly(lambda: envs.step(actions))
     except Exception as error:  # noqa: BLE001
         assert_clear_error(error, {"actions"})
-        assert_unchanged(before, vector_snapshot(envs))
+        assert_unchanged(before, env_state(envs))
         return
     assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
     assert np.isfinite(rewards).all() and terminated.dtype == np.bool_ and truncated.dtype == np.bool_
@@ -622,27 +596,13 @@ def test_vector_step_with_any_actions(data: st.DataObject) -> None:
 def test_vector_reset_with_any_options_and_seeds(seed: Any, data: st.DataObject) -> None:
     envs = VECTOR
     nominal = np.broadcast_to(envs.unwrapped.cluster.positions, (3, 3, 3))
-    options = data.draw(
-        st.one_of(
-            st.none(),
-            junk,
-            st.fixed_dictionaries(
-                {},
-                optional={
-                    "positions": state_like(nominal.shape, nominal),
-                    "velocities": state_like(nominal.shape, None),
-                    "mask": st.booleans(),
-                },
-            ),
-        ),
-        label="options",
-    )
-    before = vector_snapshot(envs)
+    options = data.draw(reset_options(nominal, "mask", st.booleans()), label="options")
+    before = env_state(envs)
     try:
         obs, infos = quietly(lambda: envs.reset(seed=seed, options=options))
     except Exception as error:  # noqa: BLE001
         assert_clear_error(error, {"seed", "options", "option", "positions", "velocities"})
-        assert_unchanged(before, vector_snapshot(envs))
+        assert_unchanged(before, env_state(envs))
         return
     assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
     assert np.isfinite(infos["vibration_energy"]).all()
