@@ -88,6 +88,11 @@ def remove_rigid_velocity(x: np.ndarray, v: np.ndarray, masses: np.ndarray) -> N
 #: Observations are clipped to +-this (it is reached only far beyond a lost formation).
 OBSERVATION_LIMIT = 1e4
 
+#: A step whose |reward| would exceed this (or be NaN) ends as ``numerics_diverged`` with a finite
+#: reward.  No accepted setting gets near it unless the state has run away, and it keeps every
+#: reward finite also in float32 (max 3.4e38), as Stable-Baselines3 stores them.
+REWARD_LIMIT = 1e30
+
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _bounded(value: float) -> float:
@@ -181,8 +186,9 @@ def _evaluate_clusters(
     strain_energy (J), frame_potential (J)]``.  ``weights`` = ``[vibration_weight / energy_scale,
     propellant_weight / full_impulse, slack_weight, failure_penalty]``.  A cable past its
     breaking load ends the episode only with ``terminate_on_break``.  A cluster whose reward
-    terms or energies would not be finite ends as numerics diverged (code 3), with the vibration
-    term (and a non-finite propellant term) set to 0: the reward is always finite.
+    would pass ``REWARD_LIMIT`` (or be NaN), or whose energies would not be finite, ends as
+    numerics diverged (code 3), with the vibration term (and any non-finite term) set to 0: the
+    reward is always finite.
 
     The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension may
     hold a viscous part).  In a turning frame (``frame_tidal`` (B, 3), 1/s^2) the vibration energy
@@ -279,18 +285,22 @@ def _evaluate_clusters(
         slack_fraction = slack / m
         terms_vibration = -weights[0] * vibration
         terms_propellant = -weights[1] * impulse[b]
-        if not (math.isfinite(terms_vibration) and math.isfinite(terms_propellant) and math.isfinite(kinetic)
-                and math.isfinite(strain) and math.isfinite(frame_potential)):
-            # A state beyond the reward's arithmetic (an energy or a weighted term that overflows)
-            # is a divergence too: the episode ends there with a finite reward, the vibration
-            # term dropped as for a frozen cluster, never a NaN or -inf while it runs on.
+        terms_slack = -weights[2] * slack_fraction
+        running_reward = terms_vibration + terms_propellant + terms_slack
+        if not (abs(running_reward) <= REWARD_LIMIT and math.isfinite(kinetic) and math.isfinite(strain)
+                and math.isfinite(frame_potential)):
+            # A state beyond the reward's arithmetic (an energy or a weighted term that overflows
+            # or passes REWARD_LIMIT; NaN fails the comparison too) is a divergence: the episode
+            # ends there with a finite reward, the vibration term dropped as for a frozen
+            # cluster, never a NaN or -inf while it runs on.
             reason = 3
             vibration = 0.0
             terms_vibration = 0.0
             if not math.isfinite(terms_propellant):
                 terms_propellant = 0.0
+            if not math.isfinite(terms_slack):
+                terms_slack = 0.0
         end_reason[b] = reason
-        terms_slack = -weights[2] * slack_fraction
         terms_failure = -weights[3] if reason > 0 else 0.0
         scalars[b, 0] = terms_vibration + terms_propellant + terms_slack + terms_failure
         scalars[b, 1] = terms_vibration

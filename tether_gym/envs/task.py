@@ -36,8 +36,6 @@ CableFailure = Literal["terminate", "continue"]
 
 #: ``end_reason`` codes reported in ``info`` (index into this tuple).
 END_REASONS = ("running", "formation_lost", "cable_broken", "numerics_diverged")
-#: The code of an episode whose state or reward ran away.
-DIVERGED = END_REASONS.index("numerics_diverged")
 
 RANDOMISABLE = ("masses", "EA", "damping", "N0", "axial_damping")
 
@@ -134,9 +132,8 @@ MAX_THRUST_DELAY = 1000
 MAX_DELAY_LINE = 10**8
 
 #: A step whose |reward| exceeds this (or is NaN) ends as ``numerics_diverged`` with a finite
-#: reward.  No accepted setting gets near it unless the state has run away, and it keeps every
-#: reward finite also in float32 (max 3.4e38), as Stable-Baselines3 stores them.
-REWARD_LIMIT = 1e30
+#: reward (checked in the task kernel, where it is defined).
+REWARD_LIMIT = _task_kernels.REWARD_LIMIT
 
 #: Most sub-envs of one vector env.  Each cluster holds some kB of state; beyond this one batch
 #: outgrows a process's memory and a step's latency: run several processes instead.
@@ -255,6 +252,8 @@ def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
     bools, complex numbers, strings, None, dicts and ragged lists are refused (by
     :func:`tether_gym.limits.real_array`, which also refuses NaN in anything but an array)."""
     if isinstance(value, np.ndarray) and value.dtype.kind in "iuf":  # the hot path of every step
+        if value.dtype.itemsize <= 8:  # float16/32/64 and integers: no overflow, no errstate needed
+            return np.asarray(value, dtype=np.float64)
         # A longdouble beyond float64 becomes inf, which the caller refuses.
         with np.errstate(over="ignore", invalid="ignore"):
             return value.astype(np.float64, copy=False)
@@ -757,27 +756,6 @@ class DampingTask:
             self.sim, self.bias, self.nominal, self.nominal_strain_energy, self.stats.status,
             self.stats.peak_tension, self.impulse, self.observation, self.scalars, self.end_reason,
         )
-        # One reduction per step; NaN fails the comparison too.
-        if not np.abs(self.scalars[:, 0]).max() <= REWARD_LIMIT:
-            self._end_runaways()
-
-    def _end_runaways(self) -> None:
-        """End every cluster whose reward is NaN, infinite or beyond ``REWARD_LIMIT`` as
-        ``numerics_diverged``, with a finite reward: ``-failure_penalty`` plus its propellant and
-        slack terms (each 0 if not finite).  Its energies stay in ``info`` as computed."""
-        scalars = self.scalars
-        runaway = ~(np.abs(scalars[:, 0]) <= REWARD_LIMIT)
-        terms = scalars[runaway]
-        for name in ("reward_propellant", "reward_slack"):
-            column = terms[:, _COLUMN[name]]
-            column[~np.isfinite(column)] = 0.0
-        terms[:, _COLUMN["reward_vibration"]] = 0.0
-        terms[:, _COLUMN["reward_failure"]] = -self.config.failure_penalty
-        terms[:, _COLUMN["reward"]] = (
-            terms[:, _COLUMN["reward_propellant"]] + terms[:, _COLUMN["reward_slack"]] - self.config.failure_penalty
-        )
-        scalars[runaway] = terms
-        self.end_reason[runaway] = DIVERGED
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(
