@@ -25,6 +25,7 @@ from tether_gym.simulator import (
     EnergyReport,
     SimulationDiverged,
     Simulator,
+    SimulatorState,
 )
 
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS, register_envs
@@ -47,6 +48,7 @@ __all__ = [
     "LEO_ORBIT_RATE",
     "SimulationDiverged",
     "Simulator",
+    "SimulatorState",
     "load_cluster",
     "make_cluster",
     "preset_names",

@@ -25,7 +25,9 @@ __all__ = [
     "AdvanceStats",
     "BatchSimulator",
     "EnergyReport",
+    "STATE_FIELDS",
     "SimulationDiverged",
+    "SimulatorState",
     "Simulator",
 ]
 
@@ -109,6 +111,56 @@ class EnergyReport:
         """Mechanical energy kinetic + strain + frame potential, J (the Jacobi integral in a
         turning frame)."""
         return self.kinetic + self.strain + self.frame_potential
+
+
+#: The state of a cluster in a batch: public name -> BatchSimulator attribute.  Together with the
+#: cluster's parameters these are everything the integration reads, so a cluster restored from
+#: them continues bit-identically.
+STATE_FIELDS: dict[str, str] = {
+    "positions": "positions_",  # (k, n, 3) m
+    "half_step_velocities": "_v_half",  # (k, n, 3) m/s, v_{n-1/2} (v_0 right after a reset)
+    "velocities": "velocities_",  # (k, n, 3) m/s at the current time
+    "internal_forces": "_f_int",  # (k, n, 3) N, f_int at the current positions
+    "tension": "tension",  # (k, m) N
+    "intact": "intact",  # (k, m) bool
+    "last_step": "_h_prev",  # (k,) s, 0 right after a reset (the next step starts uniformly accelerated)
+    "omega2": "_omega2",  # (k,) (rad/s)^2, the step-limiting estimate at the current positions
+    "previous_force": "_previous_force",  # (k, n, 3) N, the force of the last interval (exact impulses)
+    "time": "time",  # (k,) s since the reset
+    "work": "_work",  # (k,) J, external work since the reset
+    "dissipated": "_dissipated",  # (k,) J
+    "initial_energy": "_energy0",  # (k,) J
+    "status": "status",  # (k,) STATUS_* code
+}
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatorState:
+    """An exact copy of the state of k clusters of a :class:`BatchSimulator`, from
+    :meth:`BatchSimulator.snapshot`; :meth:`BatchSimulator.restore` puts it back, into the same
+    clusters or into others (of this or another batch of the same topology and settings), and
+    the restored clusters continue bit-identically to the originals.
+
+    Attributes:
+        clusters: the k clusters' parameters (randomised clusters included).
+        arrays: every entry of :data:`STATE_FIELDS`, each of shape (k, ...), read-only copies.
+        settings: the batch settings the continuation depends on (safety factor, elongation,
+            largest step, sub-step budget); a batch with other settings refuses the state.
+    """
+
+    clusters: tuple[Cluster, ...]
+    arrays: dict[str, np.ndarray]
+    settings: tuple[float, str, float, int]
+
+    @property
+    def num_clusters(self) -> int:
+        """k, the number of clusters held."""
+        return len(self.clusters)
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        if name in STATE_FIELDS:
+            return self.arrays[name]
+        raise AttributeError(f"SimulatorState has no attribute {name!r}; its arrays are {list(STATE_FIELDS)}")
 
 
 def _check_array(
@@ -353,6 +405,59 @@ class BatchSimulator:
         self._omega2[idx] = omega2
         report = self.energy()
         self._energy0[idx] = report.total[idx]
+
+    # ------------------------------------------------------------------ snapshots
+    @property
+    def settings(self) -> tuple[float, str, float, int]:
+        """``(safety_factor, elongation, max_step, max_substeps)``: what a restored state needs
+        to be the same for a bit-identical continuation."""
+        return (self.safety_factor, self.elongation, self.max_step, self.max_substeps)
+
+    def snapshot(self, indices: Sequence[int] | np.ndarray | None = None) -> SimulatorState:
+        """An exact copy of the state of clusters ``indices`` (default all, in order): see
+        :class:`SimulatorState`.  For planning and search: snapshot, try something, restore."""
+        idx = self._indices(indices)
+        arrays = {}
+        for name, attribute in STATE_FIELDS.items():
+            copy = getattr(self, attribute)[idx]  # fancy indexing copies
+            copy.flags.writeable = False
+            arrays[name] = copy
+        return SimulatorState(tuple(self.clusters[int(b)] for b in idx), arrays, self.settings)
+
+    def restore(self, state: SimulatorState, indices: Sequence[int] | np.ndarray | None = None) -> None:
+        """Put ``state`` (k clusters) into clusters ``indices`` (default: the first k, in order),
+        parameters included; a state of one cluster may be restored into any number of clusters
+        (cloning, e.g. for sampling-based planning).  Each restored cluster then continues
+        bit-identically to the cluster the state was taken from.  The state must come from a
+        batch of the same topology and :attr:`settings`; nothing changes when it is refused."""
+        if not isinstance(state, SimulatorState):
+            raise TypeError(f"state must be a SimulatorState from BatchSimulator.snapshot; got {type(state).__name__}")
+        idx = np.arange(state.num_clusters) if indices is None else self._indices(indices)
+        if state.num_clusters not in (1, idx.size):
+            raise ValueError(
+                f"state holds {state.num_clusters} clusters and cannot fill the {idx.size} clusters of indices; "
+                "give one index per cluster of the state, or a state of one cluster to clone"
+            )
+        if idx.size and (idx.max() >= self.num_clusters):
+            raise ValueError(f"indices must be in 0..{self.num_clusters - 1}; got {idx.tolist()}")
+        template = state.clusters[0]
+        if template.num_nodes != self.num_nodes or not np.array_equal(template.cables, self.cables):
+            raise ValueError(
+                f"state has a different topology ({template.num_nodes} satellites, {template.num_cables} cables) "
+                f"from this batch ({self.num_nodes} satellites, {self.num_cables} cables)"
+            )
+        if state.settings != self.settings:
+            raise ValueError(
+                f"state was taken with settings (safety_factor, elongation, max_step, max_substeps) = {state.settings}, "
+                f"this batch has {self.settings}; a restored cluster would not continue the same way"
+            )
+        source = np.zeros(idx.size, dtype=np.int64) if state.num_clusters == 1 else np.arange(idx.size)
+        for k, b in zip(source, idx):
+            cluster = state.clusters[int(k)]
+            if self.clusters[int(b)] is not cluster:
+                self.set_cluster(int(b), cluster, reset=False)
+        for name, attribute in STATE_FIELDS.items():
+            getattr(self, attribute)[idx] = state.arrays[name][source]
 
     def _evaluate(
         self,

@@ -24,9 +24,17 @@ from numpy.typing import ArrayLike
 from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
 from tether_gym.limits import MAX_COORDINATE, MAX_SPEED, is_real_number, real_array, to_float
-from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, PARALLEL_MIN_BATCH, AdvanceStats, BatchSimulator
+from tether_gym.simulator import (
+    DEFAULT_SAFETY_FACTOR,
+    PARALLEL_MIN_BATCH,
+    AdvanceStats,
+    BatchSimulator,
+    SimulatorState,
+)
 
 __all__ = [
+    "TASK_STATE_FIELDS",
+    "TaskState",
     "END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "ClusterScales", "DampingTask", "EnvArgumentError", "TaskConfig",
     "task_from_arguments",
 ]
@@ -615,6 +623,44 @@ def task_from_arguments(
     return DampingTask(cluster, num_clusters, config)
 
 
+#: A cluster's task state beyond the simulator's: what its next step reads (bias, nominal shape,
+#: delay line, faults and disturbances of the episode) and what the last step wrote (forces,
+#: books, observation, reward terms, end reason, sub-step statistics).  ``stats.*`` name the
+#: arrays of the task's :class:`~tether_gym.simulator.AdvanceStats`.
+TASK_STATE_FIELDS = (
+    "bias", "nominal", "nominal_strain_energy", "force", "thrust", "impulse", "propellant", "disturbance",
+    "thruster_ok", "failure_time", "failing_thruster", "periodic_direction", "periodic_phase", "action_queue",
+    "observation", "scalars", "end_reason", "stats.substeps", "stats.step_min", "stats.step_max", "stats.status",
+    "stats.peak_tension",
+)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TaskState:
+    """An exact copy of the state of k clusters of a :class:`DampingTask`, from
+    :meth:`DampingTask.snapshot`; :meth:`DampingTask.restore` puts it back into any clusters of a
+    task built from the same cluster and :class:`TaskConfig`, which then continue bit-identically
+    (given the same actions, and the same generators where disturbances or noise draw).
+
+    Attributes:
+        simulator: the clusters' :class:`~tether_gym.simulator.SimulatorState`.
+        arrays: every entry of :data:`TASK_STATE_FIELDS`, each of shape (k, ...), read-only copies.
+        config: the task's settings; ``cluster``: its nominal cluster; ``difficulty``: its
+            difficulty when the state was taken.
+    """
+
+    simulator: SimulatorState
+    arrays: dict[str, np.ndarray]
+    config: TaskConfig
+    cluster: Cluster
+    difficulty: float
+
+    @property
+    def num_clusters(self) -> int:
+        """k, the number of clusters held."""
+        return self.simulator.num_clusters
+
+
 class DampingTask:
     """The damping task over a batch of B clusters of one topology.
 
@@ -756,6 +802,47 @@ class DampingTask:
             self.sim, self.bias, self.nominal, self.nominal_strain_energy, self.stats.status,
             self.stats.peak_tension, self.impulse, self.observation, self.scalars, self.end_reason,
         )
+
+    # ------------------------------------------------------------------ snapshots
+    def _state_array(self, name: str) -> np.ndarray:
+        owner, _, attribute = name.rpartition(".")
+        return getattr(self.stats if owner == "stats" else self, attribute)
+
+    def snapshot(self, indices: Sequence[int] | np.ndarray | None = None) -> TaskState:
+        """An exact copy of the state of clusters ``indices`` (default all, in order): their
+        simulator state and every task array of :data:`TASK_STATE_FIELDS`.  For planning and
+        search: snapshot, step candidate actions, restore (see :class:`TaskState`)."""
+        simulator = self.sim.snapshot(indices)
+        idx = self.sim._indices(indices)
+        arrays = {}
+        for name in TASK_STATE_FIELDS:
+            copy = self._state_array(name)[idx]
+            copy.flags.writeable = False
+            arrays[name] = copy
+        return TaskState(simulator, arrays, self.config, self.cluster, self.difficulty)
+
+    def restore(self, state: TaskState, indices: Sequence[int] | np.ndarray | None = None) -> None:
+        """Put ``state`` (k clusters) into clusters ``indices`` (default: the first k); a state of
+        one cluster may fill any number of clusters (cloning).  The state must come from a task
+        with an equal cluster, :class:`TaskConfig` and difficulty; nothing changes when it is
+        refused.  The restored clusters continue bit-identically to the originals."""
+        if not isinstance(state, TaskState):
+            raise TypeError(f"state must be a TaskState from DampingTask.snapshot; got {type(state).__name__}")
+        if state.config != self.config or state.cluster != self.cluster:
+            raise ValueError(
+                "state was taken from a task with another cluster or TaskConfig; restore it into a task built "
+                "from the same cluster and settings"
+            )
+        if state.difficulty != self.difficulty:
+            raise ValueError(
+                f"state was taken at difficulty {state.difficulty}, this task is at {self.difficulty}; call "
+                f"set_difficulty({state.difficulty}) first"
+            )
+        idx = np.arange(state.num_clusters) if indices is None else self.sim._indices(indices)
+        self.sim.restore(state.simulator, idx)  # validates the indices and the cluster count first
+        source = np.zeros(idx.size, dtype=np.int64) if state.num_clusters == 1 else np.arange(idx.size)
+        for name in TASK_STATE_FIELDS:
+            self._state_array(name)[idx] = state.arrays[name][source]
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(
