@@ -87,6 +87,8 @@ def rollout(
     steps = envs.unwrapped.max_episode_steps
     if steps is None:
         raise ValueError(f"{env_id} has no max_episode_steps; pass env_kwargs={{'max_episode_steps': ...}}")
+    if hasattr(controller, "attach"):  # privileged controllers (mpc) read the state of the env they control
+        controller.attach(envs)
     if hasattr(controller, "reset_statistics"):
         controller.reset_statistics()
     observation, _ = envs.reset(seed=[int(s) for s in seeds])

@@ -137,8 +137,9 @@ def shipped_models(env_id: str) -> dict[str, Path]:
 
 def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
     """A controller from a name: a baseline (``passive``, ``velocity_feedback``, ``lqr``,
-    ``tension_aware``), a shipped model of the env's id (e.g. ``ppo``), or a path to a policy
-    directory (a pickle-based SB3 model only with ``trust_pickle``).
+    ``tension_aware``), the privileged model-predictive reference ``mpc`` (agents.mpc), a
+    shipped model of the env's id (e.g. ``ppo``), or a path to a policy directory (a
+    pickle-based SB3 model only with ``trust_pickle``).
 
     Raises ValueError naming ``spec`` when it is none of these, or when the policy's
     observations do not fit ``env``'s."""
@@ -146,6 +147,10 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
         raise ValueError(f"controller must be a non-empty name or path; got {spec!r}")
     if spec in BASELINES:
         return make_baseline(spec, env)
+    if spec == "mpc":
+        from agents.mpc import MPCController
+
+        return MPCController(env)
     env_id = getattr(getattr(env, "spec", None), "id", None)
     shipped = shipped_models(env_id) if env_id is not None else {}
     if spec in shipped:
@@ -155,7 +160,7 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
             refuse_untrusted(spec, opt_in="--trust-pickle")
         controller = TrainedPolicy(spec, trust_pickle=trust_pickle)
     else:
-        known = sorted(BASELINES) + sorted(shipped)
+        known = sorted(BASELINES) + ["mpc"] + sorted(shipped)
         raise ValueError(
             f"unknown controller {spec!r}: not one of {known}, and no such file or directory "
             f"(pass a baseline name, a shipped model name, or the path of a policy directory)"

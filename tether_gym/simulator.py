@@ -134,6 +134,16 @@ STATE_FIELDS: dict[str, str] = {
 }
 
 
+def read_only_rows(arrays: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
+    """Read-only copies of rows ``rows`` (fancy indexing, so repeats are allowed) of every array."""
+    selected = {}
+    for name, array in arrays.items():
+        copy = array[rows]
+        copy.flags.writeable = False
+        selected[name] = copy
+    return selected
+
+
 @dataclass(frozen=True, eq=False)
 class SimulatorState:
     """An exact copy of the state of k clusters of a :class:`BatchSimulator`, from
@@ -156,6 +166,12 @@ class SimulatorState:
     def num_clusters(self) -> int:
         """k, the number of clusters held."""
         return len(self.clusters)
+
+    def select(self, rows: Sequence[int] | np.ndarray) -> SimulatorState:
+        """The state of clusters ``rows`` of this state, in that order; rows may repeat (e.g.
+        ``np.repeat(np.arange(k), n)`` makes n copies of each cluster for planning)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        return SimulatorState(tuple(self.clusters[int(r)] for r in rows), read_only_rows(self.arrays, rows), self.settings)
 
     def __getattr__(self, name: str) -> np.ndarray:
         if name in STATE_FIELDS:
@@ -417,11 +433,7 @@ class BatchSimulator:
         """An exact copy of the state of clusters ``indices`` (default all, in order): see
         :class:`SimulatorState`.  For planning and search: snapshot, try something, restore."""
         idx = self._indices(indices)
-        arrays = {}
-        for name, attribute in STATE_FIELDS.items():
-            copy = getattr(self, attribute)[idx]  # fancy indexing copies
-            copy.flags.writeable = False
-            arrays[name] = copy
+        arrays = read_only_rows({name: getattr(self, attribute) for name, attribute in STATE_FIELDS.items()}, idx)
         return SimulatorState(tuple(self.clusters[int(b)] for b in idx), arrays, self.settings)
 
     def restore(self, state: SimulatorState, indices: Sequence[int] | np.ndarray | None = None) -> None:

@@ -30,6 +30,7 @@ from tether_gym.simulator import (
     AdvanceStats,
     BatchSimulator,
     SimulatorState,
+    read_only_rows,
 )
 
 __all__ = [
@@ -660,6 +661,13 @@ class TaskState:
         """k, the number of clusters held."""
         return self.simulator.num_clusters
 
+    def select(self, rows: Sequence[int] | np.ndarray) -> TaskState:
+        """The state of clusters ``rows`` of this state, in that order; rows may repeat (one
+        restore then fills a planning batch with n copies of each cluster)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        return TaskState(self.simulator.select(rows), read_only_rows(self.arrays, rows), self.config, self.cluster,
+                         self.difficulty)
+
 
 class DampingTask:
     """The damping task over a batch of B clusters of one topology.
@@ -814,11 +822,7 @@ class DampingTask:
         search: snapshot, step candidate actions, restore (see :class:`TaskState`)."""
         simulator = self.sim.snapshot(indices)
         idx = self.sim._indices(indices)
-        arrays = {}
-        for name in TASK_STATE_FIELDS:
-            copy = self._state_array(name)[idx]
-            copy.flags.writeable = False
-            arrays[name] = copy
+        arrays = read_only_rows({name: self._state_array(name) for name in TASK_STATE_FIELDS}, idx)
         return TaskState(simulator, arrays, self.config, self.cluster, self.difficulty)
 
     def restore(self, state: TaskState, indices: Sequence[int] | np.ndarray | None = None) -> None:
