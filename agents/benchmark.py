@@ -23,30 +23,37 @@ controller c in episode e, and E episodes:
   with a 95 % **t interval** ``mean(d) ± t(0.975, E-1) · sd(d) / sqrt(E)`` (``sd`` with E-1
   degrees of freedom, quantile from ``scipy.stats.t``), and the number of episodes where c did
   better;
-* the *normalised score*, 0 for passive and 100 for the reference (``mpc``). Per episode,
+* the *normalised score*, 0 for passive and 100 for the reference (``mpc``), of the means:
 
-      score[c, e] = 100 · (R[c, e] - R[passive, e]) / (mean_e R[ref, e] - mean_e R[passive, e]):
+      S[c] = 100 · (R̄[c] - R̄[passive]) / (R̄[ref] - R̄[passive]),
 
-  the paired gain over passive on that seed, in units of the reference's mean gain on the id.
-  Its mean over episodes is the score of the means, ``100 (R̄_c - R̄_passive) / (R̄_ref -
-  R̄_passive)``, so passive scores 0 on every episode and the reference 100 on average. The
-  per-id interval is the t interval of the per-episode scores; like rliable's reference scores,
-  the denominator is treated as a fixed constant (its own uncertainty is the reference's paired
-  difference, also reported). The score is "not available" on an id where the reference did
-  not run, or did not beat passive's mean return. (Why not a per-episode ratio
+  an affine map of the mean return (as Atari's human-normalised score), so it ranks
+  controllers as their mean returns do. Its 95 % interval is a paired percentile bootstrap
+  (:data:`SCORE_BOOTSTRAP_REPS` resamples of the seeds, the same seeds for c, passive and the
+  reference, seeded with ``--seed``): it includes the uncertainty of the denominator and the
+  strong correlation of numerator and denominator, which both grow with a seed's initial
+  energy (the reference's own interval is exactly [100, 100]). The score is "not available"
+  on an id where the reference did not run, or did not beat passive's mean return.
+
+  Per episode, ``score[c, e] = 100 · (R[c, e] - R[passive, e]) / (R̄[ref] - R̄[passive])``: the
+  paired gain over passive on that seed, in units of the reference's mean gain; its mean over
+  the episodes is S[c]. These feed the aggregate. (Why not a ratio per episode,
   ``(R[c,e] - R[p,e]) / (R[ref,e] - R[p,e])``: on a seed where the reference gains little over
-  passive, that ratio explodes; the tension-aware law gains between -4 % and +62 % of
-  passive's return across 16 seeds of the default id.)
+  passive, it explodes. Passive's return varies 10- to 50-fold between seeds of one id.)
 
 **Across ids.** For each controller, the per-episode scores form an (episodes × ids) matrix,
 over the ids where its score is available. As in rliable (Agarwal et al. 2021), with episodes
 in the place of runs: the interquartile mean :func:`rliable.metrics.aggregate_iqm` (the mean of
 the middle 50 % of all the matrix's scores) and the mean of the per-id means
-(:func:`rliable.metrics.aggregate_mean`), each with a 95 % stratified percentile bootstrap
+(:func:`rliable.metrics.aggregate_mean`, the mean of the S[c]), each with a 95 % stratified
+percentile bootstrap
 interval from :func:`rliable.library.get_interval_estimates` (episodes resampled within each
 id; ``--bootstrap-reps`` replications, 50 000 by default as in rliable; the resampling is
 seeded with ``--seed``, so the numbers reproduce). The intervals cover the episode-to-episode
-(initial-condition) variation, not training-seed variation: one shipped model per id. Two
+(initial-condition) variation, not training-seed variation: one shipped model per id. The
+per-episode scores spread with the seeds' initial energies, and the IQM trims the episodes
+with the largest and smallest gains, so an IQM sits below the mean on this task (mpc's mean is
+100 by construction, its IQM is not): compare rows on the same statistic. Two
 extra rows take, per id, the best scripted baseline, and (when the shipped models have
 different names on different ids) the id's shipped model. A row available on fewer ids than
 another is not comparable with it: the table gives the count.
@@ -100,6 +107,7 @@ __all__ = [
     "main",
     "normalised_scores",
     "paired_difference",
+    "score_interval",
 ]
 
 #: The controller that scores 0: doing nothing.
@@ -108,6 +116,8 @@ ZERO = "passive"
 REFERENCE = "mpc"
 #: Confidence level of every interval.
 CONFIDENCE = 0.95
+#: Bootstrap resamples of each per-id score interval.
+SCORE_BOOTSTRAP_REPS = 10_000
 #: Aggregate rows that are not one controller.
 BEST_BASELINE_ROW = "best baseline (per id)"
 SHIPPED_ROW = "shipped model (per id)"
@@ -220,6 +230,34 @@ def normalised_scores(returns: Any, zero_returns: Any, reference_returns: Any) -
             f"the reference's mean return is not above passive's (gap {gap:.4g}): no score scale"
         )
     return 100.0 * (returns - zero) / gap
+
+
+def score_interval(returns: Any, zero_returns: Any, reference_returns: Any, reps: int = SCORE_BOOTSTRAP_REPS,
+                   seed: int = 0, confidence: float = CONFIDENCE) -> tuple[float, float] | None:
+    """Paired percentile-bootstrap interval of the score of the means,
+    ``100 (mean R - mean R0) / (mean Rref - mean R0)``.
+
+    Each of ``reps`` resamples draws E seeds with replacement, the same seeds for the three
+    (E,) return arrays, so the interval carries the denominator's uncertainty and the
+    correlation between numerator and denominator (both grow with a seed's initial energy).
+    Returns ``(low, high)``, or None when more than ``(1 - confidence) / 2`` of the resamples
+    have a reference no better than passive (the scale itself is then uncertain)."""
+    returns = _check_returns("returns", returns)
+    zero = _check_returns("zero_returns", zero_returns)
+    reference = _check_returns("reference_returns", reference_returns)
+    if not returns.shape == zero.shape == reference.shape:
+        raise ValueError(f"a paired bootstrap needs the same seeds on every side; got {returns.size}, "
+                         f"{zero.size} and {reference.size} episodes")
+    picks = np.random.default_rng(seed).integers(0, returns.size, size=(reps, returns.size))
+    gains = (returns - zero)[picks].mean(axis=1)
+    scales = (reference - zero)[picks].mean(axis=1)
+    tail = (1.0 - confidence) / 2
+    usable = scales > 0
+    if np.mean(~usable) > tail:
+        return None
+    ratios = 100.0 * gains[usable] / scales[usable]
+    low, high = np.quantile(ratios, [tail, 1.0 - tail])
+    return float(low), float(high)
 
 
 def _rliable() -> tuple[Any, Any]:
@@ -564,8 +602,10 @@ def _analyse(ids: list[str], records: dict[str, dict[str, EpisodeRecord]], wall:
                 "normalised_scores": scores[name].tolist() if name in scores else None,
             }
             if name in scores:
-                mean, _, half_width = t_interval(scores[name])
-                entry["normalised_score"] = {"mean": mean, "ci95": half_width}
+                interval = score_interval(returns[name], returns[ZERO], returns[reference], seed=seed)
+                entry["normalised_score"] = {"mean": float(scores[name].mean()),
+                                             "low": None if interval is None else interval[0],
+                                             "high": None if interval is None else interval[1]}
                 score_columns.setdefault(name, {})[env_id] = scores[name]
             controllers[name] = entry
         if scores:
@@ -617,7 +657,11 @@ def _score_cell(entry: dict[str, Any] | None) -> str:
     if entry is None:
         return "—"
     score = entry["normalised_score"]
-    return "n/a" if score is None else f"{score['mean']:.1f} ± {score['ci95']:.1f}"
+    if score is None:
+        return "n/a"
+    if score["low"] is None:
+        return f"{score['mean']:.1f} [interval n/a]"
+    return f"{score['mean']:.1f} [{score['low']:.1f}, {score['high']:.1f}]"
 
 
 def _aggregate_cell(row: dict[str, Any], key: str) -> str:
@@ -656,7 +700,8 @@ def markdown_report(results: dict[str, Any]) -> str:
     lines += ["", (f"Bold: the id's best scripted baseline. ✗: a baseline whose mean return is below "
                    f"{ZERO}'s, not eligible as best baseline. —: not run on the id (see the missing list "
                    "below)."), "",
-              f"## Normalised score per id (0 = {ZERO}, 100 = {reference}; mean ± 95 % t interval)", "",
+              (f"## Normalised score per id (0 = {ZERO}, 100 = {reference}; score of the means "
+               "[95 % paired bootstrap interval])"), "",
               "| id | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
     for env_id, entry in results["per_id"].items():
         cells = [_score_cell(entry["controllers"].get(name)) for name in columns]
@@ -705,8 +750,10 @@ def markdown_report(results: dict[str, Any]) -> str:
         ("- Best scripted baseline: the highest mean return among the scripted baselines whose mean return "
          f"is not below {ZERO}'s."),
         "- Δ return: paired by seed, d[e] = R[c, e] - R[best, e]; mean(d) ± t(0.975, E-1) sd(d)/√E.",
-        (f"- Normalised score of episode e: 100 (R[c, e] - R[{ZERO}, e]) / (mean R[{reference}] - "
-         f"mean R[{ZERO}]); the per-id cell is its mean ± t interval (the denominator taken as fixed)."),
+        (f"- Normalised score: 100 (mean R[c] - mean R[{ZERO}]) / (mean R[{reference}] - mean R[{ZERO}]), "
+         f"with a paired percentile-bootstrap interval ({SCORE_BOOTSTRAP_REPS} resamples of the seeds, the "
+         f"same for c, {ZERO} and {reference}). Per episode: 100 (R[c, e] - R[{ZERO}, e]) / "
+         f"(mean R[{reference}] - mean R[{ZERO}]), whose mean is the score."),
         ("- Aggregate: rliable's IQM (25 % trimmed mean of all per-episode scores of the row) and mean of "
          f"the per-id means, with {settings['bootstrap']['reps']} stratified percentile-bootstrap "
          f"replications (episodes resampled within each id, seeded with "
@@ -737,7 +784,7 @@ def _write_outputs(out: Path, results: dict[str, Any], records: dict[str, dict[s
             score_rows.append([env_id, name, item["kind"], item["mean_return"], item["return_ci95"],
                                item["failures"], item["baseline_note"], entry["best_baseline"],
                                paired.get("mean"), paired.get("low"), paired.get("high"), paired.get("wins"),
-                               score.get("mean"), score.get("ci95"), item["wall_seconds"]])
+                               score.get("mean"), score.get("low"), score.get("high"), item["wall_seconds"]])
             per_episode_scores = item["normalised_scores"] or [None] * len(item["returns"])
             for seed, value, ended, episode_score in zip(entry["seeds"], item["returns"], item["terminated"],
                                                          per_episode_scores, strict=True):
@@ -745,7 +792,7 @@ def _write_outputs(out: Path, results: dict[str, Any], records: dict[str, dict[s
     atomic_write_text(out / "scores.csv", _csv_text(
         ["env_id", "controller", "kind", "mean_return", "return_ci95", "failures", "baseline_note",
          "best_baseline", "paired_diff_mean", "paired_diff_low", "paired_diff_high", "paired_wins",
-         "normalised_score", "normalised_score_ci95", "wall_seconds"], score_rows))
+         "normalised_score", "normalised_score_low", "normalised_score_high", "wall_seconds"], score_rows))
     atomic_write_text(out / "episodes.csv", _csv_text(
         ["env_id", "controller", "seed", "return", "terminated", "normalised_score"], episode_rows))
     atomic_write_text(out / "aggregate.csv", _csv_text(
@@ -801,7 +848,7 @@ def _score_axis(values: list[float]) -> tuple[float, float]:
 
 
 def plot_normalised_scores(results: dict[str, Any], path: Path) -> None:
-    """Per id, a bar per controller: mean normalised score with its 95 % interval. Bars beyond
+    """Per id, a bar per controller: the normalised score with its 95 % interval. Bars beyond
     :data:`SCORE_AXIS` are cut at its edge and labelled with their value."""
     plt = _pyplot()
     reference = results["settings"]["reference"]
@@ -814,7 +861,8 @@ def plot_normalised_scores(results: dict[str, Any], path: Path) -> None:
     columns = [name for name in _columns(results) if name != ZERO]
     scores = [item["normalised_score"] for entry in results["per_id"].values()
               for item in entry["controllers"].values() if item["normalised_score"]]
-    low_limit, high_limit = _score_axis([s["mean"] + sign * s["ci95"] for s in scores for sign in (-1, 1)])
+    low_limit, high_limit = _score_axis([s[key] for s in scores for key in ("mean", "low", "high")
+                                         if s[key] is not None])
     fig, ax = plt.subplots(figsize=(max(8.0, 1.3 * len(ids) + 3), 5.2))
     width = 0.8 / max(len(columns), 1)
     for k, name in enumerate(columns):
@@ -823,12 +871,18 @@ def plot_normalised_scores(results: dict[str, Any], path: Path) -> None:
             item = results["per_id"][env_id]["controllers"].get(name)
             if item is not None and item["normalised_score"] is not None:
                 x.append(i - 0.4 + width * (k + 0.5))
-                mean.append(item["normalised_score"]["mean"])
-                error.append(item["normalised_score"]["ci95"])
+                score = item["normalised_score"]
+                mean.append(score["mean"])
+                # The interval's ends within the axis (none: no error bar), as distances from the
+                # bar's end, also cut at the axis.
+                low, high, end = np.clip([score["low"] if score["low"] is not None else score["mean"],
+                                          score["high"] if score["high"] is not None else score["mean"],
+                                          score["mean"]], low_limit, high_limit)
+                error.append((max(end - low, 0.0), max(high - end, 0.0)))
         if not x:
             continue
         shown = np.clip(mean, low_limit, high_limit)
-        ax.bar(x, shown, width, yerr=error, capsize=2, label=name, error_kw={"linewidth": 0.8})
+        ax.bar(x, shown, width, yerr=np.transpose(error), capsize=2, label=name, error_kw={"linewidth": 0.8})
         for xi, value, cut in zip(x, mean, shown, strict=True):
             if value != cut:  # written inside the cut bar, from its cut end
                 ax.text(xi, 0.97 * cut, f"{value:.0f}", ha="center", va="bottom" if cut < 0 else "top",
@@ -838,8 +892,8 @@ def plot_normalised_scores(results: dict[str, Any], path: Path) -> None:
     ax.set_ylim(low_limit, high_limit)
     ax.set_xticks(range(len(ids)), [env_id.removeprefix("Tether") for env_id in ids], rotation=20, ha="right")
     ax.set_ylabel(f"normalised score (0 = {ZERO}, 100 = {reference})")
-    ax.set_title(f"normalised score per id: mean and 95 % t interval over {results['settings']['episodes']} "
-                 "episodes", fontsize=10)
+    ax.set_title(f"normalised score per id over {results['settings']['episodes']} episodes (95 % paired "
+                 "bootstrap interval)", fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=8, ncol=min(len(columns), 5), loc="upper center", bbox_to_anchor=(0.5, -0.22),
               frameon=False)

@@ -26,6 +26,7 @@ from agents.benchmark import (
     main,
     normalised_scores,
     paired_difference,
+    score_interval,
 )
 from agents.evaluate import rollout
 from agents.files import OutputError, OutputExistsError
@@ -86,6 +87,27 @@ def test_normalised_score_on_a_hand_case() -> None:
     assert normalised_scores(mpc, passive, mpc).mean() == pytest.approx(100.0)
     with pytest.raises(ValueError, match="not above passive"):
         normalised_scores(controller, passive, passive)
+
+
+def test_score_interval_is_paired_over_seeds() -> None:
+    """Whatever seeds a resample draws, a controller that gains exactly half of the reference's
+    gain on every seed scores 50: its interval is [50, 50], however much the seeds differ.
+    A t interval on the per-episode scores would be wide here, since the gains differ 20-fold."""
+    passive = np.array([-100.0, -50.0, -400.0, -20.0, -75.0])
+    reference = passive + np.array([60.0, 30.0, 240.0, 12.0, 45.0])  # 60 % of passive's cost, each seed
+    half = passive + 0.5 * (reference - passive)
+    assert score_interval(half, passive, reference, reps=2000) == pytest.approx((50.0, 50.0))
+    assert score_interval(reference, passive, reference, reps=2000) == pytest.approx((100.0, 100.0))
+    assert score_interval(passive, passive, reference, reps=2000) == pytest.approx((0.0, 0.0))
+    # A controller that is better than the reference on the high-energy seed only: the interval
+    # contains its score of the means and is not degenerate.
+    mixed = reference + np.array([-10.0, -5.0, 100.0, -2.0, -5.0])
+    score = normalised_scores(mixed, passive, reference).mean()
+    low, high = score_interval(mixed, passive, reference, reps=2000)
+    assert low < score < high
+    # A reference that is no better than passive on most resamples: no scale, no interval.
+    noisy = passive + np.array([30.0, -29.0, 1.0, -1.0, 0.5])
+    assert score_interval(half, passive, noisy, reps=2000) is None
 
 
 def test_best_baseline_excludes_baselines_below_passive() -> None:
@@ -164,7 +186,9 @@ def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
         controllers = entry["controllers"]
         assert list(controllers) == ["passive", "velocity_feedback", "tension_aware"]
         assert controllers["passive"]["normalised_scores"] == [0.0] * 4
-        assert controllers["tension_aware"]["normalised_score"]["mean"] == pytest.approx(100.0)
+        reference_score = controllers["tension_aware"]["normalised_score"]
+        assert (reference_score["mean"], reference_score["low"], reference_score["high"]) == pytest.approx(
+            (100.0, 100.0, 100.0))
         best = entry["best_baseline"]
         assert best == max(("passive", "velocity_feedback", "tension_aware"),
                            key=lambda name: controllers[name]["mean_return"])
