@@ -59,8 +59,13 @@ class MPCSettings:
     Attributes:
         samples: candidate thrust sequences per environment and iteration, >= 2 (the first is
             the nominal plan).
-        horizon: control steps planned ahead, >= 1.
-        knots: knots of the perturbations, interpolated linearly over the horizon, in 1..horizon.
+        horizon: control steps planned ahead (the prediction horizon), >= 1.
+        control_horizon: the first steps of the horizon whose commands are planned, in
+            0..horizon (0: all of them). Past it the plan is zero: with a ``prior`` the rollout
+            then simply continues under that controller, which estimates the cost-to-go of each
+            candidate by the prior's own closed loop (the rollout algorithm).
+        knots: knots of the perturbations, interpolated linearly over the control horizon, in
+            1..control horizon.
         noise: standard deviation of the knot perturbations, in normalised thrust (actions
             lie in [-1, 1]).
         iterations: refinements per control step, each around the last one's plan.
@@ -75,6 +80,7 @@ class MPCSettings:
 
     samples: int = 32
     horizon: int = 10
+    control_horizon: int = 0
     knots: int = 3
     noise: float = 0.4
     iterations: int = 1
@@ -85,8 +91,8 @@ class MPCSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        whole = {"samples": (2, 100_000), "horizon": (1, 10_000), "knots": (1, self.horizon),
-                 "iterations": (1, 100), "seed": (0, 2**63 - 1)}
+        whole = {"samples": (2, 100_000), "horizon": (1, 10_000), "control_horizon": (0, self.horizon),
+                 "knots": (1, self.control_horizon or self.horizon), "iterations": (1, 100), "seed": (0, 2**63 - 1)}
         for name, (low, high) in whole.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
@@ -165,12 +171,16 @@ class MPCController:
         # Planning rollouts of tasks with disturbances or noise draw from the controller's own
         # generators: the plan is scored on one sample of them.
         self.planner_rngs = [np.random.default_rng([s.seed, k]) for k in range(self.planner.num_clusters)]
-        knot_times = np.linspace(0.0, s.horizon - 1, s.knots) if s.knots > 1 else np.zeros(1)
+        planned = s.control_horizon or s.horizon
+        knot_times = np.linspace(0.0, planned - 1, s.knots) if s.knots > 1 else np.zeros(1)
         steps = np.arange(s.horizon, dtype=float)
-        # (horizon, knots) linear interpolation weights; a single knot holds its value throughout.
+        # (horizon, knots) linear interpolation weights over the control horizon (a single knot
+        # holds its value), zero past it.
         self.interpolation = np.stack(
             [np.interp(steps, knot_times, np.eye(s.knots)[k]) for k in range(s.knots)], axis=1
         ) if s.knots > 1 else np.ones((s.horizon, 1))
+        self.interpolation[planned:] = 0.0
+        self.planned_steps = planned
         self.weights = s.discount ** steps
 
     @property
@@ -216,7 +226,9 @@ class MPCController:
             self.plan = self._update(candidates, costs)
             noise *= 0.5
         action = self._actions(self.task, self.plan[:, 0]).astype(np.float32)
+        # Shift: the last planned command is held for the new last planned step.
         self.plan = np.concatenate([self.plan[:, 1:], self.plan[:, -1:]], axis=1)
+        self.plan[:, self.planned_steps:] = 0.0
         self.compute_seconds += time.perf_counter() - start
         self.env_steps += self.batch
         return (action[0] if single else action), None
@@ -249,7 +261,10 @@ class MPCController:
         total = np.zeros(flat.shape[0])
         rngs = self.planner_rngs if planner._perturbed else None
         for h in range(self.settings.horizon):
-            planner.step(np.ascontiguousarray(self._actions(planner, flat[:, h])), rngs=rngs)
+            # The env receives float32 actions: rounding the planned ones alike keeps the
+            # planner's rollouts bit-identical to what the env would do with them.
+            actions = self._actions(planner, flat[:, h]).astype(np.float32).astype(np.float64)
+            planner.step(actions, rngs=rngs)
             total += self.weights[h] * planner.scalars[:, 0]
         total += self.settings.terminal_weight * self.weights[-1] * planner.scalars[:, VIBRATION_TERM]
         return -total.reshape(self.batch, self.settings.samples)

@@ -54,6 +54,16 @@ def test_planning_leaves_the_controlled_env_untouched_and_is_reproducible() -> N
     assert first.seconds_per_step > 0.0
 
 
+def test_past_the_control_horizon_the_prior_alone_acts() -> None:
+    """Candidates differ only within the control horizon; the rest of each rollout is the
+    prior's closed loop, its estimate of the cost-to-go."""
+    env = gym.make_vec("TetherTriangle-v0", num_envs=1)
+    env.reset(seed=[4])
+    controller = MPCController(env, MPCSettings(samples=6, horizon=12, control_horizon=4, knots=2, prior="lqr"))
+    candidates = controller._candidates(0.5)
+    assert np.all(candidates[:, :, 4:] == 0.0) and np.any(candidates[:, 1:, :4] != 0.0)
+
+
 def test_the_plan_is_scored_with_the_tasks_reward() -> None:
     """Against a planner that keeps its nominal plan (noise 0), the best of the samples is never
     worse over the horizon: sampling searches, it does not just add noise."""
@@ -73,6 +83,10 @@ def test_mpc_is_refused_clearly() -> None:
         MPCSettings(samples=1)
     with pytest.raises(ValueError, match="knots"):
         MPCSettings(horizon=3, knots=4)
+    with pytest.raises(ValueError, match="control_horizon"):
+        MPCSettings(horizon=3, control_horizon=4)
+    with pytest.raises(ValueError, match="knots"):
+        MPCSettings(horizon=30, control_horizon=2, knots=3)
     with pytest.raises(ValueError, match="prior"):
         MPCSettings(prior="oracle")
     with pytest.raises(ValueError, match="unknown mpc setting"):
