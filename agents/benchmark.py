@@ -39,7 +39,7 @@ controller c in episode e, and E episodes:
   paired gain over passive on that seed, in units of the reference's mean gain; its mean over
   the episodes is S[c]. These feed the aggregate. (Why not a ratio per episode,
   ``(R[c,e] - R[p,e]) / (R[ref,e] - R[p,e])``: on a seed where the reference gains little over
-  passive, it explodes. Passive's return varies 10- to 50-fold between seeds of one id.)
+  passive, it explodes. On each id, passive's smallest return is 2 to 13 % of its mean.)
 
 **Across ids.** For each controller, the per-episode scores form an (episodes × ids) matrix,
 over the ids where its score is available. As in rliable (Agarwal et al. 2021), with episodes
@@ -454,6 +454,7 @@ def benchmark(
     at once; an unknown name raises ValueError)."""
     import gymnasium as gym
 
+    started_at = time.perf_counter()
     ids = _check_names("env_ids", env_ids, allowed=list(ENV_IDS)) or list(ENV_IDS)
     names = _check_names("controllers", controllers)
     episodes = _check_int("episodes", episodes, 2)  # two at least, for an interval
@@ -528,7 +529,9 @@ def benchmark(
         records[unit.env_id][unit.name] = record
         wall[unit.env_id][unit.name] = seconds
         progress.finished(index, seconds, int(record.end_step.max()))
-    total_seconds = time.perf_counter() - progress.start
+    rollout_seconds = time.perf_counter() - progress.start
+    print(f"rollouts done in {_clock(rollout_seconds)}; statistics (rliable's bootstrap: {bootstrap_reps} "
+          "replications per row) and files...")
 
     results = _analyse(ids, records, wall, missing, reference, shipped, bootstrap_reps, seed)
     results["settings"] = {
@@ -539,9 +542,14 @@ def benchmark(
                                                 "reps": bootstrap_reps, "random_state": seed},
         "env_kwargs": dict(env_kwargs or {}), "versions": _versions(),
     }
-    results["wall_seconds"] = total_seconds
+    results["rollout_seconds"] = rollout_seconds
+    # From the call to the statistics, loading the controllers included; writing the files is left out,
+    # since the time is written into them.
+    results["wall_seconds"] = time.perf_counter() - started_at
     _write_outputs(out, results, records, plots)
-    print(f"\nthe benchmark took {_clock(total_seconds)} ({total_seconds:.0f} s) for {len(units)} rollouts")
+    total_seconds = time.perf_counter() - started_at
+    print(f"\nthe benchmark took {_clock(total_seconds)} ({total_seconds:.0f} s): {len(units)} rollouts in "
+          f"{_clock(rollout_seconds)}, the rest loading controllers, statistics and files")
     return results
 
 
