@@ -41,22 +41,21 @@ controller c in episode e, and E episodes:
   ``(R[c,e] - R[p,e]) / (R[ref,e] - R[p,e])``: on a seed where the reference gains little over
   passive, it explodes. On each id, passive's smallest return is 2 to 13 % of its mean.)
 
-**Across ids.** For each controller, the per-episode scores form an (episodes × ids) matrix,
-over the ids where its score is available. As in rliable (Agarwal et al. 2021), with episodes
-in the place of runs: the interquartile mean :func:`rliable.metrics.aggregate_iqm` (the mean of
-the middle 50 % of all the matrix's scores) and the mean of the per-id means
-(:func:`rliable.metrics.aggregate_mean`, the mean of the S[c]), each with a 95 % stratified
-percentile bootstrap
-interval from :func:`rliable.library.get_interval_estimates` (episodes resampled within each
-id; ``--bootstrap-reps`` replications, 50 000 by default as in rliable; the resampling is
-seeded with ``--seed``, so the numbers reproduce). The intervals cover the episode-to-episode
-(initial-condition) variation, not training-seed variation: one shipped model per id. The
-per-episode scores spread with the seeds' initial energies, and the IQM trims the episodes
-with the largest and smallest gains, so an IQM sits below the mean on this task (mpc's mean is
-100 by construction, its IQM is not): compare rows on the same statistic. Two
-extra rows take, per id, the best scripted baseline, and (when the shipped models have
-different names on different ids) the id's shipped model. A row available on fewer ids than
-another is not comparable with it: the table gives the count.
+**Across ids.** As in rliable (Agarwal et al. 2021), with each controller one run whose score
+on an id is S[c] (the RL protocol: a run's score is its mean over evaluation episodes): the
+interquartile mean :func:`rliable.metrics.aggregate_iqm` of the (1 run × ids) matrix of the
+S[c], that is the mean of the middle half of the ids (with 8 ids, of the 4 between the 2 lowest
+and the 2 highest), and the mean of the S[c] (:func:`rliable.metrics.aggregate_mean`), over the
+ids where the score is available. Each gets a 95 % stratified percentile-bootstrap interval
+from :func:`rliable.library.get_interval_estimates`: its ``StratifiedBootstrap`` resamples the
+held-out episodes within each id (``--bootstrap-reps`` replications, 50 000 by default as in
+rliable, seeded with ``--seed``), and each replication recomputes the per-id scores from the
+drawn seeds, paired as above, so mpc's IQM is 100 with the interval [100, 100]. The intervals
+cover the sampling of the held-out episodes, not training-seed variation (one shipped model
+per id). Two extra rows take, per id, the best scripted baseline, and (when the shipped models
+have different names on different ids) the id's shipped model. A row available on fewer ids
+than another is not comparable with it: the table gives the count. The per-episode scores
+``score[c, e]`` are written out too (``episodes.csv``), for other aggregates.
 
 **Files in** ``--out`` (default ``outputs/benchmark``): ``benchmark.md`` (the tables, for the
 README), ``benchmark.json`` (every number, per-episode returns included, and the settings),
@@ -272,29 +271,63 @@ def _rliable() -> tuple[Any, Any]:
     return library, metrics
 
 
-def aggregate_scores(matrices: dict[str, np.ndarray], reps: int = 50_000, seed: int = 0,
-                     confidence: float = CONFIDENCE) -> dict[str, dict[str, float]]:
-    """rliable's aggregates of per-episode normalised scores, one entry per row of ``matrices``.
+def aggregate_scores(returns: dict[str, dict[str, Any]], zero_returns: dict[str, Any],
+                     reference_returns: dict[str, Any], reps: int = 50_000, seed: int = 0,
+                     confidence: float = CONFIDENCE) -> dict[str, dict[str, Any]]:
+    """rliable's aggregates over ids of the normalised scores, one entry per row of ``returns``.
 
-    Each matrix is (episodes, ids): column j holds the row's per-episode scores on one id. For
-    each row: ``iqm`` (:func:`rliable.metrics.aggregate_iqm`, the 25 % trimmed mean of all
-    entries), ``mean`` (:func:`rliable.metrics.aggregate_mean`, the mean of the per-id means),
-    and their ``*_low`` / ``*_high`` stratified percentile-bootstrap bounds from
-    :func:`rliable.library.get_interval_estimates` with ``reps`` replications. Every row gets
-    its resamples drawn from a generator seeded with ``seed``, so the intervals reproduce and a
-    row's interval does not depend on the other rows."""
+    ``returns[row][env_id]`` holds the row's (E,) returns on an id, and ``zero_returns[env_id]``
+    and ``reference_returns[env_id]`` passive's and the reference's on the same seeds. Each row
+    is one run (a controller, or one shipped model per id), whose score on an id is the score of
+    its mean return, :func:`normalised_scores` averaged over the episodes. Over the ids where
+    the row ran:
+
+    * ``iqm``: :func:`rliable.metrics.aggregate_iqm` of the (1, ids) matrix of those scores, the
+      mean of the middle half of the ids (scipy's 25 % trimmed mean);
+    * ``mean``: :func:`rliable.metrics.aggregate_mean`, the mean of the per-id scores;
+    * ``*_low`` / ``*_high``: their stratified percentile-bootstrap interval from
+      :func:`rliable.library.get_interval_estimates` with ``reps`` replications. rliable's
+      :class:`~rliable.library.StratifiedBootstrap` resamples an (E, ids) matrix of episode
+      indices within each id; each replication's per-id scores are the scores of the means of
+      the drawn seeds, the same seeds for the row, passive and the reference, so the resampling
+      stays paired (the reference's own interval is exactly [100, 100]). A replication whose
+      reference is no better than passive on some id has no score; if any does, the interval
+      is None.
+
+    The resampling is seeded with ``seed``: the intervals reproduce, and a row's interval does
+    not depend on the other rows."""
     library, metrics = _rliable()
-    results: dict[str, dict[str, float]] = {}
-    for name, matrix in matrices.items():
-        scores = np.asarray(matrix, dtype=np.float64)
-        if scores.ndim != 2 or scores.shape[0] < 2 or scores.shape[1] < 1:
-            raise ValueError(
-                f"scores of {name!r} must be an (episodes >= 2, ids >= 1) matrix; got {scores.shape}"
-            )
+    results: dict[str, dict[str, Any]] = {}
+    for name, per_id in returns.items():
+        ids = list(per_id)
+        if not ids:
+            raise ValueError(f"row {name!r} has no id to aggregate over")
+        gains, scales = [], []
+        for env_id in ids:
+            values = _check_returns(f"returns of {name!r} on {env_id}", per_id[env_id])
+            zero = _check_returns(f"zero_returns on {env_id}", zero_returns[env_id])
+            reference = _check_returns(f"reference_returns on {env_id}", reference_returns[env_id])
+            if not values.shape == zero.shape == reference.shape:
+                raise ValueError(f"{name!r} on {env_id}: the returns need the same seeds on every side; got "
+                                 f"{values.size}, {zero.size} and {reference.size} episodes")
+            gains.append(values - zero)
+            scales.append(reference - zero)
+        episodes = {gain.size for gain in gains}
+        if len(episodes) != 1:
+            raise ValueError(f"row {name!r} has different episode counts on its ids: {sorted(episodes)}")
+        gain, scale = np.stack(gains, axis=1), np.stack(scales, axis=1)  # (E, ids)
 
-        def both(s: np.ndarray) -> np.ndarray:
-            return np.array([metrics.aggregate_iqm(s), metrics.aggregate_mean(s)])
+        def statistics(drawn: np.ndarray, gain: np.ndarray = gain, scale: np.ndarray = scale) -> np.ndarray:
+            """IQM and mean over ids of the per-id scores of the episodes ``drawn`` ((E, ids) indices)."""
+            columns = np.arange(gain.shape[1])
+            picks = drawn.astype(np.intp)
+            denominator = scale[picks, columns].mean(axis=0)
+            if not np.all(denominator > 0):
+                return np.array([math.nan, math.nan])
+            per_id_scores = (100.0 * gain[picks, columns].mean(axis=0) / denominator)[None, :]  # (1 run, ids)
+            return np.array([metrics.aggregate_iqm(per_id_scores), metrics.aggregate_mean(per_id_scores)])
 
+        indices = np.tile(np.arange(gain.shape[0], dtype=np.float64)[:, None], (1, len(ids)))
         # rliable 1.2.0's StratifiedBootstrap.update_indices draws its resamples from numpy's
         # global generator (np.random.choice) and ignores ``random_state``: seed the global
         # generator for the call, and put back its state after it, so that the intervals
@@ -307,15 +340,18 @@ def aggregate_scores(matrices: dict[str, np.ndarray], reps: int = 50_000, seed: 
                 # keyword; arch only warns about the keyword's name.
                 warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)
                 points, intervals = library.get_interval_estimates(
-                    {name: scores}, both, method="percentile", reps=reps, confidence_interval_size=confidence,
-                    random_state=np.random.RandomState(seed),
+                    {name: indices}, statistics, method="percentile", reps=reps,
+                    confidence_interval_size=confidence, random_state=np.random.RandomState(seed),
                 )
         finally:
             np.random.set_state(global_state)
         (iqm, mean), ((iqm_low, mean_low), (iqm_high, mean_high)) = points[name], intervals[name]
-        results[name] = {"iqm": float(iqm), "iqm_low": float(iqm_low), "iqm_high": float(iqm_high),
-                         "mean": float(mean), "mean_low": float(mean_low), "mean_high": float(mean_high),
-                         "ids": int(scores.shape[1]), "episodes": int(scores.shape[0])}
+        bounds = [iqm_low, iqm_high, mean_low, mean_high]
+        iqm_low, iqm_high, mean_low, mean_high = (None if not np.all(np.isfinite(bounds)) else float(b)
+                                                  for b in bounds)
+        results[name] = {"iqm": float(iqm), "iqm_low": iqm_low, "iqm_high": iqm_high, "mean": float(mean),
+                         "mean_low": mean_low, "mean_high": mean_high, "ids": len(ids), "env_ids": ids,
+                         "episodes": int(gain.shape[0])}
     return results
 
 
@@ -538,7 +574,7 @@ def benchmark(
         "command": command or f"agents.benchmark.benchmark(env_ids={ids!r}, controllers={names!r}, "
                               f"episodes={episodes}, seed={seed}, reference={reference!r})",
         "env_ids": ids, "episodes": episodes, "seeds": seeds, "reference": reference, "zero": ZERO,
-        "confidence": CONFIDENCE, "bootstrap": {"method": "percentile, stratified by id (rliable)",
+        "confidence": CONFIDENCE, "bootstrap": {"method": "percentile, stratified by id, paired (rliable)",
                                                 "reps": bootstrap_reps, "random_state": seed},
         "env_kwargs": dict(env_kwargs or {}), "versions": _versions(),
     }
@@ -571,7 +607,9 @@ def _analyse(ids: list[str], records: dict[str, dict[str, EpisodeRecord]], wall:
              bootstrap_reps: int, seed: int) -> dict[str, Any]:
     """Every statistic of the benchmark, as a JSON-ready dict (NaN never appears: None instead)."""
     per_id: dict[str, Any] = {}
-    score_columns: dict[str, dict[str, np.ndarray]] = {}  # aggregate row -> id -> (E,) scores
+    row_returns: dict[str, dict[str, np.ndarray]] = {}  # aggregate row -> id -> (E,) returns
+    zero_returns: dict[str, np.ndarray] = {}  # id -> passive's (E,) returns, where the score exists
+    reference_returns: dict[str, np.ndarray] = {}
     for env_id in ids:
         rows = records[env_id]
         returns = {name: record.rewards.sum(axis=1) for name, record in rows.items()}
@@ -614,24 +652,22 @@ def _analyse(ids: list[str], records: dict[str, dict[str, EpisodeRecord]], wall:
                 entry["normalised_score"] = {"mean": float(scores[name].mean()),
                                              "low": None if interval is None else interval[0],
                                              "high": None if interval is None else interval[1]}
-                score_columns.setdefault(name, {})[env_id] = scores[name]
+                row_returns.setdefault(name, {})[env_id] = returns[name]
             controllers[name] = entry
         if scores:
-            score_columns.setdefault(BEST_BASELINE_ROW, {})[env_id] = scores[best]
+            zero_returns[env_id], reference_returns[env_id] = returns[ZERO], returns[reference]
+            row_returns.setdefault(BEST_BASELINE_ROW, {})[env_id] = returns[best]
             models = [name for name in rows if name in shipped[env_id]]
             if len(models) == 1:
-                score_columns.setdefault(SHIPPED_ROW, {})[env_id] = scores[models[0]]
+                row_returns.setdefault(SHIPPED_ROW, {})[env_id] = returns[models[0]]
         seeds = next(iter(rows.values())).seeds.tolist()
         per_id[env_id] = {"best_baseline": best, "score": score_note, "controllers": controllers,
                           "missing": missing[env_id], "seeds": seeds}
     shipped_names = {name for env_id in ids for name in records[env_id] if name in shipped[env_id]}
     if len(shipped_names) < 2:
-        score_columns.pop(SHIPPED_ROW, None)  # the same numbers as the one shipped name's own row
-    matrices = {row: np.stack([columns[env_id] for env_id in ids if env_id in columns], axis=1)
-                for row, columns in score_columns.items()}
-    aggregate = aggregate_scores(matrices, reps=bootstrap_reps, seed=seed) if matrices else {}
-    for row, columns in score_columns.items():
-        aggregate[row]["env_ids"] = [env_id for env_id in ids if env_id in columns]
+        row_returns.pop(SHIPPED_ROW, None)  # the same numbers as the one shipped name's own row
+    aggregate = (aggregate_scores(row_returns, zero_returns, reference_returns, reps=bootstrap_reps,
+                                  seed=seed) if row_returns else {})
     return {"per_id": per_id, "aggregate": aggregate, "aggregate_ids": len(ids)}
 
 
@@ -673,6 +709,8 @@ def _score_cell(entry: dict[str, Any] | None) -> str:
 
 
 def _aggregate_cell(row: dict[str, Any], key: str) -> str:
+    if row[key + "_low"] is None:
+        return f"{row[key]:.1f} [interval n/a]"
     return f"{row[key]:.1f} [{row[key + '_low']:.1f}, {row[key + '_high']:.1f}]"
 
 
@@ -714,8 +752,8 @@ def markdown_report(results: dict[str, Any]) -> str:
     for env_id, entry in results["per_id"].items():
         cells = [_score_cell(entry["controllers"].get(name)) for name in columns]
         lines.append(f"| {env_id} | " + " | ".join(cells) + " |")
-    lines += ["", "## Aggregate over ids (per-episode normalised scores, 95 % stratified bootstrap, rliable)",
-              ""]
+    lines += ["", ("## Aggregate over ids (normalised scores; rliable: IQM and mean over ids, 95 % "
+                   "stratified bootstrap)"), ""]
     if results["aggregate"]:
         lines += ["| controller | ids | IQM [95 % CI] | mean [95 % CI] |", "|---|---|---|---|"]
         for row, values in results["aggregate"].items():
@@ -762,10 +800,10 @@ def markdown_report(results: dict[str, Any]) -> str:
          f"with a paired percentile-bootstrap interval ({SCORE_BOOTSTRAP_REPS} resamples of the seeds, the "
          f"same for c, {ZERO} and {reference}). Per episode: 100 (R[c, e] - R[{ZERO}, e]) / "
          f"(mean R[{reference}] - mean R[{ZERO}]), whose mean is the score."),
-        ("- Aggregate: rliable's IQM (25 % trimmed mean of all per-episode scores of the row) and mean of "
-         f"the per-id means, with {settings['bootstrap']['reps']} stratified percentile-bootstrap "
-         f"replications (episodes resampled within each id, seeded with "
-         f"{settings['bootstrap']['random_state']})."),
+        ("- Aggregate: rliable's IQM over ids (the mean of the middle half of the per-id scores) and mean "
+         f"over ids, with {settings['bootstrap']['reps']} stratified percentile-bootstrap replications: "
+         "episodes resampled within each id, the per-id scores recomputed from each resample, paired "
+         f"(seeded with {settings['bootstrap']['random_state']})."),
     ]
     return "\n".join(lines) + "\n"
 
@@ -952,15 +990,16 @@ def plot_aggregate(results: dict[str, Any], path: Path) -> None:
                      f"not available: {reference} did not run, or did not beat {ZERO}, on any id")
         return
     rows = list(aggregate)
-    low_limit, high_limit = _score_axis([aggregate[row][key] for row in rows
-                                         for key in ("iqm_low", "iqm_high", "mean_low", "mean_high")])
+    keys = ("iqm", "iqm_low", "iqm_high", "mean", "mean_low", "mean_high")
+    low_limit, high_limit = _score_axis([aggregate[row][key] for row in rows for key in keys
+                                         if aggregate[row][key] is not None])
     fig, axes = plt.subplots(1, 2, figsize=(9, 0.45 * len(rows) + 1.6), sharey=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax, key, title in zip(axes, ("iqm", "mean"), ("IQM", "mean"), strict=True):
         for j, row in enumerate(rows):
             values = aggregate[row]
-            low, high, point = (float(np.clip(values[k], low_limit, high_limit))
-                                for k in (f"{key}_low", f"{key}_high", key))
+            low, high, point = (float(np.clip(values[key] if values[k] is None else values[k], low_limit,
+                                              high_limit)) for k in (f"{key}_low", f"{key}_high", key))
             ax.barh(j, max(high - low, 0.5), left=low, height=0.6, color=colours[j % len(colours)],
                     alpha=0.75)
             ax.vlines(point, j - 0.3, j + 0.3, color="k", linewidth=1.5)

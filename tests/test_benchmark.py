@@ -129,23 +129,47 @@ def test_best_baseline_excludes_baselines_below_passive() -> None:
 
 
 def test_aggregate_iqm_on_a_hand_case() -> None:
-    # Two ids, four episodes each. All eight scores sorted: -500, 0, 10, 20, 30, 40, 50, 1000;
-    # the IQM drops the lowest and highest quarter (two each) and averages 10, 20, 30, 40 = 25.
-    # The mean of the per-id means: (0 + 10 + 20 + 1000)/4 = 257.5 and (-500 + 30 + 40 + 50)/4 = -95,
-    # so (257.5 - 95)/2 = 81.25.
-    scores = np.array([[0.0, -500.0], [10.0, 30.0], [20.0, 40.0], [1000.0, 50.0]])
-    result = aggregate_scores({"x": scores}, reps=500, seed=3)["x"]
+    # Eight ids, two episodes each; on every id passive returns (-100, -200) and the reference
+    # (-50, -100): a mean gain of 75. The controller gains a fixed fraction of the reference's
+    # gain on each seed, so its per-id scores are 100 x that fraction, whatever seeds are drawn:
+    # -50, 0, 10, 20, 30, 40, 100 and 1000.
+    ids = [f"id{k}" for k in range(8)]
+    passive = np.array([-100.0, -200.0])
+    reference = np.array([-50.0, -100.0])
+    per_id_scores = [-50.0, 0.0, 10.0, 20.0, 30.0, 40.0, 100.0, 1000.0]
+    controller = {env_id: passive + score / 100.0 * (reference - passive)
+                  for env_id, score in zip(ids, per_id_scores, strict=True)}
+    zero = dict.fromkeys(ids, passive)
+    ref = dict.fromkeys(ids, reference)
+    result = aggregate_scores({"x": controller}, zero, ref, reps=300, seed=3)["x"]
+    # The IQM drops the lowest and the highest quarter of the ids (two each: -50, 0 and 100, 1000)
+    # and averages 10, 20, 30 and 40: 25. The mean of the eight: 1150 / 8 = 143.75.
     assert result["iqm"] == pytest.approx(25.0)
-    assert result["mean"] == pytest.approx(81.25)
-    assert result["iqm_low"] <= result["iqm"] <= result["iqm_high"]
-    assert result["mean_low"] <= result["mean"] <= result["mean_high"]
-    assert result["iqm_high"] > result["iqm_low"]
-    # Seeded: the same interval again, and independent of the other rows.
-    again = aggregate_scores({"y": -scores, "x": scores}, reps=500, seed=3)["x"]
-    assert again == result
-    # Scores that do not vary leave nothing to resample: a zero-width interval at the value.
-    flat = aggregate_scores({"flat": np.full((5, 3), 7.0)}, reps=200, seed=0)["flat"]
-    assert (flat["iqm_low"], flat["iqm"], flat["iqm_high"]) == pytest.approx((7.0, 7.0, 7.0))
+    assert result["mean"] == pytest.approx(143.75)
+    # Every resample gives the same per-id scores: the intervals have no width.
+    assert (result["iqm_low"], result["iqm_high"]) == pytest.approx((25.0, 25.0))
+    assert (result["mean_low"], result["mean_high"]) == pytest.approx((143.75, 143.75))
+    assert (result["ids"], result["env_ids"], result["episodes"]) == (8, ids, 2)
+
+
+def test_aggregate_intervals_are_paired_and_seeded() -> None:
+    rng = np.random.default_rng(0)
+    ids = ["a", "b", "c"]
+    energy = {env_id: rng.uniform(0.1, 5.0, 16) for env_id in ids}  # seed-to-seed spread of the scale
+    zero = {env_id: -100.0 * energy[env_id] for env_id in ids}
+    ref = {env_id: -40.0 * energy[env_id] + rng.normal(0.0, 5.0, 16) for env_id in ids}
+    noisy = {env_id: -60.0 * energy[env_id] + rng.normal(0.0, 20.0, 16) for env_id in ids}
+    result = aggregate_scores({"noisy": noisy, "reference": ref}, zero, ref, reps=500, seed=7)
+    # The reference scores 100 in every resample, however its returns spread.
+    reference_row = result["reference"]
+    assert [reference_row[key] for key in ("iqm", "iqm_low", "iqm_high", "mean_low", "mean_high")] == \
+        pytest.approx([100.0] * 5)
+    row = result["noisy"]
+    assert row["iqm_low"] < row["iqm"] < row["iqm_high"]
+    assert row["mean_low"] < row["mean"] < row["mean_high"]
+    # Seeded: the same numbers again, whatever other rows are computed with it.
+    assert aggregate_scores({"noisy": noisy}, zero, ref, reps=500, seed=7)["noisy"] == row
+    assert aggregate_scores({"noisy": noisy}, zero, ref, reps=500, seed=8)["noisy"] != row
 
 
 def _without_mpc(monkeypatch: pytest.MonkeyPatch) -> None:
