@@ -92,6 +92,17 @@ class TrainedPolicy:
         self.name = name or self.algo
         self.observation_shape: tuple[int, ...] = tuple(self.policy.observation_space.shape)
         self.observation_size = int(np.prod(self.observation_shape))
+        #: The baseline whose actions the policy corrects (agents.residual), or None.
+        self.residual_on: str | None = self.metadata.get("residual_on")
+        self.baseline: Any = None
+
+    def attach(self, env: Any) -> None:
+        """Build the baseline a residual policy adds its corrections to, from ``env`` (a
+        tether-gym env of the policy's id); nothing to do for a plain policy."""
+        if self.residual_on is not None:
+            from agents.baselines import make_baseline
+
+            self.baseline = make_baseline(self.residual_on, env)
 
     @property
     def saturation_fraction(self) -> float:
@@ -120,9 +131,20 @@ class TrainedPolicy:
             )
         if not np.all(np.isfinite(obs)):
             raise ValueError("observation has NaN or infinite entries: the policy's actions would be garbage")
+        raw = obs
         if self.normalizer is not None:
             obs = self.normalizer.normalize_obs(obs).astype(np.float32)
-        return self.policy.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        actions, state = self.policy.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        if self.residual_on is None:
+            return actions, state
+        if self.baseline is None:
+            raise RuntimeError(
+                f"{self.path} is a residual policy on {self.residual_on!r}: attach(env) it to a tether-gym env "
+                "first (make_controller does)"
+            )
+        from agents.residual import residual_actions
+
+        return residual_actions(self.baseline, raw, actions), state
 
 
 def shipped_models(env_id: str) -> dict[str, Path]:
@@ -165,6 +187,7 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
             f"unknown controller {spec!r}: not one of {known}, and no such file or directory "
             f"(pass a baseline name, a shipped model name, or the path of a policy directory)"
         )
+    controller.attach(env)
     observation_space = getattr(env, "single_observation_space", None) or getattr(env, "observation_space", None)
     shape = tuple(getattr(observation_space, "shape", ()) or ())
     if shape and shape != controller.observation_shape:

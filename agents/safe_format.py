@@ -594,7 +594,7 @@ def load_tensors(data: bytes, where: Path) -> dict[str, torch.Tensor]:
 
 def policy_metadata(
     model: BaseAlgorithm, env_id: str | None, provenance: Mapping[str, Any] | None, normalization: bool,
-    training_state: bool,
+    training_state: bool, residual_on: str | None = None,
 ) -> dict[str, Any]:
     """The ``policy.json`` of ``model`` (see the module docstring)."""
     policy_class = model.policy_class
@@ -606,6 +606,7 @@ def policy_metadata(
         "action_space": encode_space(model.action_space, "action_space"),
         "num_timesteps": int(model.num_timesteps),
         "normalization": normalization, "training_state": training_state,
+        "residual_on": residual_on,
         "versions": _versions(),
         "provenance": _json_value(dict(provenance or {}), "provenance"),
     }
@@ -619,6 +620,7 @@ def save_policy(
     provenance: Mapping[str, Any] | None = None,
     training_state: bool = False,
     extra_files: Iterable[str] = (),
+    residual_on: str | None = None,
 ) -> Path:
     """Write ``model``'s policy (and ``normalizer``'s statistics) to ``directory`` in the safe
     format; with ``training_state``, also the optimizer states and counters that resuming needs.
@@ -628,7 +630,7 @@ def save_policy(
     directory.mkdir(parents=True, exist_ok=True)
     statistics = (NormalizationStatistics.from_vec_normalize(normalizer) if isinstance(normalizer, VecNormalize)
                   else normalizer)
-    metadata = policy_metadata(model, env_id, provenance, statistics is not None, training_state)
+    metadata = policy_metadata(model, env_id, provenance, statistics is not None, training_state, residual_on)
     written = [METADATA_FILE, WEIGHTS_FILE]
     atomic_write_bytes(directory / WEIGHTS_FILE, tensor_bytes(model.policy.state_dict()))
     if statistics is not None:
@@ -727,6 +729,14 @@ def read_metadata(directory: Path, reader: _VerifiedReader | None = None) -> dic
     _require(metadata, "num_timesteps", int, where)
     _require(metadata, "normalization", bool, where)
     _require(metadata, "training_state", bool, where)
+    # Optional (policies written before residual training have none): the baseline the
+    # policy's actions are corrections to.
+    from agents.residual import check_residual_on
+
+    try:
+        metadata["residual_on"] = check_residual_on(metadata.get("residual_on"), f"{where}: residual_on")
+    except ValueError as error:
+        raise PolicyFormatError(str(error)) from None
     return metadata
 
 

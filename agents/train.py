@@ -53,6 +53,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 import tether_gym
 from agents.cli import int_at_least
+from agents.residual import ResidualVecEnv, check_residual_on
 from agents.files import (
     OutputError,
     OutputExistsError,
@@ -88,7 +89,7 @@ __all__ = ["ACTIVATIONS", "ALGORITHMS", "HyperparameterError", "load_hyperparame
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 #: Keys of a hyperparameter entry that are not passed to the algorithm's constructor.
-RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs", "curriculum")
+RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs", "curriculum", "residual_on")
 #: Constructor arguments that agents.train sets itself, and where the user sets them instead.
 CONTROLLED_KEYS = {
     "env": "the env comes from --env", "seed": "use --seed", "device": "training runs on the CPU",
@@ -289,6 +290,11 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
             checked[key] = _check_value(key, value, dict | None, where)
         elif key == "curriculum":
             checked[key] = _check_curriculum(value, where)
+        elif key == "residual_on":
+            try:
+                checked[key] = check_residual_on(value, f"{where}: 'residual_on'")
+            except ValueError as error:
+                raise HyperparameterError(str(error)) from None
         elif key == "policy_kwargs":
             checked[key] = _check_policy_kwargs(value, cls.policy_aliases[policy], where)
         elif key in SCHEDULE_KEYS:
@@ -416,11 +422,16 @@ def _algorithm_kwargs(hyperparams: Mapping[str, Any]) -> dict[str, Any]:
 
 def make_training_env(
     env_id: str, num_envs: int, seed: int, normalize: Any, env_kwargs: Mapping[str, Any] | None = None,
-    training: bool = True,
+    training: bool = True, residual_on: str | None = None,
 ) -> VecEnv:
     """The native vector env of ``env_id`` through the SB3 adapter, with ``VecMonitor`` and, if
-    ``normalize`` is truthy (a bool or ``VecNormalize`` keyword arguments), ``VecNormalize``."""
-    venv: VecEnv = VecMonitor(make_sb3_vec_env(env_id, num_envs, seed=seed, **dict(env_kwargs or {})))
+    ``normalize`` is truthy (a bool or ``VecNormalize`` keyword arguments), ``VecNormalize``;
+    with ``residual_on`` (a baseline's name) the actions are corrections to that baseline's
+    (:class:`agents.residual.ResidualVecEnv`)."""
+    base: VecEnv = make_sb3_vec_env(env_id, num_envs, seed=seed, **dict(env_kwargs or {}))
+    if residual_on is not None:
+        base = ResidualVecEnv(base, residual_on)
+    venv: VecEnv = VecMonitor(base)
     if normalize:
         options = dict(normalize) if isinstance(normalize, Mapping) else {}
         if not training:
@@ -440,10 +451,10 @@ class SafePolicySaver(BaseCallback):
     calls (checkpoints)."""
 
     def __init__(self, directory: Path, env_id: str, provenance: Mapping[str, Any], every: int | None = None,
-                 prefix: str = "") -> None:
+                 prefix: str = "", residual_on: str | None = None) -> None:
         super().__init__()
         self.directory, self.env_id, self.provenance = directory, env_id, dict(provenance)
-        self.every, self.prefix = every, prefix
+        self.every, self.prefix, self.residual_on = every, prefix, residual_on
 
     def _on_step(self) -> bool:
         if self.every is None:
@@ -454,7 +465,7 @@ class SafePolicySaver(BaseCallback):
 
     def _save(self, directory: Path) -> None:
         save_policy(directory, self.model, self.model.get_vec_normalize_env(), self.env_id, self.provenance,
-                    training_state=True)
+                    training_state=True, residual_on=self.residual_on)
 
 
 class DifficultyCurriculum(BaseCallback):
@@ -659,9 +670,11 @@ def train(
     }
     normalize = hyperparams.get("normalize", False)
     env_kwargs = hyperparams.get("env_kwargs")
-    venv = make_training_env(env_id, n_envs, seed, normalize, env_kwargs)
+    residual_on = hyperparams.get("residual_on")
+    venv = make_training_env(env_id, n_envs, seed, normalize, env_kwargs, residual_on=residual_on)
     eval_envs = min(eval_episodes, 64)
-    eval_venv = make_training_env(env_id, eval_envs, seed + EVAL_SEED_OFFSET, normalize, env_kwargs, training=False)
+    eval_venv = make_training_env(env_id, eval_envs, seed + EVAL_SEED_OFFSET, normalize, env_kwargs, training=False,
+                                  residual_on=residual_on)
     cls = ALGORITHMS[algo]
     model = _build_model(cls, hyperparams, venv, seed, verbose, run, resume_kind, resume_path)
     venv = model.get_env()  # a pickle resume wraps the statistics it loaded around the env
@@ -670,11 +683,13 @@ def train(
     atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
     provenance = {"seed": seed, "command": command, "config": "config.yml of the run directory"}
     callback_items: list[BaseCallback] = [
-        SafePolicySaver(run / "checkpoints", env_id, provenance, every=max(checkpoint_freq // n_envs, 1), prefix=algo),
+        SafePolicySaver(run / "checkpoints", env_id, provenance, every=max(checkpoint_freq // n_envs, 1), prefix=algo,
+                        residual_on=residual_on),
         EvalCallback(
             eval_venv, n_eval_episodes=eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
             best_model_save_path=None, log_path=str(run / "best"), deterministic=True,
-            callback_on_new_best=SafePolicySaver(run / "best", env_id, provenance), verbose=verbose,
+            callback_on_new_best=SafePolicySaver(run / "best", env_id, provenance, residual_on=residual_on),
+            verbose=verbose,
         ),
     ]
     curriculum = hyperparams.get("curriculum")
@@ -686,7 +701,7 @@ def train(
         reset_num_timesteps=resume_kind is None,
     )
     save_policy(run, model, model.get_vec_normalize_env(), env_id, provenance, training_state=True,
-                extra_files=["config.yml"])
+                extra_files=["config.yml"], residual_on=residual_on)
     elapsed = time.perf_counter() - start
     print(f"trained {algo} on {env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
           f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}")
