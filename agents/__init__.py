@@ -11,4 +11,12 @@
 * :mod:`agents.train`: ``python -m agents.train``, SB3 training driven by ``agents/hyperparams``.
 * :mod:`agents.evaluate`: rollouts on held-out seeds and the comparison metrics.
 * :mod:`agents.compare`: ``python -m agents.compare``, the side-by-side table and plots.
+* :mod:`agents.mpc`: the privileged model-predictive reference controller ``mpc``.
+* :mod:`agents.residual`: policies trained as corrections to a scripted baseline.
+* :mod:`agents.benchmark`: ``python -m agents.benchmark``, every id, controller and statistic.
 """
+
+# tether_gym sets the OpenMP spin policy (tether_gym._kernels) when it is imported. Importing it
+# before torch gives torch's own OpenMP threads the same policy, so that they do not starve the
+# simulator's threads in a training process.
+import tether_gym  # noqa: F401, E402
