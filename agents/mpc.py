@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -167,7 +168,9 @@ class MPCController:
         self.planner = DampingTask(task.cluster, self.batch * s.samples, task.config)
         self.rows = np.repeat(np.arange(self.batch), s.samples)
         self.plan = np.zeros((self.batch, s.horizon, self.action_size))
-        self.rng = np.random.default_rng(s.seed)
+        # One generator per environment, reseeded at each episode start from the episode's initial
+        # state: an episode gets the same plans whatever the batch size and its slot in it.
+        self.rngs = [np.random.default_rng(s.seed) for _ in range(self.batch)]
         # Planning rollouts of tasks with disturbances or noise draw from the controller's own
         # generators: the plan is scored on one sample of them.
         self.planner_rngs = [np.random.default_rng([s.seed, k]) for k in range(self.planner.num_clusters)]
@@ -218,6 +221,8 @@ class MPCController:
         start = time.perf_counter()
         fresh = self.task.sim.time == 0.0
         self.plan[fresh] = 0.0
+        for e in np.flatnonzero(fresh):
+            self.rngs[e] = np.random.default_rng([self.settings.seed, self._episode_key(e)])
         snapshot = self.task.snapshot().select(self.rows)
         noise = self.settings.noise
         for _ in range(self.settings.iterations):
@@ -236,12 +241,17 @@ class MPCController:
     def _candidates(self, noise: float) -> np.ndarray:
         """(E, samples, horizon, A) thrust sequences in [-1, 1]; sample 0 is the nominal plan."""
         s = self.settings
-        knots = self.rng.standard_normal((self.batch, s.samples, s.knots, self.action_size)) * noise
+        knots = np.stack([rng.standard_normal((s.samples, s.knots, self.action_size)) for rng in self.rngs]) * noise
         knots[:, 0] = 0.0
         perturbation = np.einsum("hk,eska->esha", self.interpolation, knots)
         # Residuals on a prior may reach +-2 (a full command against the prior's); actions +-1.
         bound = 1.0 if self.prior is None else 2.0
         return np.clip(self.plan[:, None] + perturbation, -bound, bound)
+
+    def _episode_key(self, index: int) -> int:
+        """A 32-bit key of environment ``index``'s current (initial) state."""
+        sim = self.task.sim
+        return zlib.crc32(sim.positions[index].tobytes() + sim.velocities[index].tobytes())
 
     def _actions(self, task: DampingTask, plan_step: np.ndarray) -> np.ndarray:
         """The commands of one planned step, (rows, A): the plan itself, or the prior's

@@ -78,6 +78,16 @@ def test_the_plan_is_scored_with_the_tasks_reward() -> None:
     assert np.array_equal(best, candidates[np.arange(2), np.argmin(costs, axis=1)])
 
 
+def test_an_episode_gets_the_same_plans_in_any_batch() -> None:
+    """Each environment draws from its own generator, keyed by its episode's initial state."""
+    seeds = [3100, 3101, 3102]
+    short = {"max_episode_steps": 15}
+    probe = gym.make_vec("TetherTriangle-v0", num_envs=1)
+    together = rollout(MPCController(probe, SMALL), "TetherTriangle-v0", seeds, env_kwargs=short)
+    alone = rollout(MPCController(probe, SMALL), "TetherTriangle-v0", seeds[2:], env_kwargs=short)
+    assert together.rewards[2].tobytes() == alone.rewards[0].tobytes()
+
+
 def test_mpc_is_refused_clearly() -> None:
     with pytest.raises(ValueError, match="samples"):
         MPCSettings(samples=1)
