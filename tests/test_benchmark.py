@@ -111,7 +111,8 @@ def test_score_interval_is_paired_over_seeds() -> None:
 
 
 def test_best_baseline_excludes_baselines_below_passive() -> None:
-    # The default id's comparison: LQR loses formations and scores far below passive.
+    # The default id's comparison before the slack-model LQR: the taut-model design lost formations and
+    # scored far below passive, the case the eligibility rule is for.
     means = {"passive": -127.2, "velocity_feedback": -67.6, "lqr": -2091.0, "tension_aware": -68.4}
     best, notes = best_eligible_baseline(means)
     assert best == "velocity_feedback"
