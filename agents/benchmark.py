@@ -90,7 +90,12 @@ from agents.baselines import BASELINES
 from agents.cli import int_at_least
 from agents.compare import HELD_OUT_SEED
 from agents.evaluate import EpisodeRecord, rollout, summarise
-from agents.files import OutputError, atomic_write, atomic_write_text, check_output_files, prepare_output_dir
+from agents.files import (
+    OutputError,
+    atomic_write,
+    atomic_write_text,
+    prepare_table_outputs,
+)
 from agents.pickled import PickleNotTrustedError
 from agents.policies import make_controller, shipped_models
 from agents.safe_format import PolicyFormatError
@@ -501,15 +506,7 @@ def benchmark(
             f"reference must name a controller other than {ZERO!r} (it scores 100); got {reference!r}"
         )
     _rliable()
-    if plots:
-        try:
-            import matplotlib  # noqa: F401 - checked now, not after every rollout
-        except ImportError as error:
-            raise ImportError("the plots need matplotlib: pip install 'tether-gym[plots]', or pass "
-                              "--no-plots (plots=False)") from error
-    out = prepare_output_dir(out, argument="--out")
-    check_output_files(out, TABLE_FILES + (PLOT_FILES if plots else ()), force=force, argument="--out",
-                       what="an earlier benchmark")
+    out = prepare_table_outputs(out, TABLE_FILES, PLOT_FILES, plots, force, what="an earlier benchmark")
 
     shipped = {env_id: shipped_models(env_id) for env_id in ids}
     if names is None:

@@ -35,7 +35,12 @@ import numpy as np
 from agents.baselines import BASELINES
 from agents.cli import int_at_least
 from agents.evaluate import METRICS, EpisodeRecord, rollout, summarise
-from agents.files import OutputError, atomic_write, atomic_write_text, check_output_files, prepare_output_dir
+from agents.files import (
+    OutputError,
+    atomic_write,
+    atomic_write_text,
+    prepare_table_outputs,
+)
 from agents.pickled import PickleNotTrustedError
 from agents.policies import make_controller, shipped_models
 from agents.safe_format import PolicyFormatError
@@ -109,15 +114,7 @@ def compare(
         repeated = sorted({name for name in controllers if controllers.count(name) > 1})
         if repeated:
             raise ValueError(f"controllers lists {repeated} more than once: each row of the table needs its own name")
-    if plots:
-        try:
-            import matplotlib  # noqa: F401 - checked now, not after every rollout
-        except ImportError as error:
-            raise ImportError("the plots need matplotlib: pip install 'tether-gym[plots]', or pass --no-plots "
-                              "(plots=False)") from error
-    out = prepare_output_dir(out, argument="--out")
-    check_output_files(out, TABLE_FILES + (PLOT_FILES if plots else ()), force=force, argument="--out",
-                       what="an earlier comparison")
+    out = prepare_table_outputs(out, TABLE_FILES, PLOT_FILES, plots, force, what="an earlier comparison")
     names = list(controllers) if controllers else (list(BASELINES) + list(shipped_models(env_id)))
     probe = gym.make_vec(env_id, num_envs=1, **dict(env_kwargs or {}))
     num_nodes = probe.unwrapped.task.cluster.num_nodes

@@ -27,6 +27,7 @@ __all__ = [
     "check_no_symlinks_inside",
     "check_output_files",
     "prepare_output_dir",
+    "prepare_table_outputs",
 ]
 
 
@@ -155,3 +156,22 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
 def atomic_write_text(path: str | Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically (see :func:`atomic_write`)."""
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def prepare_table_outputs(
+    out: str | Path, tables: Iterable[str], plots: Iterable[str], with_plots: bool, force: bool, what: str
+) -> Path:
+    """Everything a table-and-plots command (comparison, benchmark) checks before any work:
+    matplotlib is there when plots are asked for, ``out`` is a usable directory (``--out``), and
+    none of its ``tables`` (and ``plots``) would overwrite ``what`` without ``force`` or write
+    through a symlink. Returns the directory."""
+    if with_plots:
+        try:
+            import matplotlib  # noqa: F401 - checked now, not after every rollout
+        except ImportError as error:
+            raise ImportError("the plots need matplotlib: pip install 'tether-gym[plots]', or pass --no-plots "
+                              "(plots=False)") from error
+    directory = prepare_output_dir(out, argument="--out")
+    check_output_files(directory, tuple(tables) + (tuple(plots) if with_plots else ()), force=force,
+                       argument="--out", what=what)
+    return directory
