@@ -99,6 +99,7 @@ from agents.files import (
 from agents.pickled import PickleNotTrustedError
 from agents.policies import make_controller, shipped_models
 from agents.safe_format import PolicyFormatError
+from tether_gym.limits import is_whole_number
 from tether_gym.registration import ENV_IDS
 
 __all__ = [
@@ -166,6 +167,21 @@ def _check_returns(name: str, values: Any) -> np.ndarray:
     return array
 
 
+def _check_scored_returns(
+    returns: Any, zero_returns: Any, reference_returns: Any, purpose: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The three (E,) return arrays of a score (controller, passive, reference), checked to be
+    per-episode returns of the same seeds; ``purpose`` ("normalised scores need") starts the
+    message when they are not."""
+    returns = _check_returns("returns", returns)
+    zero = _check_returns("zero_returns", zero_returns)
+    reference = _check_returns("reference_returns", reference_returns)
+    if not returns.shape == zero.shape == reference.shape:
+        raise ValueError(f"{purpose} the same seeds on every side; got {returns.size}, "
+                         f"{zero.size} and {reference.size} episodes")
+    return returns, zero, reference
+
+
 def t_interval(values: np.ndarray, confidence: float = CONFIDENCE) -> tuple[float, float, float]:
     """``(mean, sample std, half-width)`` of the two-sided t interval of the mean of ``values``
     (1-D, at least 2 entries): ``t(1 - (1 - confidence)/2, n - 1) · std / sqrt(n)``."""
@@ -222,12 +238,7 @@ def normalised_scores(returns: Any, zero_returns: Any, reference_returns: Any) -
     ``returns``, ``zero_returns`` (passive) and ``reference_returns`` (mpc) are (E,) returns on
     the same seeds. Raises ValueError when the reference's mean return is not above passive's
     (the scale would be zero or reversed)."""
-    returns = _check_returns("returns", returns)
-    zero = _check_returns("zero_returns", zero_returns)
-    reference = _check_returns("reference_returns", reference_returns)
-    if not returns.shape == zero.shape == reference.shape:
-        raise ValueError(f"normalised scores need the same seeds on every side; got {returns.size}, "
-                         f"{zero.size} and {reference.size} episodes")
+    returns, zero, reference = _check_scored_returns(returns, zero_returns, reference_returns, "normalised scores need")
     gap = float(reference.mean() - zero.mean())
     if not gap > 0:
         raise ValueError(
@@ -246,12 +257,7 @@ def score_interval(returns: Any, zero_returns: Any, reference_returns: Any, reps
     correlation between numerator and denominator (both grow with a seed's initial energy).
     Returns ``(low, high)``, or None when more than ``(1 - confidence) / 2`` of the resamples
     have a reference no better than passive (the scale itself is then uncertain)."""
-    returns = _check_returns("returns", returns)
-    zero = _check_returns("zero_returns", zero_returns)
-    reference = _check_returns("reference_returns", reference_returns)
-    if not returns.shape == zero.shape == reference.shape:
-        raise ValueError(f"a paired bootstrap needs the same seeds on every side; got {returns.size}, "
-                         f"{zero.size} and {reference.size} episodes")
+    returns, zero, reference = _check_scored_returns(returns, zero_returns, reference_returns, "a paired bootstrap needs")
     picks = np.random.default_rng(seed).integers(0, returns.size, size=(reps, returns.size))
     gains = (returns - zero)[picks].mean(axis=1)
     scales = (reference - zero)[picks].mean(axis=1)
@@ -423,7 +429,7 @@ def _clock(seconds: float) -> str:
 
 
 def _check_int(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+    if not is_whole_number(value) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
     return int(value)
 

@@ -44,6 +44,7 @@ from agents.files import (
 from agents.pickled import PickleNotTrustedError
 from agents.policies import make_controller, shipped_models
 from agents.safe_format import PolicyFormatError
+from tether_gym.limits import is_whole_number
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 __all__ = ["compare", "main"]
@@ -74,7 +75,7 @@ PLOT_FILES = ("energy.png", "displacement.png")
 
 
 def _check_int(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+    if not is_whole_number(value) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
     return int(value)
 

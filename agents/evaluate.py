@@ -18,6 +18,7 @@ import numpy as np
 import scipy.stats
 
 import tether_gym  # noqa: F401 - registers the ids
+from tether_gym.limits import is_whole_number
 
 __all__ = ["EpisodeRecord", "METRICS", "rollout", "summarise"]
 
@@ -71,10 +72,10 @@ def rollout(
 
     ``progress`` is an optional callable ``progress(steps_done, steps_total)``."""
     seed_list = list(seeds)
-    bad = [s for s in seed_list if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0]
+    bad = [s for s in seed_list if not is_whole_number(s) or s < 0]
     if bad:
         raise ValueError(f"seeds must be non-negative integers; got {bad[:5]}")
-    if isinstance(satellite, bool) or not isinstance(satellite, (int, np.integer)):
+    if not is_whole_number(satellite):
         raise ValueError(f"satellite must be an integer index; got {satellite!r}")
     seeds = np.asarray(seed_list, dtype=np.int64)
     count = seeds.size

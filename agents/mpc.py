@@ -43,6 +43,7 @@ import numpy as np
 import yaml
 
 from tether_gym.envs.task import SCALARS, DampingTask, TaskState
+from tether_gym.limits import is_whole_number
 
 __all__ = ["MPC_SETTINGS_FILE", "MPCController", "MPCSettings", "load_mpc_settings"]
 
@@ -96,7 +97,7 @@ class MPCSettings:
                  "knots": (1, self.control_horizon or self.horizon), "iterations": (1, 100), "seed": (0, 2**63 - 1)}
         for name, (low, high) in whole.items():
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
+            if not is_whole_number(value) or not low <= value <= high:
                 raise ValueError(f"mpc setting {name} must be a whole number in {low}..{high}; got {value!r}")
         from agents.baselines import BASELINES
 

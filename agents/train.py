@@ -53,7 +53,6 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 import tether_gym
 from agents.cli import int_at_least
-from agents.residual import ResidualVecEnv, check_residual_on
 from agents.files import (
     OutputError,
     OutputExistsError,
@@ -69,6 +68,7 @@ from agents.pickled import (
     refuse_untrusted,
     sb3_model_file,
 )
+from agents.residual import ResidualVecEnv, check_residual_on
 from agents.safe_format import (
     ACTIVATIONS,
     ALGORITHMS,

@@ -18,6 +18,7 @@ differences with an element-by-element critical-step estimate.  Main entry point
 from tether_gym.cluster import Cluster, ClusterError, load_cluster, save_cluster
 from tether_gym.frames import LEO_ORBIT_RATE, Frame
 from tether_gym.presets import PRESETS, make_cluster, preset_names
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS, register_envs
 from tether_gym.simulator import (
     DEFAULT_SAFETY_FACTOR,
     AdvanceStats,
@@ -27,8 +28,6 @@ from tether_gym.simulator import (
     Simulator,
     SimulatorState,
 )
-
-from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS, register_envs
 
 __version__ = "0.1.0"
 

@@ -20,7 +20,6 @@ Conventions (SI units throughout):
 from __future__ import annotations
 
 import math
-
 import os
 
 import numba

@@ -36,6 +36,7 @@ __all__ = [
     "MIN_MASS",
     "check_range",
     "is_real_number",
+    "is_whole_number",
     "real_array",
     "short_repr",
     "to_float",
@@ -154,6 +155,11 @@ def to_float(value: Any) -> float:
         return float(value)
     except OverflowError:
         return math.inf if value > 0 else -math.inf
+
+
+def is_whole_number(value: Any) -> bool:
+    """True for a Python or numpy integer that is not a boolean."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 def is_real_number(value: Any) -> bool:

@@ -28,7 +28,7 @@ import numpy as np
 
 from tether_gym.cluster import Cluster, ClusterError
 from tether_gym.frames import LEO_ORBIT_RATE, Frame, FrameError
-from tether_gym.limits import is_real_number, short_repr, to_float
+from tether_gym.limits import is_real_number, is_whole_number, short_repr, to_float
 
 __all__ = ["MAX_SATELLITES", "PRESETS", "make_cluster", "preset_names"]
 
@@ -46,8 +46,7 @@ def _check_preset_argument(preset: str, name: str, value: object, default: objec
         if not isinstance(value, (bool, np.bool_)):
             raise ClusterError(f"preset {preset!r}: {name} must be True or False; got {short_repr(value)}")
     elif isinstance(default, int):
-        if not (isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-                and 1 <= value <= MAX_SATELLITES):
+        if not (is_whole_number(value) and 1 <= value <= MAX_SATELLITES):
             raise ClusterError(
                 f"preset {preset!r}: {name} must be a whole number in 1..{MAX_SATELLITES}; got {value!r}"
             )

@@ -18,7 +18,16 @@ from numpy.typing import ArrayLike
 
 from tether_gym import _kernels
 from tether_gym.cluster import Cluster
-from tether_gym.limits import MAX_COORDINATE, MAX_FORCE, MAX_SPEED, check_range, is_real_number, real_array, to_float
+from tether_gym.limits import (
+    MAX_COORDINATE,
+    MAX_FORCE,
+    MAX_SPEED,
+    check_range,
+    is_real_number,
+    is_whole_number,
+    real_array,
+    to_float,
+)
 
 __all__ = [
     "DEFAULT_SAFETY_FACTOR",
@@ -209,11 +218,6 @@ def _check_duration(duration: float) -> float:
     return value
 
 
-def _is_whole(value: object) -> bool:
-    """True for a Python or numpy integer that is not a boolean."""
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-
-
 class BatchSimulator:
     """B tether clusters of one topology, integrated together by explicit central differences.
 
@@ -246,7 +250,7 @@ class BatchSimulator:
     ) -> None:
         if isinstance(clusters, Cluster):
             count = 1 if num_clusters is None else num_clusters
-            if not _is_whole(count) or not 1 <= count <= MAX_BATCH:
+            if not is_whole_number(count) or not 1 <= count <= MAX_BATCH:
                 raise ValueError(f"num_clusters must be a whole number in 1..{MAX_BATCH}; got {num_clusters!r}")
             cluster_list = [clusters] * int(count)
         else:
@@ -262,7 +266,7 @@ class BatchSimulator:
             raise ValueError(f"elongation must be 'exact' or 'linearised'; got {elongation!r}")
         self.elongation: Elongation = elongation
         self.max_step = _check_number("max_step", max_step, 0.0, math.inf, "s")
-        if not _is_whole(max_substeps) or not 1 <= max_substeps <= MAX_SUBSTEPS_LIMIT:
+        if not is_whole_number(max_substeps) or not 1 <= max_substeps <= MAX_SUBSTEPS_LIMIT:
             raise ValueError(f"max_substeps must be a whole number in 1..{MAX_SUBSTEPS_LIMIT:.0e}; got {max_substeps!r}")
         self.max_substeps = int(max_substeps)
 
@@ -312,7 +316,7 @@ class BatchSimulator:
         With ``reset=True`` (default) it is also put at rest at its nominal positions.  Nothing
         changes when the arguments are refused.
         """
-        if not _is_whole(index) or not 0 <= index < len(self.clusters):
+        if not is_whole_number(index) or not 0 <= index < len(self.clusters):
             raise ValueError(f"index must be a cluster index in 0..{len(self.clusters) - 1}; got {index!r}")
         if not isinstance(cluster, Cluster):
             raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
@@ -522,7 +526,7 @@ class BatchSimulator:
         duration = _check_duration(duration)
         shape = (self.num_clusters, self.num_nodes, 3)
         p = np.zeros(shape) if force is None else _check_array("force", force, shape, "N", MAX_FORCE)
-        if not _is_whole(record_steps) or not 0 <= record_steps <= MAX_RECORDED_STEPS:
+        if not is_whole_number(record_steps) or not 0 <= record_steps <= MAX_RECORDED_STEPS:
             raise ValueError(f"record_steps must be a whole number in 0..{MAX_RECORDED_STEPS}; got {record_steps!r}")
         if active is None:
             mask = self._all_active

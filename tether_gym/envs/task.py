@@ -23,7 +23,15 @@ from numpy.typing import ArrayLike
 
 from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
-from tether_gym.limits import MAX_COORDINATE, MAX_SPEED, is_real_number, real_array, to_float
+from tether_gym.limits import (
+    MAX_COORDINATE,
+    MAX_SPEED,
+    is_real_number,
+    is_whole_number,
+    real_array,
+    short_repr,
+    to_float,
+)
 from tether_gym.simulator import (
     DEFAULT_SAFETY_FACTOR,
     PARALLEL_MIN_BATCH,
@@ -161,12 +169,6 @@ class EnvArgumentError(ValueError):
 # One check per kind of value.  Each returns the value normalised (Python float, int, bool, str
 # or tuple) or raises EnvArgumentError naming ``name``.
 
-def _shown(value: Any) -> str:
-    """``repr(value)``, shortened for messages."""
-    text = repr(value)
-    return text if len(text) <= 120 else text[:117] + "..."
-
-
 def _real(value: Any) -> float | None:
     """``value`` as a float if it is a real number (not a bool, not a string), else None; an int
     beyond the float range becomes +-inf, so that the range checks refuse it by name."""
@@ -193,7 +195,7 @@ def check_number(
         return number  # type: ignore[return-value]
     kind = "" if number is not None else f" (a {type(value).__name__})"
     raise EnvArgumentError(
-        f"{name} must be a finite number {_interval(low, high, low_open, unit)}; got {_shown(value)}{kind}"
+        f"{name} must be a finite number {_interval(low, high, low_open, unit)}; got {short_repr(value)}{kind}"
         + (f"; {fix}" if fix else "")
     )
 
@@ -201,11 +203,11 @@ def check_number(
 def check_whole(name: str, value: Any, low: int, high: int, unit: str = "") -> int:
     """``value`` as an int in [low, high], or an :class:`EnvArgumentError` naming ``name``; bools
     and floats (even 2.0) are rejected."""
-    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and low <= value <= high:
+    if is_whole_number(value) and low <= value <= high:
         return int(value)
     raise EnvArgumentError(
         f"{name} must be a whole number (an int) in {low}..{high}{' ' + unit if unit else ''}; "
-        f"got {_shown(value)} (a {type(value).__name__})"
+        f"got {short_repr(value)} (a {type(value).__name__})"
     )
 
 
@@ -213,14 +215,14 @@ def check_bool(name: str, value: Any) -> bool:
     """``value`` as a bool (True/False only), or an :class:`EnvArgumentError` naming ``name``."""
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
-    raise EnvArgumentError(f"{name} must be True or False; got {_shown(value)}")
+    raise EnvArgumentError(f"{name} must be True or False; got {short_repr(value)}")
 
 
 def check_choice(name: str, value: Any, choices: Sequence[str]) -> str:
     """``value`` if it is one of the strings ``choices``, or an :class:`EnvArgumentError` naming ``name``."""
     if isinstance(value, str) and value in choices:
         return value
-    raise EnvArgumentError(f"{name} must be one of {' or '.join(repr(c) for c in choices)}; got {_shown(value)}")
+    raise EnvArgumentError(f"{name} must be one of {' or '.join(repr(c) for c in choices)}; got {short_repr(value)}")
 
 
 def _items(name: str, value: Any, what: str) -> list[Any]:
@@ -229,7 +231,7 @@ def _items(name: str, value: Any, what: str) -> list[Any]:
         return value.tolist()
     if isinstance(value, (list, tuple, range)):
         return list(value)
-    raise EnvArgumentError(f"{name} must be {what} (a list or tuple); got {_shown(value)}")
+    raise EnvArgumentError(f"{name} must be {what} (a list or tuple); got {short_repr(value)}")
 
 
 def check_satellites(name: str, value: Any) -> tuple[int, ...] | None:
@@ -250,9 +252,9 @@ def check_seed(name: str, value: Any) -> int | None:
     """None, or ``value`` as an int >= 0 (a seed for ``numpy.random.default_rng``)."""
     if value is None:
         return None
-    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value >= 0:
+    if is_whole_number(value) and value >= 0:
         return int(value)
-    raise EnvArgumentError(f"{name} must be a whole number >= 0 (an int) or None; got {_shown(value)}")
+    raise EnvArgumentError(f"{name} must be a whole number >= 0 (an int) or None; got {short_repr(value)}")
 
 
 def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
@@ -267,7 +269,7 @@ def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
         with np.errstate(over="ignore", invalid="ignore"):
             return value.astype(np.float64, copy=False)
     if isinstance(value, (str, bytes, Mapping)):
-        raise EnvArgumentError(f"{name} must be {what}; got {_shown(value)}")
+        raise EnvArgumentError(f"{name} must be {what}; got {short_repr(value)}")
     return real_array(name, value, EnvArgumentError, allow_inf=True)
 
 
@@ -479,7 +481,7 @@ class TaskConfig:
             if thrust is None or not (math.isfinite(thrust) and low <= thrust <= high):
                 raise EnvArgumentError(
                     f"max_thrust must be finite and > 0 N, in [{low:g}, {high:g}] N per thruster; "
-                    f"got {_shown(self.max_thrust)}"
+                    f"got {short_repr(self.max_thrust)}"
                 )
             thrusts.append(thrust)
         return thrusts[0] if scalar else tuple(thrusts)
@@ -488,7 +490,7 @@ class TaskConfig:
         """``randomize`` as a dict of known keys to spreads within [0, MAX_SPREAD]."""
         if not isinstance(self.randomize, Mapping):
             raise EnvArgumentError(
-                f"randomize must be a dict of relative spreads, e.g. {{'masses': 0.2}}; got {_shown(self.randomize)}"
+                f"randomize must be a dict of relative spreads, e.g. {{'masses': 0.2}}; got {short_repr(self.randomize)}"
             )
         unknown = [key for key in self.randomize if key not in RANDOMISABLE]
         if unknown:
@@ -506,10 +508,10 @@ class TaskConfig:
         items = _items("thruster_failure_window", self.thruster_failure_window, "(start, end) in s")
         times = [_real(item) for item in items]
         if len(times) != 2 or any(t is None or not math.isfinite(t) for t in times):
-            raise EnvArgumentError(f"{usage}; got {_shown(self.thruster_failure_window)}")
+            raise EnvArgumentError(f"{usage}; got {short_repr(self.thruster_failure_window)}")
         start, end = times
         if not (0.0 <= start <= end <= MAX_TIME):  # type: ignore[operator]
-            raise EnvArgumentError(f"{usage}; got {_shown(self.thruster_failure_window)}")
+            raise EnvArgumentError(f"{usage}; got {short_repr(self.thruster_failure_window)}")
         return (start, end)  # type: ignore[return-value]
 
     def validate(self, cluster: Cluster) -> ClusterScales:
@@ -605,14 +607,14 @@ def task_from_arguments(
     if preset_kwargs is not None and not isinstance(preset_kwargs, Mapping):
         raise EnvArgumentError(
             "preset_kwargs must be a dict of the preset's parameters, e.g. {'N0': 1.0}, or None; "
-            f"got {_shown(preset_kwargs)}"
+            f"got {short_repr(preset_kwargs)}"
         )
     if cluster is None:
         if not isinstance(preset, str):
-            raise EnvArgumentError(f"preset must be a preset name, one of {preset_names()}; got {_shown(preset)}")
+            raise EnvArgumentError(f"preset must be a preset name, one of {preset_names()}; got {short_repr(preset)}")
         keys = [key for key in preset_kwargs or {} if not isinstance(key, str)]
         if keys:
-            raise EnvArgumentError(f"preset_kwargs keys must be parameter names (strings); got {_shown(keys)}")
+            raise EnvArgumentError(f"preset_kwargs keys must be parameter names (strings); got {short_repr(keys)}")
         cluster = make_cluster(preset, **dict(preset_kwargs or {}))
     elif not isinstance(cluster, Cluster):
         raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
@@ -890,7 +892,7 @@ class DampingTask:
             return None, None
         if not isinstance(options, Mapping):
             raise EnvArgumentError(
-                f"options must be a dict such as {{'positions': X0, 'velocities': V0}} or None; got {_shown(options)}"
+                f"options must be a dict such as {{'positions': X0, 'velocities': V0}} or None; got {short_repr(options)}"
             )
         unknown = sorted(set(options) - set(RESET_OPTION_KEYS), key=repr)
         if unknown:

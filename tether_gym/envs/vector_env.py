@@ -22,6 +22,7 @@ from tether_gym.envs.task import (
     check_whole,
     task_from_arguments,
 )
+from tether_gym.limits import is_whole_number
 
 __all__ = ["TetherClusterVectorEnv"]
 
@@ -77,8 +78,7 @@ class TetherClusterVectorEnv(VectorEnv):
                 "a single env, gym.make(id, render_mode='rgb_array'), or use gym.make_vec(..., "
                 "vectorization_mode='sync')"
             )
-        whole = isinstance(num_envs, (int, np.integer)) and not isinstance(num_envs, (bool, np.bool_))
-        if not (whole and 1 <= num_envs <= MAX_NUM_ENVS):
+        if not (is_whole_number(num_envs) and 1 <= num_envs <= MAX_NUM_ENVS):
             raise EnvArgumentError(
                 f"num_envs must be a positive integer, at most {MAX_NUM_ENVS} (run several processes for more); "
                 f"got {num_envs!r}"
@@ -134,7 +134,7 @@ class TetherClusterVectorEnv(VectorEnv):
         """The seed of each sub-env (None: keep its generator) from ``reset``'s ``seed``, checked."""
         if seed is None:
             return [None] * self.num_envs
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+        if is_whole_number(seed):
             first = check_seed("seed", seed)
             return [first + i for i in range(self.num_envs)]
         if not isinstance(seed, (list, tuple, np.ndarray)) or (isinstance(seed, np.ndarray) and seed.ndim != 1):
