@@ -89,12 +89,28 @@ class TrainedPolicy:
             )
         else:
             raise FileNotFoundError(f"no trained policy at {path}: no such file or directory")
+        self._adopt(name)
+
+    def _adopt(self, name: str | None) -> None:
         self.name = name or self.algo
         self.observation_shape: tuple[int, ...] = tuple(self.policy.observation_space.shape)
         self.observation_size = int(np.prod(self.observation_shape))
         #: The baseline whose actions the policy corrects (agents.residual), or None.
         self.residual_on: str | None = self.metadata.get("residual_on")
         self.baseline: Any = None
+
+    @classmethod
+    def from_parts(cls, policy: Any, normalizer: Any, env_id: str, algo: str, residual_on: str | None = None,
+                   name: str | None = None) -> TrainedPolicy:
+        """A TrainedPolicy around an in-memory SB3 ``policy`` and its observation ``normalizer``
+        (a ``VecNormalize`` or None), e.g. the model being trained; nothing is copied, so it acts
+        with the weights and statistics they hold when ``predict`` is called."""
+        self = cls.__new__(cls)
+        self.policy, self.normalizer, self.algo, self.env_id = policy, normalizer, algo, env_id
+        self.metadata = {"algo": algo, "env_id": env_id, "residual_on": residual_on}
+        self.path = Path(f"<in-memory {algo} policy>")
+        self._adopt(name)
+        return self
 
     def attach(self, env: Any) -> None:
         """Build the baseline a residual policy adds its corrections to, from ``env`` (a

@@ -12,7 +12,9 @@ all of it in the safe policy format (:mod:`agents.safe_format`: JSON and safeten
 * ``checkpoints/<algo>_<steps>_steps/``: the policy, its ``VecNormalize`` statistics and the
   optimizer state every ``--checkpoint-freq`` steps;
 * ``best/``: the best policy on the evaluation episodes (with its statistics and optimizer
-  state), and ``evaluations.npz``;
+  state), and ``evaluations.json``: every evaluation's returns and paired difference from the
+  best scripted baseline on the same seeds, and when training first beat it
+  (:mod:`agents.selection`);
 * ``policy.json``, ``policy.safetensors``, ``normalization.json``, ``training.*`` and
   ``MANIFEST.sha256``: the final policy.
 
@@ -48,7 +50,7 @@ from typing import Any
 
 import yaml
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 import tether_gym
@@ -81,6 +83,7 @@ from agents.safe_format import (
     read_metadata,
     save_policy,
 )
+from agents.selection import EVALUATIONS_FILE, SeededEvaluation
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
@@ -97,9 +100,6 @@ CONTROLLED_KEYS = {
 }
 #: Keys that take a number or "lin_<number>" (linear decay to 0 over training).
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
-#: Seeds of the evaluation episodes are offset from the training seed by this much, so that they
-#: are never episodes the agent trained on.
-EVAL_SEED_OFFSET = 1_000_000
 #: Files an earlier run of agents.train may have left (this format and the pickle-based one).
 LEGACY_RUN_FILES = ("model.zip", "vecnormalize.pkl")
 LEGACY_BEST_FILES = ("best_model.zip", "vecnormalize.pkl", "evaluations.npz")
@@ -558,7 +558,7 @@ def _clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
             remove(run / name)
     best = run / "best"
     if best.is_dir() and best.resolve() not in keep:
-        for name in (*POLICY_FILES, *LEGACY_BEST_FILES):
+        for name in (*POLICY_FILES, EVALUATIONS_FILE, *LEGACY_BEST_FILES):
             remove(best / name)
     checkpoints = run / "checkpoints"
     if checkpoints.is_dir():
@@ -641,6 +641,7 @@ def train(
 
     Every argument, the hyperparameters, the resume source and the run directory are checked
     before any env is built: errors name the argument or key and the fix."""
+    started = time.perf_counter()
     if algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
     if env_id not in ENV_IDS:
@@ -672,9 +673,6 @@ def train(
     env_kwargs = hyperparams.get("env_kwargs")
     residual_on = hyperparams.get("residual_on")
     venv = make_training_env(env_id, n_envs, seed, normalize, env_kwargs, residual_on=residual_on)
-    eval_envs = min(eval_episodes, 64)
-    eval_venv = make_training_env(env_id, eval_envs, seed + EVAL_SEED_OFFSET, normalize, env_kwargs, training=False,
-                                  residual_on=residual_on)
     cls = ALGORITHMS[algo]
     model = _build_model(cls, hyperparams, venv, seed, verbose, run, resume_kind, resume_path)
     venv = model.get_env()  # a pickle resume wraps the statistics it loaded around the env
@@ -685,13 +683,13 @@ def train(
     callback_items: list[BaseCallback] = [
         SafePolicySaver(run / "checkpoints", env_id, provenance, every=max(checkpoint_freq // n_envs, 1), prefix=algo,
                         residual_on=residual_on),
-        EvalCallback(
-            eval_venv, n_eval_episodes=eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
-            best_model_save_path=None, log_path=str(run / "best"), deterministic=True,
-            callback_on_new_best=SafePolicySaver(run / "best", env_id, provenance, residual_on=residual_on),
-            verbose=verbose,
-        ),
     ]
+    evaluation = SeededEvaluation(
+        env_id, eval_episodes, every=eval_freq // n_envs, log_dir=run / "best",
+        on_new_best=SafePolicySaver(run / "best", env_id, provenance, residual_on=residual_on), started=started,
+        env_kwargs=env_kwargs, residual_on=residual_on, verbose=1 if progress_bar or verbose else 0,
+    )
+    callback_items.append(evaluation)
     curriculum = hyperparams.get("curriculum")
     if curriculum:
         callback_items.append(DifficultyCurriculum(curriculum["start"], curriculum["fraction"], total))
@@ -705,8 +703,13 @@ def train(
     elapsed = time.perf_counter() - start
     print(f"trained {algo} on {env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
           f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}")
+    if evaluation.history:
+        beat = evaluation.first_beat
+        print(f"best evaluation return {evaluation.best_mean:.2f} against {evaluation.bar} "
+              f"{evaluation.baseline_returns[evaluation.bar].mean():.2f} on the evaluation seeds; "
+              + (f"first beat it at {beat['timesteps']:,} steps, {beat['wall_time_s']:.0f} s after the command started"
+                 if beat else "never beat it"))
     venv.close()
-    eval_venv.close()
     return run
 
 
@@ -770,7 +773,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="raise the difficulty from START to 1 over the first FRACTION of the run",
     )
     parser.add_argument("--eval-freq", type=int_at_least(1), default=50_000, help="env steps between evaluations")
-    parser.add_argument("--eval-episodes", type=int_at_least(1), default=32)
+    parser.add_argument("--eval-episodes", type=int_at_least(1), default=32,
+                        help="evaluation episodes, the same seeds (1 000 000 up) at every evaluation")
     parser.add_argument("--checkpoint-freq", type=int_at_least(1), default=250_000,
                         help="env steps between checkpoints")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (for logs)")

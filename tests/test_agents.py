@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
 
@@ -172,12 +173,36 @@ def trained_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     )
 
 
+def _check_evaluations(run: Path) -> None:
+    """best/evaluations.json: every evaluation on the same seeds, paired against the best baseline
+    rolled out on those seeds, and the best/ policy is the one with the best mean return."""
+    from agents.evaluate import rollout
+    from agents.selection import evaluation_seeds
+
+    log = json.loads((run / "best" / "evaluations.json").read_text())
+    seeds = evaluation_seeds(2)
+    assert log["seeds"] == [seeds[0], seeds[-1]] and log["bar"] == max(log["baselines"], key=log["baselines"].get)
+    assert [entry["timesteps"] for entry in log["evaluations"]] == [256, 512]
+    env = gym.make("TetherTetrahedron-v0")
+    bar = rollout(make_controller(log["bar"], env), "TetherTetrahedron-v0", seeds).rewards.sum(axis=1)
+    assert bar.mean() == pytest.approx(log["baselines"][log["bar"]], rel=1e-12)
+    for entry in log["evaluations"]:
+        assert entry["difference_vs_bar"] == pytest.approx(np.mean(np.array(entry["returns"]) - bar), rel=1e-9)
+        assert entry["difference_low"] < entry["difference_vs_bar"] < entry["difference_high"]
+    best = TrainedPolicy(run, best=True)
+    best.attach(env)
+    returns = rollout(best, "TetherTetrahedron-v0", seeds).rewards.sum(axis=1)
+    assert returns.mean() == pytest.approx(log["best_mean_return"], rel=1e-6)
+    assert log["best_mean_return"] == max(entry["mean_return"] for entry in log["evaluations"])
+
+
 def test_training_smoke_writes_everything(trained_run: Path) -> None:
     safe = ("policy.json", "policy.safetensors", "normalization.json", "training.safetensors", "training.json",
             "MANIFEST.sha256")
-    for name in ("config.yml", *safe, *(f"best/{name}" for name in safe), "best/evaluations.npz"):
+    for name in ("config.yml", *safe, *(f"best/{name}" for name in safe), "best/evaluations.json"):
         assert (trained_run / name).is_file(), name
     assert any((trained_run / "tensorboard").rglob("events.out.tfevents.*"))
+    _check_evaluations(trained_run)
     assert sorted(p.name for p in (trained_run / "checkpoints").iterdir()) == ["ppo_256_steps", "ppo_512_steps"]
     for checkpoint in (trained_run / "checkpoints").iterdir():
         assert sorted(p.name for p in checkpoint.iterdir()) == sorted(safe)

@@ -427,8 +427,8 @@ def test_train_refuses_to_overwrite_a_run_without_force(tmp_path: Path, monkeypa
     assert not (run / "checkpoints").exists() or not any((run / "checkpoints").iterdir())
     assert TrainedPolicy(run).metadata["num_timesteps"] == 256
     # A symlink anywhere in the run directory is refused, even with --force.
-    (run / "best" / "evaluations.npz").unlink()
-    (run / "best" / "evaluations.npz").symlink_to(tmp_path / "elsewhere.npz")
+    (run / "best" / "evaluations.json").unlink()
+    (run / "best" / "evaluations.json").symlink_to(tmp_path / "elsewhere.json")
     with pytest.raises(OutputError, match="symlink"):
         train("ppo", ENV, seed=3, out=tmp_path, force=True, **TINY)
 

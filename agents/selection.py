@@ -1,0 +1,165 @@
+"""Model selection during training, on fixed evaluation seeds, paired against the scripted baselines.
+
+SB3's ``EvalCallback`` evaluates on whatever episodes its env's seed stream reaches next, so two
+evaluations of the same policy see different initial conditions. On tether-gym the spread of
+returns between initial conditions is far larger than what separates good controllers: on the
+default id the mean of 32 fresh episodes swings by about +-10 between evaluations while the best
+scripted baseline (LQR) and the predictive reference differ by 2. A "best model" chosen that way is
+mostly the luckiest draw of seeds.
+
+:class:`SeededEvaluation` evaluates every time on the *same* seeds (``EVAL_SEEDS_START`` up,
+never the comparison's held-out seeds 10 000-10 063), so that successive evaluations and the
+baselines are compared episode by episode:
+
+* at the start of training it rolls out every scripted baseline on those seeds once and takes the
+  best eligible one (:func:`agents.benchmark.best_eligible_baseline`) as the bar;
+* at every evaluation it reports the policy's mean return and its paired difference from the bar
+  with a 95 % t interval, to the console, to TensorBoard (``eval/*``) and to
+  ``best/evaluations.json``;
+* it saves the policy to ``best/`` when the mean return is the best so far (selection happens on
+  these seeds, never on the held-out ones the benchmark reports);
+* it records the wall time, counted from the start of the training command, and the step count of
+  the first evaluation whose mean return beats the bar: the "time to beat the best baseline".
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from agents.files import atomic_write_text
+
+__all__ = ["EVALUATIONS_FILE", "EVAL_SEEDS_START", "SeededEvaluation", "evaluation_seeds"]
+
+#: The evaluation log in the run's ``best/`` directory.
+EVALUATIONS_FILE = "evaluations.json"
+
+#: First evaluation seed; the evaluation episodes are seeds EVAL_SEEDS_START .. +episodes-1 for every
+#: run, so runs of different training seeds are selected and compared on the same episodes.
+EVAL_SEEDS_START = 1_000_000
+
+
+def evaluation_seeds(episodes: int) -> list[int]:
+    """The seeds of the ``episodes`` evaluation episodes (the same for every run)."""
+    return list(range(EVAL_SEEDS_START, EVAL_SEEDS_START + int(episodes)))
+
+
+class SeededEvaluation(BaseCallback):
+    """Evaluate the policy every ``every`` calls on fixed seeds, paired against the best scripted
+    baseline (see the module docstring).
+
+    Args:
+        env_id: the id trained on.
+        episodes: evaluation episodes (seeds :func:`evaluation_seeds`).
+        every: callback calls (vector steps) between evaluations.
+        log_dir: where ``evaluations.json`` goes (the run's ``best/``).
+        on_new_best: a callback run when the mean return is the best so far (saves ``best/``).
+        started: ``time.perf_counter()`` at the start of the training command.
+        env_kwargs: the env's keyword arguments (``env_kwargs`` of the hyperparameters).
+        residual_on: the baseline a residual policy corrects, or None.
+        verbose: 1 prints a line per evaluation.
+    """
+
+    def __init__(self, env_id: str, episodes: int, every: int, log_dir: Path, on_new_best: BaseCallback,
+                 started: float, env_kwargs: dict[str, Any] | None = None, residual_on: str | None = None,
+                 verbose: int = 1) -> None:
+        super().__init__(verbose=verbose)
+        self.env_id, self.seeds, self.every = env_id, evaluation_seeds(episodes), max(int(every), 1)
+        self.log_dir, self.on_new_best, self.started = Path(log_dir), on_new_best, started
+        self.env_kwargs, self.residual_on = dict(env_kwargs or {}), residual_on
+        self.baseline_returns: dict[str, np.ndarray] = {}
+        self.bar: str = ""
+        self.best_mean = -np.inf
+        self.history: list[dict[str, Any]] = []
+        self.first_beat: dict[str, Any] | None = None
+
+    def _init_callback(self) -> None:
+        self.on_new_best.init_callback(self.model)
+
+    def _rollout_returns(self, controller: Any, name: str) -> np.ndarray:
+        from agents.evaluate import rollout
+
+        record = rollout(controller, self.env_id, self.seeds, name=name, env_kwargs=self.env_kwargs)
+        return record.rewards.sum(axis=1)
+
+    def _on_training_start(self) -> None:
+        import gymnasium as gym
+
+        from agents.baselines import BASELINES, make_baseline
+        from agents.benchmark import best_eligible_baseline
+
+        env = gym.make(self.env_id, **self.env_kwargs)
+        for name in BASELINES:
+            self.baseline_returns[name] = self._rollout_returns(make_baseline(name, env), name)
+        env.close()
+        self.bar, _ = best_eligible_baseline({name: float(r.mean()) for name, r in self.baseline_returns.items()})
+        if self.verbose:
+            means = ", ".join(f"{name} {r.mean():.2f}" for name, r in self.baseline_returns.items())
+            print(f"evaluation seeds {self.seeds[0]}..{self.seeds[-1]}: {means}; the bar is {self.bar}", flush=True)
+
+    def _policy(self) -> Any:
+        from agents.policies import TrainedPolicy
+
+        policy = TrainedPolicy.from_parts(self.model.policy, self.model.get_vec_normalize_env(), self.env_id,
+                                          algo=type(self.model).__name__.lower(), residual_on=self.residual_on)
+        if self.residual_on is not None:
+            import gymnasium as gym
+
+            env = gym.make(self.env_id, **self.env_kwargs)
+            policy.attach(env)
+            env.close()
+        return policy
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every == 0:
+            self.evaluate()
+        return True
+
+    def evaluate(self) -> dict[str, Any]:
+        """Run the evaluation now; returns (and logs) its entry."""
+        from agents.benchmark import paired_difference
+
+        returns = self._rollout_returns(self._policy(), "policy")
+        bar_returns = self.baseline_returns[self.bar]
+        paired = paired_difference(returns, bar_returns)
+        wall = time.perf_counter() - self.started
+        entry = {
+            "timesteps": int(self.num_timesteps), "wall_time_s": round(wall, 2),
+            "mean_return": float(returns.mean()), "returns": returns.tolist(),
+            "difference_vs_bar": paired.mean, "difference_low": paired.low, "difference_high": paired.high,
+            "wins": paired.wins,
+        }
+        self.history.append(entry)
+        if self.first_beat is None and returns.mean() > bar_returns.mean():
+            self.first_beat = {"timesteps": entry["timesteps"], "wall_time_s": entry["wall_time_s"]}
+        self.logger.record("eval/mean_return", entry["mean_return"])
+        self.logger.record(f"eval/difference_vs_{self.bar}", paired.mean)
+        self.logger.record(f"eval/difference_vs_{self.bar}_low", paired.low)
+        new_best = returns.mean() > self.best_mean
+        if new_best:
+            self.best_mean = float(returns.mean())
+            self.on_new_best.on_step()
+        if self.verbose:
+            print(f"eval at {entry['timesteps']:,} steps ({wall:.0f} s): return {returns.mean():.2f}, "
+                  f"vs {self.bar} {paired.mean:+.2f} [{paired.low:+.2f}, {paired.high:+.2f}]"
+                  + (" (new best)" if new_best else ""), flush=True)
+        self.write()
+        return entry
+
+    def summary(self) -> dict[str, Any]:
+        """What the run's ``best/evaluations.json`` holds."""
+        return {
+            "env_id": self.env_id, "seeds": [self.seeds[0], self.seeds[-1]],
+            "baselines": {name: float(r.mean()) for name, r in self.baseline_returns.items()},
+            "bar": self.bar, "best_mean_return": None if not self.history else self.best_mean,
+            "first_beat_bar": self.first_beat, "evaluations": self.history,
+        }
+
+    def write(self) -> None:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(self.log_dir / EVALUATIONS_FILE, json.dumps(self.summary(), indent=1) + "\n")
