@@ -701,10 +701,11 @@ def train(
     save_policy(run, model, model.get_vec_normalize_env(), env_id, provenance, training_state=True,
                 extra_files=["config.yml"], residual_on=residual_on)
     elapsed = time.perf_counter() - start
+    evaluation.finish(model.num_timesteps)
     print(f"trained {algo} on {env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
           f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}")
     if evaluation.history:
-        beat = evaluation.first_beat
+        beat = evaluation.first_beat.get(evaluation.bar)
         print(f"best evaluation return {evaluation.best_mean:.2f} against {evaluation.bar} "
               f"{evaluation.baseline_returns[evaluation.bar].mean():.2f} on the evaluation seeds; "
               + (f"first beat it at {beat['timesteps']:,} steps, {beat['wall_time_s']:.0f} s after the command started"

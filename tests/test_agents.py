@@ -183,6 +183,7 @@ def _check_evaluations(run: Path) -> None:
     seeds = evaluation_seeds(2)
     assert log["seeds"] == [seeds[0], seeds[-1]] and log["bar"] == max(log["baselines"], key=log["baselines"].get)
     assert [entry["timesteps"] for entry in log["evaluations"]] == [256, 512]
+    assert log["training"]["timesteps"] == 512 and log["training"]["wall_time_s"] >= log["evaluations"][-1]["wall_time_s"]
     env = gym.make("TetherTetrahedron-v0")
     bar = rollout(make_controller(log["bar"], env), "TetherTetrahedron-v0", seeds).rewards.sum(axis=1)
     assert bar.mean() == pytest.approx(log["baselines"][log["bar"]], rel=1e-12)
@@ -194,6 +195,11 @@ def _check_evaluations(run: Path) -> None:
     returns = rollout(best, "TetherTetrahedron-v0", seeds).rewards.sum(axis=1)
     assert returns.mean() == pytest.approx(log["best_mean_return"], rel=1e-6)
     assert log["best_mean_return"] == max(entry["mean_return"] for entry in log["evaluations"])
+    for name, beat in log["first_beat"].items():
+        first = next(entry for entry in log["evaluations"] if entry["mean_return"] > log["baselines"][name])
+        assert beat == {"timesteps": first["timesteps"], "wall_time_s": first["wall_time_s"]}
+    assert set(log["first_beat"]) == {name for name, value in log["baselines"].items()
+                                      if any(entry["mean_return"] > value for entry in log["evaluations"])}
 
 
 def test_training_smoke_writes_everything(trained_run: Path) -> None:

@@ -1,0 +1,217 @@
+"""Choose the model to ship for each id from several training runs, and record every run's result:
+``python -m agents.ship RUN [RUN ...] --out agents/models``.
+
+Each ``RUN`` is a run directory of ``agents.train`` (its ``best/`` policy is the candidate), or a
+policy directory (a checkpoint, or a model shipped earlier). Every candidate is rolled out on the
+evaluation seeds (:func:`agents.selection.evaluation_seeds`, 1 000 000 up), the seeds training
+selected its ``best/`` on, alongside every scripted baseline. Per id and algorithm, the candidate
+with the highest mean return there is shipped: its policy files, ``config.yml`` and training log
+are copied to ``OUT/<id>/<algo>/`` under a fresh ``MANIFEST.sha256``. The held-out seeds the
+benchmark reports (10 000 up) play no part in the choice.
+
+Every candidate's result goes to ``OUT/training_runs.json`` and ``OUT/training_runs.md``: the
+training seed, steps, wall time, mean return on the evaluation seeds and its paired difference
+from the best scripted baseline there (95 % t interval), and the wall time at which its training
+first beat each baseline (from the run's ``best/evaluations.json``). Entries of earlier calls for
+other ids or algorithms are kept, so runs can be shipped id by id.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import shutil
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from agents.cli import int_at_least
+from agents.files import OutputError, atomic_write_text, prepare_output_dir
+from agents.safe_format import (
+    METADATA_FILE,
+    NORMALIZATION_FILE,
+    WEIGHTS_FILE,
+    PolicyFormatError,
+    is_policy_dir,
+    read_metadata,
+    write_manifest,
+)
+from agents.selection import EVALUATIONS_FILE, evaluation_seeds
+
+__all__ = ["evaluate_candidates", "main", "ship"]
+
+SHIPPED_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE)
+RUNS_TABLE = "training_runs"
+
+
+def _policy_dir(run: Path) -> Path:
+    for directory in (run / "best", run):
+        if is_policy_dir(directory):
+            return directory
+    raise FileNotFoundError(f"{run} holds no policy (neither {run}/best/{METADATA_FILE} nor {run}/{METADATA_FILE})")
+
+
+def _training_log(run: Path, policy_dir: Path) -> dict[str, Any] | None:
+    for path in (policy_dir / EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE):
+        if path.is_file():
+            return json.loads(path.read_text(encoding="utf-8"))
+    return None
+
+
+def _config(run: Path, policy_dir: Path) -> dict[str, Any]:
+    for path in (policy_dir / "config.yml", run / "config.yml"):
+        if path.is_file():
+            return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    return {}
+
+
+def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[dict[str, Any]]:
+    """Roll every candidate of ``runs`` and every scripted baseline of its id out on the
+    evaluation seeds; returns one record (plain JSON data) per run."""
+    import gymnasium as gym
+
+    from agents.baselines import BASELINES, make_baseline
+    from agents.benchmark import best_eligible_baseline, paired_difference
+    from agents.evaluate import rollout
+    from agents.policies import TrainedPolicy
+
+    seeds = evaluation_seeds(episodes)
+    baselines: dict[str, dict[str, np.ndarray]] = {}
+    candidates = []
+    for run in map(Path, runs):
+        policy_dir = _policy_dir(run)
+        metadata = read_metadata(policy_dir)
+        env_id = metadata["env_id"]
+        if env_id is None:
+            raise PolicyFormatError(f"{policy_dir}/{METADATA_FILE} names no env id: it cannot be shipped for one")
+        env = gym.make(env_id)
+        if env_id not in baselines:
+            baselines[env_id] = {name: rollout(make_baseline(name, env), env_id, seeds).rewards.sum(axis=1)
+                                 for name in BASELINES}
+        policy = TrainedPolicy(policy_dir)
+        policy.attach(env)
+        returns = rollout(policy, env_id, seeds).rewards.sum(axis=1)
+        env.close()
+        bar, _ = best_eligible_baseline({name: float(r.mean()) for name, r in baselines[env_id].items()})
+        paired = paired_difference(returns, baselines[env_id][bar])
+        config, log = _config(run, policy_dir), _training_log(run, policy_dir)
+        training = (log or {}).get("training") or {}
+        candidates.append({
+            "env_id": env_id, "algo": metadata["algo"], "run": str(run), "policy": str(policy_dir),
+            "seed": config.get("seed"), "command": config.get("command"), "timesteps": metadata["num_timesteps"],
+            "wall_time_s": training.get("wall_time_s"), "residual_on": metadata.get("residual_on"),
+            "mean_return": float(returns.mean()), "bar": bar, "bar_mean_return": float(baselines[env_id][bar].mean()),
+            "difference": paired.mean, "difference_low": paired.low, "difference_high": paired.high,
+            "baselines": {name: float(r.mean()) for name, r in baselines[env_id].items()},
+            "first_beat": (log or {}).get("first_beat"), "seeds": [seeds[0], seeds[-1]],
+        })
+    return candidates
+
+
+def _markdown(entries: list[dict[str, Any]]) -> str:
+    lines = [
+        "# Training runs and the shipped models",
+        "",
+        ("Every training run considered for shipping, evaluated on the evaluation seeds "
+        f"({entries[0]['seeds'][0]}..{entries[0]['seeds'][1]}, never the benchmark's held-out seeds). "
+        "Δ: paired difference of the mean return from the id's best scripted baseline on those seeds (95 % t "
+        "interval). Beat: wall time from the start of the training command to the first evaluation whose "
+        "mean return beat that baseline's (— never). Made by `python -m agents.ship`."),
+        "",
+        "| id | algo | seed | steps | wall time | mean return | best baseline | Δ vs best baseline | beat velocity feedback | beat best baseline | shipped |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def beat(entry: dict[str, Any], name: str) -> str:
+        found = (entry.get("first_beat") or {}).get(name)
+        return "—" if not found else f"{found['wall_time_s'] / 60:.1f} min ({found['timesteps'] / 1e6:.2f} M)"
+
+    for entry in sorted(entries, key=lambda e: (e["env_id"], e["algo"], str(e["seed"]))):
+        wall = "?" if entry["wall_time_s"] is None else f"{entry['wall_time_s'] / 60:.1f} min"
+        lines.append(
+            f"| {entry['env_id']} | {entry['algo']}{' (residual on ' + entry['residual_on'] + ')' if entry['residual_on'] else ''} "
+            f"| {entry['seed']} | {entry['timesteps'] / 1e6:.2f} M | {wall} | {entry['mean_return']:.2f} "
+            f"| {entry['bar']} {entry['bar_mean_return']:.2f} "
+            f"| {entry['difference']:+.2f} [{entry['difference_low']:+.2f}, {entry['difference_high']:+.2f}] "
+            f"| {beat(entry, 'velocity_feedback')} | {beat(entry, entry['bar'])} | {'**yes**' if entry['shipped'] else ''} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def ship(runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force: bool = False,
+         command: str | None = None) -> list[dict[str, Any]]:
+    """Evaluate ``runs``, ship the best per id and algorithm into ``out`` (see the module
+    docstring) and return every candidate's record (with ``shipped``).
+
+    An existing shipped model is replaced only with ``force``; to keep it in the running, pass
+    its directory among ``runs`` (every candidate is evaluated before anything is replaced)."""
+    out = prepare_output_dir(out, argument="--out")
+    candidates = evaluate_candidates(runs, episodes)
+    chosen: dict[tuple[str, str], dict[str, Any]] = {}
+    for candidate in candidates:
+        key = (candidate["env_id"], candidate["algo"])
+        if key not in chosen or candidate["mean_return"] > chosen[key]["mean_return"]:
+            chosen[key] = candidate
+    for (env_id, algo), candidate in chosen.items():
+        target = out / env_id / algo
+        if (target / METADATA_FILE).exists() and not force and Path(candidate["policy"]).resolve() != target.resolve():
+            raise OutputError(f"{target} already holds a shipped model: pass --force to replace it")
+    for candidate in candidates:
+        candidate["shipped"] = chosen[(candidate["env_id"], candidate["algo"])] is candidate
+    for (env_id, algo), candidate in chosen.items():
+        target, source = out / env_id / algo, Path(candidate["policy"])
+        if source.resolve() == target.resolve():
+            continue
+        staging = out / env_id / f".{algo}.staging"
+        shutil.rmtree(staging, ignore_errors=True)
+        staging.mkdir(parents=True)
+        for name in SHIPPED_FILES:
+            if (source / name).is_file():
+                shutil.copy2(source / name, staging / name)
+        run = Path(candidate["run"])
+        for name, origin in (("config.yml", run / "config.yml"), (EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE)):
+            if origin.is_file():
+                shutil.copy2(origin, staging / name)
+        write_manifest(staging, [p.name for p in staging.iterdir()])
+        if target.exists():
+            shutil.rmtree(target)
+        staging.rename(target)
+    table = out / f"{RUNS_TABLE}.json"
+    earlier = json.loads(table.read_text(encoding="utf-8"))["runs"] if table.is_file() else []
+    replaced = {(c["env_id"], c["algo"]) for c in candidates}
+    entries = [e for e in earlier if (e["env_id"], e["algo"]) not in replaced] + candidates
+    atomic_write_text(table, json.dumps({"command": command, "runs": entries}, indent=1) + "\n")
+    atomic_write_text(out / f"{RUNS_TABLE}.md", _markdown(entries))
+    for candidate in candidates:
+        print(f"{candidate['env_id']} {candidate['algo']} seed {candidate['seed']}: {candidate['mean_return']:.2f} "
+              f"(vs {candidate['bar']} {candidate['difference']:+.2f} [{candidate['difference_low']:+.2f}, "
+              f"{candidate['difference_high']:+.2f}]){'  <- shipped' if candidate['shipped'] else ''}")
+    return candidates
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m agents.ship", description=__doc__.split("\n\n")[0])
+    parser.add_argument("runs", nargs="+", metavar="RUN", help="run directories of agents.train, or policy directories")
+    parser.add_argument("--out", default="agents/models", help="where shipped models go (default agents/models)")
+    parser.add_argument("--episodes", type=int_at_least(2), default=64, help="evaluation episodes (default 64)")
+    parser.add_argument("--force", action="store_true", help="replace shipped models")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    arguments = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(arguments)
+    return ship(args.runs, args.out, episodes=args.episodes, force=args.force,
+                command=shlex.join(["python", "-m", "agents.ship", *arguments]))
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except (OutputError, PolicyFormatError, FileNotFoundError, ValueError) as error:
+        sys.exit(f"agents.ship: error: {error}")

@@ -1,0 +1,73 @@
+"""agents.ship: the shipped model is the best candidate on the evaluation seeds, every run is recorded."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from agents.evaluate import rollout
+from agents.files import OutputError
+from agents.policies import TrainedPolicy
+from agents.safe_format import verify_manifest
+from agents.selection import evaluation_seeds
+from agents.ship import main, ship
+from agents.train import train
+
+ENV = "TetherTetrahedron-v0"
+TINY = dict(timesteps=256, num_envs=4, overrides={"n_steps": 64, "batch_size": 64, "n_epochs": 1,
+                                                  "policy_kwargs": {"log_std_init": 0.0}},
+            eval_freq=128, eval_episodes=2, checkpoint_freq=10_000, progress_bar=False)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    out = tmp_path_factory.mktemp("runs")
+    return [train("ppo", ENV, seed=seed, out=out, **TINY) for seed in (0, 1, 2)]
+
+
+def _mean_on_evaluation_seeds(policy_dir: Path, episodes: int) -> float:
+    policy = TrainedPolicy(policy_dir)
+    return float(rollout(policy, ENV, evaluation_seeds(episodes)).rewards.sum(axis=1).mean())
+
+
+def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_path: Path) -> None:
+    records = ship(runs, tmp_path / "models", episodes=4)
+    means = [_mean_on_evaluation_seeds(run / "best", 4) for run in runs]
+    assert [r["mean_return"] for r in records] == pytest.approx(means, rel=1e-9)
+    best = max(range(3), key=lambda i: means[i])
+    assert [r["shipped"] for r in records] == [i == best for i in range(3)]
+    shipped = tmp_path / "models" / ENV / "ppo"
+    verify_manifest(shipped)
+    assert sorted(p.name for p in shipped.iterdir()) == sorted(
+        ["policy.json", "policy.safetensors", "normalization.json", "config.yml", "evaluations.json", "MANIFEST.sha256"])
+    assert _mean_on_evaluation_seeds(shipped, 4) == pytest.approx(means[best], rel=1e-12)
+    table = json.loads((tmp_path / "models" / "training_runs.json").read_text())
+    assert sorted(entry["seed"] for entry in table["runs"]) == [0, 1, 2]
+    bar = records[0]["bar"]
+    assert bar == max(records[0]["baselines"], key=records[0]["baselines"].get)
+    for record, run in zip(records, runs):
+        assert record["difference"] == pytest.approx(record["mean_return"] - record["bar_mean_return"], abs=1e-9)
+        assert record["wall_time_s"] > 0 and record["timesteps"] == TrainedPolicy(run / "best").metadata["num_timesteps"]
+    markdown = (tmp_path / "models" / "training_runs.md").read_text()
+    assert markdown.count(f"| {ENV} | ppo |") == 3 and markdown.count("**yes**") == 1
+
+
+def test_ship_refuses_to_replace_a_shipped_model_without_force(runs: list[Path], tmp_path: Path) -> None:
+    out = tmp_path / "models"
+    ship(runs[:1], out, episodes=2)
+    before = (out / ENV / "ppo" / "policy.safetensors").read_bytes()
+    with pytest.raises(OutputError, match="--force"):
+        ship(runs[1:2], out, episodes=2)
+    assert (out / ENV / "ppo" / "policy.safetensors").read_bytes() == before
+    # The shipped model itself can stand again, beside a new run; the table keeps one row per candidate.
+    ship([out / ENV / "ppo", runs[1]], out, episodes=2, force=True)
+    assert len(json.loads((out / "training_runs.json").read_text())["runs"]) == 2
+
+
+def test_ship_command_errors_are_clear(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="holds no policy"):
+        main([str(tmp_path), "--out", str(tmp_path / "models")])
+    with pytest.raises(SystemExit):
+        main([str(tmp_path), "--episodes", "1"])
