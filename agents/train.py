@@ -48,6 +48,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -92,7 +93,8 @@ __all__ = ["ACTIVATIONS", "ALGORITHMS", "HyperparameterError", "load_hyperparame
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 #: Keys of a hyperparameter entry that are not passed to the algorithm's constructor.
-RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs", "curriculum", "residual_on")
+RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs", "curriculum", "residual_on",
+            "action_noise_std")
 #: Constructor arguments that agents.train sets itself, and where the user sets them instead.
 CONTROLLED_KEYS = {
     "env": "the env comes from --env", "seed": "use --seed", "device": "training runs on the CPU",
@@ -248,7 +250,8 @@ def _check_range(key: str, value: Any, where: str) -> None:
         return
     positive = ("n_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "buffer_size", "learning_rate",
                 "clip_range", "train_freq", "policy_delay", "target_update_interval")
-    non_negative = ("learning_starts", "vf_coef", "max_grad_norm", "target_policy_noise", "target_noise_clip")
+    non_negative = ("learning_starts", "vf_coef", "max_grad_norm", "target_policy_noise", "target_noise_clip",
+                    "action_noise_std")
     unit = ("gamma", "gae_lambda", "tau")
     if key in positive and not value > 0:
         raise HyperparameterError(f"{where}: {key!r} must be positive; got {value!r}")
@@ -290,6 +293,11 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
             checked[key] = _check_value(key, value, dict | None, where)
         elif key == "curriculum":
             checked[key] = _check_curriculum(value, where)
+        elif key == "action_noise_std":
+            if algo == "ppo":
+                raise HyperparameterError(f"{where}: 'action_noise_std' is for sac and td3; PPO explores with "
+                                          "its own policy noise (policy_kwargs.log_std_init)")
+            checked[key] = _check_value(key, value, float, where)
         elif key == "residual_on":
             try:
                 checked[key] = check_residual_on(value, f"{where}: 'residual_on'")
@@ -418,6 +426,38 @@ def _algorithm_kwargs(hyperparams: Mapping[str, Any]) -> dict[str, Any]:
     if policy_kwargs:
         kwargs["policy_kwargs"] = policy_kwargs
     return kwargs
+
+
+def _action_noise(hyperparams: Mapping[str, Any], venv: VecEnv) -> dict[str, Any]:
+    """``action_noise`` for SAC/TD3 from ``action_noise_std`` (Gaussian, that std in the [-1, 1]
+    action units, the same on every action component), or nothing."""
+    std = hyperparams.get("action_noise_std")
+    if not std:
+        return {}
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    size = int(np.prod(venv.action_space.shape))
+    return {"action_noise": NormalActionNoise(np.zeros(size), np.full(size, float(std)))}
+
+
+def start_at_the_baseline(model: BaseAlgorithm) -> None:
+    """Zero the last layer of ``model``'s actor, so that a residual policy's deterministic action
+    is exactly 0 at the start of training: the closed loop starts as the baseline's. (SB3 already
+    scales PPO's last layer by 0.01, but SAC and TD3 start with full-size random outputs, a
+    random residual thrust of about a third of full thrust.)"""
+    import torch
+
+    if hasattr(model.policy, "action_net"):  # PPO
+        layers = [model.policy.action_net]
+    else:  # SAC (a Linear mu) or TD3 (mu ending in Linear, Tanh)
+        mu = model.actor.mu
+        layers = [mu if isinstance(mu, torch.nn.Linear) else [m for m in mu if isinstance(m, torch.nn.Linear)][-1]]
+    with torch.no_grad():
+        for layer in layers:
+            layer.weight.zero_()
+            layer.bias.zero_()
+    if getattr(model, "actor_target", None) is not None:
+        model.actor_target.load_state_dict(model.actor.state_dict())
 
 
 def make_training_env(
@@ -736,8 +776,10 @@ def _build_model(
         return model
     model = cls(
         hyperparams.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu", verbose=verbose,
-        tensorboard_log=str(run / "tensorboard"), **_algorithm_kwargs(hyperparams),
+        tensorboard_log=str(run / "tensorboard"), **_algorithm_kwargs(hyperparams), **_action_noise(hyperparams, venv),
     )
+    if hyperparams.get("residual_on") is not None and resume_kind is None:
+        start_at_the_baseline(model)
     if resume_kind == "safe":
         assert resume_path is not None
         load_training_state(model, resume_path, venv if isinstance(venv, VecNormalize) else None)

@@ -59,3 +59,34 @@ def test_a_residual_policy_records_and_applies_its_baseline(residual_run: Path) 
 def test_residual_on_must_name_a_baseline() -> None:
     with pytest.raises(HyperparameterError, match="residual_on"):
         validate_hyperparameters("ppo", {"n_timesteps": 10, "residual_on": "oracle"})
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
+def test_a_residual_policy_starts_exactly_at_its_baseline(algo: str) -> None:
+    """The actor's last layer is zeroed, so the closed loop starts as the baseline's, for every
+    algorithm (SAC and TD3 otherwise start with random corrections of about a third of full thrust)."""
+    from agents.safe_format import ALGORITHMS
+    from agents.train import start_at_the_baseline
+
+    venv = ResidualVecEnv(make_sb3_vec_env("TetherTriangle-v0", 2, seed=0), "lqr")
+    model = ALGORITHMS[algo]("MlpPolicy", venv, seed=0, device="cpu")
+    observations = np.random.default_rng(1).normal(size=(16, *venv.observation_space.shape)).astype(np.float32)
+    assert np.abs(model.predict(observations, deterministic=True)[0]).max() > 1e-4  # not zero by itself
+    start_at_the_baseline(model)
+    assert not np.any(model.predict(observations, deterministic=True)[0])
+    if algo == "td3":
+        import torch
+
+        with torch.no_grad():
+            assert not torch.any(model.actor_target(torch.as_tensor(observations)))
+
+
+def test_action_noise_is_for_off_policy_algorithms() -> None:
+    entry = {"n_timesteps": 100, "action_noise_std": 0.1}
+    assert validate_hyperparameters("td3", entry)["action_noise_std"] == 0.1
+    with pytest.raises(HyperparameterError, match="sac and td3"):
+        validate_hyperparameters("ppo", entry)
+    with pytest.raises(HyperparameterError, match="action_noise_std.*>= 0"):
+        validate_hyperparameters("sac", {"n_timesteps": 100, "action_noise_std": -0.1})
+    with pytest.raises(HyperparameterError, match="action_noise_std"):
+        validate_hyperparameters("sac", {"n_timesteps": 100, "action_noise_std": "0.1"})
