@@ -491,8 +491,9 @@ def sha256_hex(data: bytes) -> str:
 
 
 def write_manifest(directory: Path, names: Iterable[str]) -> None:
-    """Write ``MANIFEST.sha256`` (``sha256sum`` format, sorted) for ``names`` in ``directory``."""
-    lines = [f"{sha256_hex((directory / name).read_bytes())}  {name}" for name in sorted(set(names))]
+    """Write ``MANIFEST.sha256`` (``sha256sum`` format, sorted) for ``names`` in ``directory``
+    (the manifest itself is never listed: its own hash cannot be in it)."""
+    lines = [f"{sha256_hex((directory / name).read_bytes())}  {name}" for name in sorted(set(names) - {MANIFEST_FILE})]
     atomic_write_text(directory / MANIFEST_FILE, "\n".join(lines) + "\n")
 
 

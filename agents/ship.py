@@ -31,7 +31,7 @@ import numpy as np
 import yaml
 
 from agents.cli import int_at_least
-from agents.files import OutputError, atomic_write_text, prepare_output_dir
+from agents.files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
 from agents.safe_format import (
     METADATA_FILE,
     NORMALIZATION_FILE,
@@ -113,6 +113,42 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
     return candidates
 
 
+def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) -> None:
+    """``reference_actions.safetensors``: observations (along the policy's own trajectories, seeds
+    0-7, and drawn around its normalisation statistics) and the network's deterministic actions on
+    them, so that a test can tell, on any machine, that the shipped files still act as shipped."""
+    import gymnasium as gym
+    import torch
+
+    from agents.convert import REFERENCE_FILE, _safe_actions
+    from agents.policies import TrainedPolicy
+    from agents.safe_format import reference_observations, tensor_bytes
+
+    policy = TrainedPolicy(directory)
+
+    def trajectory_observations(number: int) -> np.ndarray:
+        envs = gym.make_vec(env_id, num_envs=8)
+        policy.attach(envs)
+        try:
+            observation, _ = envs.reset(seed=list(range(8)))
+            rows = [observation]
+            while sum(len(r) for r in rows) < number:
+                observation, *_ = envs.step(policy.predict(observation)[0])
+                rows.append(observation)
+        finally:
+            envs.close()
+        return np.concatenate(rows)[:number]
+
+    statistics = policy.normalizer
+    mean, var = (statistics.obs_mean, statistics.obs_var) if statistics is not None else (0.0, 1.0)
+    observations = reference_observations(count, policy.policy.observation_space, mean, var,
+                                           np.random.default_rng(0), trajectory_observations)
+    actions = _safe_actions(directory, observations)
+    atomic_write_bytes(directory / REFERENCE_FILE, tensor_bytes(
+        {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(actions))},
+        metadata={"pipeline": "normalization.json, then the policy's predict(deterministic=True)"}))
+
+
 def _markdown(entries: list[dict[str, Any]]) -> str:
     lines = [
         "# Training runs and the shipped models",
@@ -140,6 +176,12 @@ def _markdown(entries: list[dict[str, Any]]) -> str:
             f"| {entry['difference']:+.2f} [{entry['difference_low']:+.2f}, {entry['difference_high']:+.2f}] "
             f"| {beat(entry, 'velocity_feedback')} | {beat(entry, entry['bar'])} | {'**yes**' if entry['shipped'] else ''} |"
         )
+    lines += ["", "## Shipped models (the command that reproduces each)", "",
+              "| id | algo | seed | steps | wall time | command |", "|---|---|---|---|---|---|"]
+    for entry in sorted((e for e in entries if e["shipped"]), key=lambda e: (e["env_id"], e["algo"])):
+        wall = "?" if entry["wall_time_s"] is None else f"{entry['wall_time_s'] / 60:.1f} min"
+        lines.append(f"| {entry['env_id']} | {entry['algo']} | {entry['seed']} | {entry['timesteps'] / 1e6:.2f} M "
+                     f"| {wall} | `{entry['command']}` |")
     return "\n".join(lines) + "\n"
 
 
@@ -177,7 +219,13 @@ def ship(runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force:
         for name, origin in (("config.yml", run / "config.yml"), (EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE)):
             if origin.is_file():
                 shutil.copy2(origin, staging / name)
-        write_manifest(staging, [p.name for p in staging.iterdir()])
+        try:
+            write_manifest(staging, [p.name for p in staging.iterdir()])  # loading inside agents/models needs it
+            _write_reference_actions(staging, env_id)
+            write_manifest(staging, [p.name for p in staging.iterdir()])
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
         if target.exists():
             shutil.rmtree(target)
         staging.rename(target)

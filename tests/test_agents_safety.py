@@ -45,6 +45,7 @@ from agents.safe_format import (
     save_policy,
 )
 from agents.train import HyperparameterError, make_training_env, train
+from tether_gym import ENV_IDS
 
 ENV = "TetherTetrahedron-v0"
 SHORT = {"max_episode_steps": 20}
@@ -286,20 +287,26 @@ def test_converter_output_matches_sb3_load(sb3_run: Path, tmp_path: Path) -> Non
     TrainedPolicy(target)
 
 
-@pytest.mark.parametrize("env_id", ["TetherTetrahedron-v0", "TetherSpinningTriangle-v0"])
-def test_shipped_models_give_the_original_sb3_actions(env_id: str) -> None:
-    """The observations and actions recorded from the pickle-based originals (PPO.load +
-    VecNormalize) when they were converted, against the shipped safe policy.
+SHIPPED = [(env_id, name) for env_id in ENV_IDS for name in shipped_models(env_id)]
+
+
+@pytest.mark.parametrize(("env_id", "name"), SHIPPED)
+def test_shipped_models_give_their_reference_actions(env_id: str, name: str) -> None:
+    """The observations and actions recorded when the model was shipped (by agents.ship, or from
+    the pickle-based original, PPO.load + VecNormalize, by agents.convert), against the shipped
+    safe policy.
 
     Recorded on another machine, the actions may differ in the last bit where torch picks other
     vector kernels, so the comparison allows 1e-6 of full thrust; a wrong weight, layer order or
     normaliser moves them by orders of magnitude more.  Within one process the safe loader is
     checked bit for bit against PPO.load (test_converter_output_matches_sb3_load)."""
-    directory = shipped_models(env_id)["ppo"]
+    directory = shipped_models(env_id)[name]
     reference = load_tensors((directory / REFERENCE_FILE).read_bytes(), directory / REFERENCE_FILE)
     observations, expected = reference["observations"].numpy(), reference["actions"].numpy()
     assert observations.shape[0] >= 512 and np.isfinite(observations).all()
-    actions = make_controller("ppo", gym.make_vec(env_id, num_envs=1)).predict(observations)[0]
+    policy = TrainedPolicy(directory)
+    normalized = policy.normalizer.normalize_obs(observations).astype(np.float32) if policy.normalizer else observations
+    actions = policy.policy.predict(normalized, deterministic=True)[0]  # the network's part (residual policies too)
     assert actions.dtype == expected.dtype
     np.testing.assert_allclose(actions, expected, rtol=0, atol=1e-6)
     assert not list(directory.glob("*.zip")) and not list(directory.glob("*.pkl"))

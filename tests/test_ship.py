@@ -5,15 +5,17 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import gymnasium as gym
 import pytest
 
 from agents.evaluate import rollout
 from agents.files import OutputError
-from agents.policies import TrainedPolicy
+from agents.policies import TrainedPolicy, make_controller, shipped_models
 from agents.safe_format import verify_manifest
 from agents.selection import evaluation_seeds
 from agents.ship import main, ship
 from agents.train import train
+from tether_gym import ENV_IDS
 
 ENV = "TetherTetrahedron-v0"
 TINY = dict(timesteps=256, num_envs=4, overrides={"n_steps": 64, "batch_size": 64, "n_epochs": 1,
@@ -41,7 +43,8 @@ def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_p
     shipped = tmp_path / "models" / ENV / "ppo"
     verify_manifest(shipped)
     assert sorted(p.name for p in shipped.iterdir()) == sorted(
-        ["policy.json", "policy.safetensors", "normalization.json", "config.yml", "evaluations.json", "MANIFEST.sha256"])
+        ["policy.json", "policy.safetensors", "normalization.json", "config.yml", "evaluations.json",
+         "reference_actions.safetensors", "MANIFEST.sha256"])
     assert _mean_on_evaluation_seeds(shipped, 4) == pytest.approx(means[best], rel=1e-12)
     table = json.loads((tmp_path / "models" / "training_runs.json").read_text())
     assert sorted(entry["seed"] for entry in table["runs"]) == [0, 1, 2]
@@ -51,7 +54,7 @@ def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_p
         assert record["difference"] == pytest.approx(record["mean_return"] - record["bar_mean_return"], abs=1e-9)
         assert record["wall_time_s"] > 0 and record["timesteps"] == TrainedPolicy(run / "best").metadata["num_timesteps"]
     markdown = (tmp_path / "models" / "training_runs.md").read_text()
-    assert markdown.count(f"| {ENV} | ppo |") == 3 and markdown.count("**yes**") == 1
+    assert markdown.count(f"| {ENV} | ppo |") == 3 + 1 and markdown.count("**yes**") == 1  # 3 runs, 1 shipped row
 
 
 def test_ship_refuses_to_replace_a_shipped_model_without_force(runs: list[Path], tmp_path: Path) -> None:
@@ -71,3 +74,16 @@ def test_ship_command_errors_are_clear(tmp_path: Path) -> None:
         main([str(tmp_path), "--out", str(tmp_path / "models")])
     with pytest.raises(SystemExit):
         main([str(tmp_path), "--episodes", "1"])
+
+
+@pytest.mark.parametrize("env_id", list(ENV_IDS))
+def test_every_id_ships_a_learned_model_that_beats_passive(env_id: str) -> None:
+    models = shipped_models(env_id)
+    assert models, f"{env_id} has no shipped learned controller in agents/models"
+    env = gym.make(env_id)
+    seeds = list(range(10_000, 10_008))
+    passive = rollout(make_controller("passive", env), env_id, seeds).rewards.sum(axis=1)
+    for name in models:
+        verify_manifest(models[name])  # every file listed, each as shipped
+        returns = rollout(make_controller(name, env), env_id, seeds).rewards.sum(axis=1)
+        assert returns.mean() > passive.mean(), (name, returns.mean(), passive.mean())
