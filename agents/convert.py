@@ -23,6 +23,7 @@ import argparse
 import shutil
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -71,9 +72,10 @@ def _safe_actions(directory: Path, observations: np.ndarray) -> np.ndarray:
     return loaded.policy.predict(obs, deterministic=True)[0]
 
 
-def _rollout(model: Any, normalizer: Any, env_id: str, env_kwargs: dict[str, Any] | None) -> Any:
-    """A function ``n -> (n, obs_dim)`` env observations along the original policy's trajectories
-    (8 episodes in parallel, seeds 0-7)."""
+def trajectory_observations(act: Callable[[np.ndarray], np.ndarray], env_id: str,
+                            env_kwargs: dict[str, Any] | None = None) -> Callable[[int], np.ndarray]:
+    """A function ``n -> (n, obs_dim)`` env observations along the trajectories of ``act`` (a batch
+    of observations -> a batch of actions), 8 episodes in parallel, seeds 0-7."""
     import gymnasium as gym
 
     import tether_gym  # noqa: F401 - registers the ids
@@ -84,7 +86,7 @@ def _rollout(model: Any, normalizer: Any, env_id: str, env_kwargs: dict[str, Any
             obs, _ = envs.reset(seed=list(range(8)))
             rows = [obs]
             while sum(len(r) for r in rows) < count:
-                obs, *_ = envs.step(_original_actions(model, normalizer, obs))
+                obs, *_ = envs.step(act(obs))
                 rows.append(obs)
         finally:
             envs.close()
@@ -146,7 +148,8 @@ def convert(
     }
     rng = np.random.default_rng(0)
     env_kwargs = (config.get("hyperparams") or {}).get("env_kwargs")
-    rollout = _rollout(model, normalizer, env_id, env_kwargs) if env_id is not None else None
+    rollout = (trajectory_observations(lambda obs: _original_actions(model, normalizer, obs), env_id, env_kwargs)
+               if env_id is not None else None)
     mean, var = (normalizer.obs_rms.mean, normalizer.obs_rms.var) if normalizer is not None else (0.0, 1.0)
     observations = reference_observations(check_observations, model.observation_space, mean, var, rng, rollout)
     expected = _original_actions(model, normalizer, observations)

@@ -120,29 +120,17 @@ def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) ->
     import gymnasium as gym
     import torch
 
-    from agents.convert import REFERENCE_FILE, _safe_actions
+    from agents.convert import REFERENCE_FILE, _safe_actions, trajectory_observations
     from agents.policies import TrainedPolicy
     from agents.safe_format import reference_observations, tensor_bytes
 
     policy = TrainedPolicy(directory)
-
-    def trajectory_observations(number: int) -> np.ndarray:
-        envs = gym.make_vec(env_id, num_envs=8)
-        policy.attach(envs)
-        try:
-            observation, _ = envs.reset(seed=list(range(8)))
-            rows = [observation]
-            while sum(len(r) for r in rows) < number:
-                observation, *_ = envs.step(policy.predict(observation)[0])
-                rows.append(observation)
-        finally:
-            envs.close()
-        return np.concatenate(rows)[:number]
-
+    policy.attach(gym.make(env_id))
     statistics = policy.normalizer
     mean, var = (statistics.obs_mean, statistics.obs_var) if statistics is not None else (0.0, 1.0)
     observations = reference_observations(count, policy.policy.observation_space, mean, var,
-                                           np.random.default_rng(0), trajectory_observations)
+                                           np.random.default_rng(0),
+                                           trajectory_observations(lambda obs: policy.predict(obs)[0], env_id))
     actions = _safe_actions(directory, observations)
     atomic_write_bytes(directory / REFERENCE_FILE, tensor_bytes(
         {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(actions))},
