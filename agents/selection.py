@@ -20,7 +20,7 @@ baselines are compared episode by episode:
   these seeds, never on the held-out ones the benchmark reports);
 * it records the wall time, counted from the start of the training command, and the step count of
   the first evaluation whose mean return beats each baseline's: the "time to beat the best
-  baseline" (the bar's), and how far short of it the run got in time to beat the others.
+  baseline" is the bar's entry.
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.files import atomic_write_text
 
-__all__ = ["EVALUATIONS_FILE", "EVAL_SEEDS_START", "SeededEvaluation", "evaluation_seeds"]
+__all__ = ["EVALUATIONS_FILE", "EVAL_SEEDS_START", "SeededEvaluation", "baseline_returns", "episode_returns",
+           "evaluation_seeds"]
 
 #: The evaluation log in the run's ``best/`` directory.
 EVALUATIONS_FILE = "evaluations.json"
@@ -48,6 +49,29 @@ EVAL_SEEDS_START = 1_000_000
 def evaluation_seeds(episodes: int) -> list[int]:
     """The seeds of the ``episodes`` evaluation episodes (the same for every run)."""
     return list(range(EVAL_SEEDS_START, EVAL_SEEDS_START + int(episodes)))
+
+
+def episode_returns(controller: Any, env_id: str, seeds: list[int], env_kwargs: dict[str, Any] | None = None) -> np.ndarray:
+    """(E,) undiscounted return of ``controller`` in one episode per seed (``agents.evaluate.rollout``)."""
+    from agents.evaluate import rollout
+
+    return rollout(controller, env_id, seeds, env_kwargs=env_kwargs).rewards.sum(axis=1)
+
+
+def baseline_returns(env_id: str, seeds: list[int],
+                     env_kwargs: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], str]:
+    """Every scripted baseline's (E,) returns on ``seeds``, and the bar: the best eligible one
+    (:func:`agents.benchmark.best_eligible_baseline`)."""
+    import gymnasium as gym
+
+    from agents.baselines import BASELINES, make_baseline
+    from agents.benchmark import best_eligible_baseline
+
+    env = gym.make(env_id, **dict(env_kwargs or {}))
+    returns = {name: episode_returns(make_baseline(name, env), env_id, seeds, env_kwargs) for name in BASELINES}
+    env.close()
+    bar, _ = best_eligible_baseline({name: float(r.mean()) for name, r in returns.items()})
+    return returns, bar
 
 
 class SeededEvaluation(BaseCallback):
@@ -79,34 +103,24 @@ class SeededEvaluation(BaseCallback):
         self.history: list[dict[str, Any]] = []
         #: For each baseline, the first evaluation whose mean return beat its mean: {timesteps, wall_time_s}.
         self.first_beat: dict[str, dict[str, Any]] = {}
+        self.policy: Any = None
         #: Set by :meth:`finish`: the command's wall time and step count at the end of training.
         self.finished: dict[str, Any] | None = None
 
     def _init_callback(self) -> None:
         self.on_new_best.init_callback(self.model)
 
-    def _rollout_returns(self, controller: Any, name: str) -> np.ndarray:
-        from agents.evaluate import rollout
-
-        record = rollout(controller, self.env_id, self.seeds, name=name, env_kwargs=self.env_kwargs)
-        return record.rewards.sum(axis=1)
-
     def _on_training_start(self) -> None:
-        import gymnasium as gym
-
-        from agents.baselines import BASELINES, make_baseline
-        from agents.benchmark import best_eligible_baseline
-
-        env = gym.make(self.env_id, **self.env_kwargs)
-        for name in BASELINES:
-            self.baseline_returns[name] = self._rollout_returns(make_baseline(name, env), name)
-        env.close()
-        self.bar, _ = best_eligible_baseline({name: float(r.mean()) for name, r in self.baseline_returns.items()})
+        self.baseline_returns, self.bar = baseline_returns(self.env_id, self.seeds, self.env_kwargs)
+        self.policy = self._policy()
         if self.verbose:
             means = ", ".join(f"{name} {r.mean():.2f}" for name, r in self.baseline_returns.items())
             print(f"evaluation seeds {self.seeds[0]}..{self.seeds[-1]}: {means}; the bar is {self.bar}", flush=True)
 
     def _policy(self) -> Any:
+        """The model's policy as a controller, built once: it holds the model's own policy and
+        normaliser objects, so it acts with their weights and statistics of the moment (and a
+        residual policy's baseline is designed once, not at every evaluation)."""
         from agents.policies import TrainedPolicy
 
         policy = TrainedPolicy.from_parts(self.model.policy, self.model.get_vec_normalize_env(), self.env_id,
@@ -128,7 +142,7 @@ class SeededEvaluation(BaseCallback):
         """Run the evaluation now; returns (and logs) its entry."""
         from agents.benchmark import paired_difference
 
-        returns = self._rollout_returns(self._policy(), "policy")
+        returns = episode_returns(self.policy, self.env_id, self.seeds, self.env_kwargs)
         bar_returns = self.baseline_returns[self.bar]
         paired = paired_difference(returns, bar_returns)
         wall = time.perf_counter() - self.started

@@ -41,7 +41,7 @@ from agents.safe_format import (
     read_metadata,
     write_manifest,
 )
-from agents.selection import EVALUATIONS_FILE, evaluation_seeds
+from agents.selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
 
 __all__ = ["evaluate_candidates", "main", "ship"]
 
@@ -75,13 +75,11 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
     evaluation seeds; returns one record (plain JSON data) per run."""
     import gymnasium as gym
 
-    from agents.baselines import BASELINES, make_baseline
-    from agents.benchmark import best_eligible_baseline, paired_difference
-    from agents.evaluate import rollout
+    from agents.benchmark import paired_difference
     from agents.policies import TrainedPolicy
 
     seeds = evaluation_seeds(episodes)
-    baselines: dict[str, dict[str, np.ndarray]] = {}
+    baselines: dict[str, tuple[dict[str, np.ndarray], str]] = {}
     candidates = []
     for run in map(Path, runs):
         policy_dir = _policy_dir(run)
@@ -89,25 +87,24 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
         env_id = metadata["env_id"]
         if env_id is None:
             raise PolicyFormatError(f"{policy_dir}/{METADATA_FILE} names no env id: it cannot be shipped for one")
-        env = gym.make(env_id)
         if env_id not in baselines:
-            baselines[env_id] = {name: rollout(make_baseline(name, env), env_id, seeds).rewards.sum(axis=1)
-                                 for name in BASELINES}
+            baselines[env_id] = baseline_returns(env_id, seeds)
+        by_name, bar = baselines[env_id]
         policy = TrainedPolicy(policy_dir)
+        env = gym.make(env_id)
         policy.attach(env)
-        returns = rollout(policy, env_id, seeds).rewards.sum(axis=1)
         env.close()
-        bar, _ = best_eligible_baseline({name: float(r.mean()) for name, r in baselines[env_id].items()})
-        paired = paired_difference(returns, baselines[env_id][bar])
+        returns = episode_returns(policy, env_id, seeds)
+        paired = paired_difference(returns, by_name[bar])
         config, log = _config(run, policy_dir), _training_log(run, policy_dir)
         training = (log or {}).get("training") or {}
         candidates.append({
             "env_id": env_id, "algo": metadata["algo"], "run": str(run), "policy": str(policy_dir),
             "seed": config.get("seed"), "command": config.get("command"), "timesteps": metadata["num_timesteps"],
             "wall_time_s": training.get("wall_time_s"), "residual_on": metadata.get("residual_on"),
-            "mean_return": float(returns.mean()), "bar": bar, "bar_mean_return": float(baselines[env_id][bar].mean()),
+            "mean_return": float(returns.mean()), "bar": bar, "bar_mean_return": float(by_name[bar].mean()),
             "difference": paired.mean, "difference_low": paired.low, "difference_high": paired.high,
-            "baselines": {name: float(r.mean()) for name, r in baselines[env_id].items()},
+            "baselines": {name: float(r.mean()) for name, r in by_name.items()},
             "first_beat": (log or {}).get("first_beat"), "seeds": [seeds[0], seeds[-1]],
         })
     return candidates
@@ -125,7 +122,9 @@ def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) ->
     from agents.safe_format import reference_observations, tensor_bytes
 
     policy = TrainedPolicy(directory)
-    policy.attach(gym.make(env_id))
+    env = gym.make(env_id)
+    policy.attach(env)
+    env.close()
     statistics = policy.normalizer
     mean, var = (statistics.obs_mean, statistics.obs_var) if statistics is not None else (0.0, 1.0)
     observations = reference_observations(count, policy.policy.observation_space, mean, var,
