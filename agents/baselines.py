@@ -85,9 +85,9 @@ class Controller:
         self.thrusters = task.thrusters
         self.max_thrust = task.max_thrust
         self.masses = self.cluster.masses
-        self.nominal_relative = self.cluster.positions - (
-            self.masses[:, None] * self.cluster.positions
-        ).sum(axis=0) / self.masses.sum()
+        self.nominal_relative = (
+            self.cluster.positions - (self.masses[:, None] * self.cluster.positions).sum(axis=0) / self.masses.sum()
+        )
         self.control_interval = task.config.control_interval
         self.action_size = task.action_size
         self.observation_size = task.observation_size
@@ -164,9 +164,10 @@ class Controller:
         m = self.masses[None, :, None]
         momentum = (m * np.cross(positions, velocities)).sum(axis=1)  # (N, 3)
         r2 = (positions**2).sum(axis=2)  # (N, n)
-        inertia = (self.masses[None, :, None, None] * (
-            r2[:, :, None, None] * np.eye(3) - positions[:, :, :, None] * positions[:, :, None, :]
-        )).sum(axis=1)  # (N, 3, 3)
+        inertia = (
+            self.masses[None, :, None, None]
+            * (r2[:, :, None, None] * np.eye(3) - positions[:, :, :, None] * positions[:, :, None, :])
+        ).sum(axis=1)  # (N, 3, 3)
         # A collinear cluster has no inertia about its axis: regularise as the task does.
         inertia += 1e-9 * (self.masses[None, :] * r2).sum(axis=1)[:, None, None] * np.eye(3)
         omega = np.linalg.solve(inertia, momentum[:, :, None])[:, :, 0]
@@ -555,8 +556,7 @@ class TensionAwareController(Controller):
 
 #: The scripted baselines by name.
 BASELINES: dict[str, type[Controller]] = {
-    cls.name: cls
-    for cls in (PassiveController, VelocityFeedbackController, LQRController, TensionAwareController)
+    cls.name: cls for cls in (PassiveController, VelocityFeedbackController, LQRController, TensionAwareController)
 }
 
 

@@ -159,9 +159,7 @@ class PairedDifference:
 def _check_returns(name: str, values: Any) -> np.ndarray:
     array = np.asarray(values, dtype=np.float64)
     if array.ndim != 1 or array.size < 2:
-        raise ValueError(
-            f"{name} must be a 1-D array of at least 2 per-episode returns; got shape {array.shape}"
-        )
+        raise ValueError(f"{name} must be a 1-D array of at least 2 per-episode returns; got shape {array.shape}")
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name} has NaN or infinite returns: a return must be a finite number")
     return array
@@ -177,8 +175,9 @@ def _check_scored_returns(
     zero = _check_returns("zero_returns", zero_returns)
     reference = _check_returns("reference_returns", reference_returns)
     if not returns.shape == zero.shape == reference.shape:
-        raise ValueError(f"{purpose} the same seeds on every side; got {returns.size}, "
-                         f"{zero.size} and {reference.size} episodes")
+        raise ValueError(
+            f"{purpose} the same seeds on every side; got {returns.size}, {zero.size} and {reference.size} episodes"
+        )
     return returns, zero, reference
 
 
@@ -192,22 +191,25 @@ def t_interval(values: np.ndarray, confidence: float = CONFIDENCE) -> tuple[floa
     return mean, std, half_width
 
 
-def paired_difference(
-    returns: Any, baseline_returns: Any, confidence: float = CONFIDENCE
-) -> PairedDifference:
+def paired_difference(returns: Any, baseline_returns: Any, confidence: float = CONFIDENCE) -> PairedDifference:
     """The paired difference ``returns - baseline_returns`` (both (E,), episode e of each on the
     same seed) with its t interval. Raises ValueError for arrays of different lengths, fewer
     than 2 episodes, or non-finite returns."""
     a = _check_returns("returns", returns)
     b = _check_returns("baseline_returns", baseline_returns)
     if a.shape != b.shape:
-        raise ValueError(
-            f"paired returns need one value per seed on both sides; got {a.size} and {b.size} episodes"
-        )
+        raise ValueError(f"paired returns need one value per seed on both sides; got {a.size} and {b.size} episodes")
     differences = a - b
     mean, std, half_width = t_interval(differences, confidence)
-    return PairedDifference(mean=mean, std=std, half_width=half_width, low=mean - half_width,
-                            high=mean + half_width, wins=int(np.sum(differences > 0)), episodes=int(a.size))
+    return PairedDifference(
+        mean=mean,
+        std=std,
+        half_width=half_width,
+        low=mean - half_width,
+        high=mean + half_width,
+        wins=int(np.sum(differences > 0)),
+        episodes=int(a.size),
+    )
 
 
 def best_eligible_baseline(mean_returns: dict[str, float], zero: str = ZERO) -> tuple[str, dict[str, str]]:
@@ -220,15 +222,12 @@ def best_eligible_baseline(mean_returns: dict[str, float], zero: str = ZERO) -> 
     Returns ``(best name, {name: note})`` with a note for every baseline: ``"best"``,
     ``"eligible"`` or ``"not eligible: mean return below passive's"``."""
     if zero not in mean_returns:
-        raise ValueError(
-            f"the best-baseline rule compares with {zero!r}, which is not among {sorted(mean_returns)}"
-        )
+        raise ValueError(f"the best-baseline rule compares with {zero!r}, which is not among {sorted(mean_returns)}")
     bar = mean_returns[zero]
     eligible = [name for name, value in mean_returns.items() if value >= bar]
     best = max(eligible, key=lambda name: mean_returns[name])  # max keeps the first of equal values
     excluded = f"not eligible: mean return below {zero}'s"
-    notes = {name: "best" if name == best else "eligible" if name in eligible else excluded
-             for name in mean_returns}
+    notes = {name: "best" if name == best else "eligible" if name in eligible else excluded for name in mean_returns}
     return best, notes
 
 
@@ -241,14 +240,18 @@ def normalised_scores(returns: Any, zero_returns: Any, reference_returns: Any) -
     returns, zero, reference = _check_scored_returns(returns, zero_returns, reference_returns, "normalised scores need")
     gap = float(reference.mean() - zero.mean())
     if not gap > 0:
-        raise ValueError(
-            f"the reference's mean return is not above passive's (gap {gap:.4g}): no score scale"
-        )
+        raise ValueError(f"the reference's mean return is not above passive's (gap {gap:.4g}): no score scale")
     return 100.0 * (returns - zero) / gap
 
 
-def score_interval(returns: Any, zero_returns: Any, reference_returns: Any, reps: int = SCORE_BOOTSTRAP_REPS,
-                   seed: int = 0, confidence: float = CONFIDENCE) -> tuple[float, float] | None:
+def score_interval(
+    returns: Any,
+    zero_returns: Any,
+    reference_returns: Any,
+    reps: int = SCORE_BOOTSTRAP_REPS,
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+) -> tuple[float, float] | None:
     """Paired percentile-bootstrap interval of the score of the means,
     ``100 (mean R - mean R0) / (mean Rref - mean R0)``.
 
@@ -257,7 +260,9 @@ def score_interval(returns: Any, zero_returns: Any, reference_returns: Any, reps
     correlation between numerator and denominator (both grow with a seed's initial energy).
     Returns ``(low, high)``, or None when more than ``(1 - confidence) / 2`` of the resamples
     have a reference no better than passive (the scale itself is then uncertain)."""
-    returns, zero, reference = _check_scored_returns(returns, zero_returns, reference_returns, "a paired bootstrap needs")
+    returns, zero, reference = _check_scored_returns(
+        returns, zero_returns, reference_returns, "a paired bootstrap needs"
+    )
     picks = np.random.default_rng(seed).integers(0, returns.size, size=(reps, returns.size))
     gains = (returns - zero)[picks].mean(axis=1)
     scales = (reference - zero)[picks].mean(axis=1)
@@ -282,9 +287,14 @@ def _rliable() -> tuple[Any, Any]:
     return library, metrics
 
 
-def aggregate_scores(returns: dict[str, dict[str, Any]], zero_returns: dict[str, Any],
-                     reference_returns: dict[str, Any], reps: int = 50_000, seed: int = 0,
-                     confidence: float = CONFIDENCE) -> dict[str, dict[str, Any]]:
+def aggregate_scores(
+    returns: dict[str, dict[str, Any]],
+    zero_returns: dict[str, Any],
+    reference_returns: dict[str, Any],
+    reps: int = 50_000,
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+) -> dict[str, dict[str, Any]]:
     """rliable's aggregates over ids of the normalised scores, one entry per row of ``returns``.
 
     ``returns[row][env_id]`` holds the row's (E,) returns on an id, and ``zero_returns[env_id]``
@@ -319,8 +329,10 @@ def aggregate_scores(returns: dict[str, dict[str, Any]], zero_returns: dict[str,
             zero = _check_returns(f"zero_returns on {env_id}", zero_returns[env_id])
             reference = _check_returns(f"reference_returns on {env_id}", reference_returns[env_id])
             if not values.shape == zero.shape == reference.shape:
-                raise ValueError(f"{name!r} on {env_id}: the returns need the same seeds on every side; got "
-                                 f"{values.size}, {zero.size} and {reference.size} episodes")
+                raise ValueError(
+                    f"{name!r} on {env_id}: the returns need the same seeds on every side; got "
+                    f"{values.size}, {zero.size} and {reference.size} episodes"
+                )
             gains.append(values - zero)
             scales.append(reference - zero)
         episodes = {gain.size for gain in gains}
@@ -351,18 +363,29 @@ def aggregate_scores(returns: dict[str, dict[str, Any]], zero_returns: dict[str,
                 # keyword; arch only warns about the keyword's name.
                 warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)
                 points, intervals = library.get_interval_estimates(
-                    {name: indices}, statistics, method="percentile", reps=reps,
-                    confidence_interval_size=confidence, random_state=np.random.RandomState(seed),
+                    {name: indices},
+                    statistics,
+                    method="percentile",
+                    reps=reps,
+                    confidence_interval_size=confidence,
+                    random_state=np.random.RandomState(seed),
                 )
         finally:
             np.random.set_state(global_state)
         (iqm, mean), ((iqm_low, mean_low), (iqm_high, mean_high)) = points[name], intervals[name]
         bounds = [iqm_low, iqm_high, mean_low, mean_high]
-        iqm_low, iqm_high, mean_low, mean_high = (None if not np.all(np.isfinite(bounds)) else float(b)
-                                                  for b in bounds)
-        results[name] = {"iqm": float(iqm), "iqm_low": iqm_low, "iqm_high": iqm_high, "mean": float(mean),
-                         "mean_low": mean_low, "mean_high": mean_high, "ids": len(ids), "env_ids": ids,
-                         "episodes": int(gain.shape[0])}
+        iqm_low, iqm_high, mean_low, mean_high = (None if not np.all(np.isfinite(bounds)) else float(b) for b in bounds)
+        results[name] = {
+            "iqm": float(iqm),
+            "iqm_low": iqm_low,
+            "iqm_high": iqm_high,
+            "mean": float(mean),
+            "mean_low": mean_low,
+            "mean_high": mean_high,
+            "ids": len(ids),
+            "env_ids": ids,
+            "episodes": int(gain.shape[0]),
+        }
     return results
 
 
@@ -416,16 +439,20 @@ class _Progress:
         elapsed = time.perf_counter() - self.start
         left = self.estimate_left(index + 1)
         estimate = "" if left is None or index + 1 == len(self.units) else f", about {_clock(left)} left"
-        print(("\r" if self.interactive else "")
-              + f"  [{index + 1}/{len(self.units)}] {unit.env_id} {unit.name}: {seconds:.1f} s "
-              + f"(elapsed {_clock(elapsed)}{estimate})" + " " * 10, flush=True)
+        print(
+            ("\r" if self.interactive else "")
+            + f"  [{index + 1}/{len(self.units)}] {unit.env_id} {unit.name}: {seconds:.1f} s "
+            + f"(elapsed {_clock(elapsed)}{estimate})"
+            + " " * 10,
+            flush=True,
+        )
 
 
 def _clock(seconds: float) -> str:
     """``m:ss`` (or ``h:mm:ss``)."""
     whole = round(seconds)
     hours, rest = divmod(whole, 3600)
-    return (f"{hours}:{rest // 60:02d}:{rest % 60:02d}" if hours else f"{rest // 60}:{rest % 60:02d}")
+    return f"{hours}:{rest // 60:02d}:{rest % 60:02d}" if hours else f"{rest // 60}:{rest % 60:02d}"
 
 
 def _check_int(name: str, value: Any, minimum: int) -> int:
@@ -508,9 +535,7 @@ def benchmark(
     seed = _check_int("seed", seed, 0)
     bootstrap_reps = _check_int("bootstrap_reps", bootstrap_reps, 100)
     if not isinstance(reference, str) or not reference or reference == ZERO:
-        raise ValueError(
-            f"reference must name a controller other than {ZERO!r} (it scores 100); got {reference!r}"
-        )
+        raise ValueError(f"reference must name a controller other than {ZERO!r} (it scores 100); got {reference!r}")
     _rliable()
     out = prepare_table_outputs(out, TABLE_FILES, PLOT_FILES, plots, force, what="an earlier benchmark")
 
@@ -544,15 +569,17 @@ def benchmark(
                 raise  # a corrupted model or an untrusted pickle is an error, not a missing controller
             except (ValueError, FileNotFoundError) as error:
                 elsewhere = [other for other in ids if name in shipped[other]]
-                reason = (f"not shipped for this id, only for {', '.join(elsewhere)}"
-                          if elsewhere and name not in shipped[env_id] else _reason(error))
+                reason = (
+                    f"not shipped for this id, only for {', '.join(elsewhere)}"
+                    if elsewhere and name not in shipped[env_id]
+                    else _reason(error)
+                )
                 missing[env_id].append({"controller": name, "reason": reason})
                 continue
             units.append(_Unit(env_id, name, controller, int(steps)))
         probe.close()
     seeds = list(range(seed, seed + episodes))
-    print(f"benchmark: {len(ids)} ids, {len(units)} rollouts of {episodes} episodes "
-          f"(seeds {seeds[0]}..{seeds[-1]})")
+    print(f"benchmark: {len(ids)} ids, {len(units)} rollouts of {episodes} episodes (seeds {seeds[0]}..{seeds[-1]})")
     for env_id, entries in missing.items():
         for entry in entries:
             print(f"  missing on {env_id}: {entry['controller']} ({entry['reason']})")
@@ -562,24 +589,42 @@ def benchmark(
     wall: dict[str, dict[str, float]] = {env_id: {} for env_id in ids}
     for index, unit in enumerate(units):
         started = time.perf_counter()
-        record = rollout(unit.controller, unit.env_id, seeds, name=unit.name, env_kwargs=env_kwargs,
-                         progress=progress.callback(index))
+        record = rollout(
+            unit.controller,
+            unit.env_id,
+            seeds,
+            name=unit.name,
+            env_kwargs=env_kwargs,
+            progress=progress.callback(index),
+        )
         seconds = time.perf_counter() - started
         records[unit.env_id][unit.name] = record
         wall[unit.env_id][unit.name] = seconds
         progress.finished(index, seconds, int(record.end_step.max()))
     rollout_seconds = time.perf_counter() - progress.start
-    print(f"rollouts done in {_clock(rollout_seconds)}; statistics (rliable's bootstrap: {bootstrap_reps} "
-          "replications per row) and files...")
+    print(
+        f"rollouts done in {_clock(rollout_seconds)}; statistics (rliable's bootstrap: {bootstrap_reps} "
+        "replications per row) and files..."
+    )
 
     results = _analyse(ids, records, wall, missing, reference, shipped, bootstrap_reps, seed)
     results["settings"] = {
-        "command": command or f"agents.benchmark.benchmark(env_ids={ids!r}, controllers={names!r}, "
-                              f"episodes={episodes}, seed={seed}, reference={reference!r})",
-        "env_ids": ids, "episodes": episodes, "seeds": seeds, "reference": reference, "zero": ZERO,
-        "confidence": CONFIDENCE, "bootstrap": {"method": "percentile, stratified by id, paired (rliable)",
-                                                "reps": bootstrap_reps, "random_state": seed},
-        "env_kwargs": dict(env_kwargs or {}), "versions": _versions(),
+        "command": command
+        or f"agents.benchmark.benchmark(env_ids={ids!r}, controllers={names!r}, "
+        f"episodes={episodes}, seed={seed}, reference={reference!r})",
+        "env_ids": ids,
+        "episodes": episodes,
+        "seeds": seeds,
+        "reference": reference,
+        "zero": ZERO,
+        "confidence": CONFIDENCE,
+        "bootstrap": {
+            "method": "percentile, stratified by id, paired (rliable)",
+            "reps": bootstrap_reps,
+            "random_state": seed,
+        },
+        "env_kwargs": dict(env_kwargs or {}),
+        "versions": _versions(),
     }
     results["rollout_seconds"] = rollout_seconds
     # From the call to the statistics, loading the controllers included; writing the files is left out,
@@ -587,8 +632,10 @@ def benchmark(
     results["wall_seconds"] = time.perf_counter() - started_at
     _write_outputs(out, results, records, plots)
     total_seconds = time.perf_counter() - started_at
-    print(f"\nthe benchmark took {_clock(total_seconds)} ({total_seconds:.0f} s): {len(units)} rollouts in "
-          f"{_clock(rollout_seconds)}, the rest loading controllers, statistics and files")
+    print(
+        f"\nthe benchmark took {_clock(total_seconds)} ({total_seconds:.0f} s): {len(units)} rollouts in "
+        f"{_clock(rollout_seconds)}, the rest loading controllers, statistics and files"
+    )
     return results
 
 
@@ -605,9 +652,16 @@ def _versions() -> dict[str, str]:
     return versions
 
 
-def _analyse(ids: list[str], records: dict[str, dict[str, EpisodeRecord]], wall: dict[str, dict[str, float]],
-             missing: dict[str, list[dict[str, str]]], reference: str, shipped: dict[str, dict[str, Path]],
-             bootstrap_reps: int, seed: int) -> dict[str, Any]:
+def _analyse(
+    ids: list[str],
+    records: dict[str, dict[str, EpisodeRecord]],
+    wall: dict[str, dict[str, float]],
+    missing: dict[str, list[dict[str, str]]],
+    reference: str,
+    shipped: dict[str, dict[str, Path]],
+    bootstrap_reps: int,
+    seed: int,
+) -> dict[str, Any]:
     """Every statistic of the benchmark, as a JSON-ready dict (NaN never appears: None instead)."""
     per_id: dict[str, Any] = {}
     row_returns: dict[str, dict[str, np.ndarray]] = {}  # aggregate row -> id -> (E,) returns
@@ -623,21 +677,30 @@ def _analyse(ids: list[str], records: dict[str, dict[str, EpisodeRecord]], wall:
         if reference not in rows:
             score_note = f"not available: {reference} did not run on this id"
         elif not means[reference] > means[ZERO]:
-            score_note = (f"not available: {reference}'s mean return ({means[reference]:.4g}) is not above "
-                          f"{ZERO}'s ({means[ZERO]:.4g})")
+            score_note = (
+                f"not available: {reference}'s mean return ({means[reference]:.4g}) is not above "
+                f"{ZERO}'s ({means[ZERO]:.4g})"
+            )
         else:
             score_note = f"0 = {ZERO}, 100 = {reference}"
-            scores = {name: normalised_scores(values, returns[ZERO], returns[reference])
-                      for name, values in returns.items()}
+            scores = {
+                name: normalised_scores(values, returns[ZERO], returns[reference]) for name, values in returns.items()
+            }
         controllers = {}
         for name, record in rows.items():
             summary = summarise(record)["values"]
             episode_steps = record.seeds.size * max(1, int(record.end_step.max()))
-            paired = (None if name == best
-                      else dataclasses.asdict(paired_difference(returns[name], returns[best])))
+            paired = None if name == best else dataclasses.asdict(paired_difference(returns[name], returns[best]))
             entry: dict[str, Any] = {
-                "kind": ("baseline" if name in BASELINES else "reference" if name == reference
-                         else "shipped model" if name in shipped[env_id] else "policy"),
+                "kind": (
+                    "baseline"
+                    if name in BASELINES
+                    else "reference"
+                    if name == reference
+                    else "shipped model"
+                    if name in shipped[env_id]
+                    else "policy"
+                ),
                 "mean_return": means[name],
                 "return_ci95": summary["return_ci95"],
                 "failures": int(record.terminated.sum()),
@@ -652,9 +715,11 @@ def _analyse(ids: list[str], records: dict[str, dict[str, EpisodeRecord]], wall:
             }
             if name in scores:
                 interval = score_interval(returns[name], returns[ZERO], returns[reference], seed=seed)
-                entry["normalised_score"] = {"mean": float(scores[name].mean()),
-                                             "low": None if interval is None else interval[0],
-                                             "high": None if interval is None else interval[1]}
+                entry["normalised_score"] = {
+                    "mean": float(scores[name].mean()),
+                    "low": None if interval is None else interval[0],
+                    "high": None if interval is None else interval[1],
+                }
                 row_returns.setdefault(name, {})[env_id] = returns[name]
             controllers[name] = entry
         if scores:
@@ -664,13 +729,21 @@ def _analyse(ids: list[str], records: dict[str, dict[str, EpisodeRecord]], wall:
             if len(models) == 1:
                 row_returns.setdefault(SHIPPED_ROW, {})[env_id] = returns[models[0]]
         seeds = next(iter(rows.values())).seeds.tolist()
-        per_id[env_id] = {"best_baseline": best, "score": score_note, "controllers": controllers,
-                          "missing": missing[env_id], "seeds": seeds}
+        per_id[env_id] = {
+            "best_baseline": best,
+            "score": score_note,
+            "controllers": controllers,
+            "missing": missing[env_id],
+            "seeds": seeds,
+        }
     shipped_names = {name for env_id in ids for name in records[env_id] if name in shipped[env_id]}
     if len(shipped_names) < 2:
         row_returns.pop(SHIPPED_ROW, None)  # the same numbers as the one shipped name's own row
-    aggregate = (aggregate_scores(row_returns, zero_returns, reference_returns, reps=bootstrap_reps,
-                                  seed=seed) if row_returns else {})
+    aggregate = (
+        aggregate_scores(row_returns, zero_returns, reference_returns, reps=bootstrap_reps, seed=seed)
+        if row_returns
+        else {}
+    )
     return {"per_id": per_id, "aggregate": aggregate, "aggregate_ids": len(ids)}
 
 
@@ -726,9 +799,11 @@ def markdown_report(results: dict[str, Any]) -> str:
     lines = [
         "# tether-gym benchmark",
         "",
-        (f"{len(settings['env_ids'])} ids; {settings['episodes']} held-out episodes per controller and id "
-         f"(seeds {seeds[0]}..{seeds[-1]}); normalised score: 0 = {ZERO}, 100 = {reference}. "
-         f"Made by `{settings['command']}` in {_clock(results['wall_seconds'])}."),
+        (
+            f"{len(settings['env_ids'])} ids; {settings['episodes']} held-out episodes per controller and id "
+            f"(seeds {seeds[0]}..{seeds[-1]}); normalised score: 0 = {ZERO}, 100 = {reference}. "
+            f"Made by `{settings['command']}` in {_clock(results['wall_seconds'])}."
+        ),
         "",
         "## Mean return per id (95 % t interval)",
         "",
@@ -746,67 +821,99 @@ def markdown_report(results: dict[str, Any]) -> str:
                 cell += " ✗"
             cells.append(cell)
         lines.append(f"| {env_id} | " + " | ".join(cells) + " |")
-    lines += ["", (f"Bold: the id's best scripted baseline. ✗: a baseline whose mean return is below "
-                   f"{ZERO}'s, not eligible as best baseline. —: not run on the id (see the missing list "
-                   "below)."), "",
-              (f"## Normalised score per id (0 = {ZERO}, 100 = {reference}; score of the means "
-               "[95 % paired bootstrap interval])"), "",
-              "| id | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
+    lines += [
+        "",
+        (
+            f"Bold: the id's best scripted baseline. ✗: a baseline whose mean return is below "
+            f"{ZERO}'s, not eligible as best baseline. —: not run on the id (see the missing list "
+            "below)."
+        ),
+        "",
+        (
+            f"## Normalised score per id (0 = {ZERO}, 100 = {reference}; score of the means "
+            "[95 % paired bootstrap interval])"
+        ),
+        "",
+        "| id | " + " | ".join(columns) + " |",
+        "|---|" + "---|" * len(columns),
+    ]
     for env_id, entry in results["per_id"].items():
         cells = [_score_cell(entry["controllers"].get(name)) for name in columns]
         lines.append(f"| {env_id} | " + " | ".join(cells) + " |")
-    lines += ["", ("## Aggregate over ids (normalised scores; rliable: IQM and mean over ids, 95 % "
-                   "stratified bootstrap)"), ""]
+    lines += [
+        "",
+        ("## Aggregate over ids (normalised scores; rliable: IQM and mean over ids, 95 % stratified bootstrap)"),
+        "",
+    ]
     if results["aggregate"]:
         lines += ["| controller | ids | IQM [95 % CI] | mean [95 % CI] |", "|---|---|---|---|"]
         for row, values in results["aggregate"].items():
-            lines.append(f"| {row} | {values['ids']}/{results['aggregate_ids']} | "
-                         f"{_aggregate_cell(values, 'iqm')} | {_aggregate_cell(values, 'mean')} |")
+            lines.append(
+                f"| {row} | {values['ids']}/{results['aggregate_ids']} | "
+                f"{_aggregate_cell(values, 'iqm')} | {_aggregate_cell(values, 'mean')} |"
+            )
         lines += ["", "A row over fewer ids than another is not comparable with it."]
     else:
-        lines.append(f"Not available: the normalised score needs {reference}, which did not run (or did not "
-                     f"beat {ZERO}) on any id.")
+        lines.append(
+            f"Not available: the normalised score needs {reference}, which did not run (or did not "
+            f"beat {ZERO}) on any id."
+        )
     lines += ["", "## Per id", ""]
     for env_id, entry in results["per_id"].items():
         best = entry["best_baseline"]
-        lines += [f"### {env_id}", "",
-                  f"Best scripted baseline: **{best}**. Normalised score: {entry['score']}."]
-        excluded = [name for name, item in entry["controllers"].items()
-                    if (item["baseline_note"] or "").startswith("not eligible")]
+        lines += [f"### {env_id}", "", f"Best scripted baseline: **{best}**. Normalised score: {entry['score']}."]
+        excluded = [
+            name
+            for name, item in entry["controllers"].items()
+            if (item["baseline_note"] or "").startswith("not eligible")
+        ]
         if excluded:
-            lines.append(f"Not eligible as best baseline (mean return below {ZERO}'s): "
-                         f"{', '.join(excluded)}.")
+            lines.append(f"Not eligible as best baseline (mean return below {ZERO}'s): {', '.join(excluded)}.")
         if entry["missing"]:
             reasons = [f"{m['controller']} ({m['reason']})" for m in entry["missing"]]
             lines.append("Missing: " + "; ".join(reasons) + ".")
-        lines += ["", (f"| controller | return (mean ± 95% CI) | failures | Δ return vs {best} "
-                       f"(mean [95% CI]) | better than {best} | normalised score | wall time (s) |"),
-                  "|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            (
+                f"| controller | return (mean ± 95% CI) | failures | Δ return vs {best} "
+                f"(mean [95% CI]) | better than {best} | normalised score | wall time (s) |"
+            ),
+            "|---|---|---|---|---|---|---|",
+        ]
         for name, item in entry["controllers"].items():
             paired = item["paired_vs_best"]
-            delta = ("—" if paired is None
-                     else f"{paired['mean']:+.1f} [{paired['low']:+.1f}, {paired['high']:+.1f}]")
+            delta = "—" if paired is None else f"{paired['mean']:+.1f} [{paired['low']:+.1f}, {paired['high']:+.1f}]"
             wins = "—" if paired is None else f"{paired['wins']}/{paired['episodes']}"
-            lines.append(f"| {name} | {item['mean_return']:.1f} ± {item['return_ci95']:.1f} | "
-                         f"{item['failures']}/{len(item['returns'])} | {delta} | {wins} | "
-                         f"{_score_cell(item)} | {item['wall_seconds']:.1f} |")
+            lines.append(
+                f"| {name} | {item['mean_return']:.1f} ± {item['return_ci95']:.1f} | "
+                f"{item['failures']}/{len(item['returns'])} | {delta} | {wins} | "
+                f"{_score_cell(item)} | {item['wall_seconds']:.1f} |"
+            )
         lines.append("")
     lines += [
         "## Definitions",
         "",
-        ("- Return: the undiscounted sum of the rewards of an episode. Episode e of every controller on an "
-         "id starts from the reset seeded `seed + e`."),
-        ("- Best scripted baseline: the highest mean return among the scripted baselines whose mean return "
-         f"is not below {ZERO}'s."),
+        (
+            "- Return: the undiscounted sum of the rewards of an episode. Episode e of every controller on an "
+            "id starts from the reset seeded `seed + e`."
+        ),
+        (
+            "- Best scripted baseline: the highest mean return among the scripted baselines whose mean return "
+            f"is not below {ZERO}'s."
+        ),
         "- Δ return: paired by seed, d[e] = R[c, e] - R[best, e]; mean(d) ± t(0.975, E-1) sd(d)/√E.",
-        (f"- Normalised score: 100 (mean R[c] - mean R[{ZERO}]) / (mean R[{reference}] - mean R[{ZERO}]), "
-         f"with a paired percentile-bootstrap interval ({SCORE_BOOTSTRAP_REPS} resamples of the seeds, the "
-         f"same for c, {ZERO} and {reference}). Per episode: 100 (R[c, e] - R[{ZERO}, e]) / "
-         f"(mean R[{reference}] - mean R[{ZERO}]), whose mean is the score."),
-        ("- Aggregate: rliable's IQM over ids (the mean of the middle half of the per-id scores) and mean "
-         f"over ids, with {settings['bootstrap']['reps']} stratified percentile-bootstrap replications: "
-         "episodes resampled within each id, the per-id scores recomputed from each resample, paired "
-         f"(seeded with {settings['bootstrap']['random_state']})."),
+        (
+            f"- Normalised score: 100 (mean R[c] - mean R[{ZERO}]) / (mean R[{reference}] - mean R[{ZERO}]), "
+            f"with a paired percentile-bootstrap interval ({SCORE_BOOTSTRAP_REPS} resamples of the seeds, the "
+            f"same for c, {ZERO} and {reference}). Per episode: 100 (R[c, e] - R[{ZERO}, e]) / "
+            f"(mean R[{reference}] - mean R[{ZERO}]), whose mean is the score."
+        ),
+        (
+            "- Aggregate: rliable's IQM over ids (the mean of the middle half of the per-id scores) and mean "
+            f"over ids, with {settings['bootstrap']['reps']} stratified percentile-bootstrap replications: "
+            "episodes resampled within each id, the per-id scores recomputed from each resample, paired "
+            f"(seeded with {settings['bootstrap']['random_state']})."
+        ),
     ]
     return "\n".join(lines) + "\n"
 
@@ -815,13 +922,15 @@ def _csv_text(header: list[str], rows: list[list[Any]]) -> str:
     stream = io.StringIO(newline="")
     writer = csv.writer(stream)
     writer.writerow(header)
-    writer.writerows(["" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v for v in row]
-                     for row in rows)
+    writer.writerows(
+        ["" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v for v in row] for row in rows
+    )
     return stream.getvalue()
 
 
-def _write_outputs(out: Path, results: dict[str, Any], records: dict[str, dict[str, EpisodeRecord]],
-                   plots: bool) -> None:
+def _write_outputs(
+    out: Path, results: dict[str, Any], records: dict[str, dict[str, EpisodeRecord]], plots: bool
+) -> None:
     """Every file of the benchmark, each written atomically."""
     atomic_write_text(out / "benchmark.md", markdown_report(results))
     text = json.dumps(_json_ready(results), indent=1, allow_nan=False)
@@ -830,24 +939,79 @@ def _write_outputs(out: Path, results: dict[str, Any], records: dict[str, dict[s
     for env_id, entry in results["per_id"].items():
         for name, item in entry["controllers"].items():
             paired, score = item["paired_vs_best"] or {}, item["normalised_score"] or {}
-            score_rows.append([env_id, name, item["kind"], item["mean_return"], item["return_ci95"],
-                               item["failures"], item["baseline_note"], entry["best_baseline"],
-                               paired.get("mean"), paired.get("low"), paired.get("high"), paired.get("wins"),
-                               score.get("mean"), score.get("low"), score.get("high"), item["wall_seconds"]])
+            score_rows.append(
+                [
+                    env_id,
+                    name,
+                    item["kind"],
+                    item["mean_return"],
+                    item["return_ci95"],
+                    item["failures"],
+                    item["baseline_note"],
+                    entry["best_baseline"],
+                    paired.get("mean"),
+                    paired.get("low"),
+                    paired.get("high"),
+                    paired.get("wins"),
+                    score.get("mean"),
+                    score.get("low"),
+                    score.get("high"),
+                    item["wall_seconds"],
+                ]
+            )
             per_episode_scores = item["normalised_scores"] or [None] * len(item["returns"])
-            for seed, value, ended, episode_score in zip(entry["seeds"], item["returns"], item["terminated"],
-                                                         per_episode_scores, strict=True):
+            for seed, value, ended, episode_score in zip(
+                entry["seeds"], item["returns"], item["terminated"], per_episode_scores, strict=True
+            ):
                 episode_rows.append([env_id, name, seed, value, int(ended), episode_score])
-    atomic_write_text(out / "scores.csv", _csv_text(
-        ["env_id", "controller", "kind", "mean_return", "return_ci95", "failures", "baseline_note",
-         "best_baseline", "paired_diff_mean", "paired_diff_low", "paired_diff_high", "paired_wins",
-         "normalised_score", "normalised_score_low", "normalised_score_high", "wall_seconds"], score_rows))
-    atomic_write_text(out / "episodes.csv", _csv_text(
-        ["env_id", "controller", "seed", "return", "terminated", "normalised_score"], episode_rows))
-    atomic_write_text(out / "aggregate.csv", _csv_text(
-        ["row", "ids", "iqm", "iqm_low", "iqm_high", "mean", "mean_low", "mean_high", "env_ids"],
-        [[row, v["ids"], v["iqm"], v["iqm_low"], v["iqm_high"], v["mean"], v["mean_low"], v["mean_high"],
-          " ".join(v["env_ids"])] for row, v in results["aggregate"].items()]))
+    atomic_write_text(
+        out / "scores.csv",
+        _csv_text(
+            [
+                "env_id",
+                "controller",
+                "kind",
+                "mean_return",
+                "return_ci95",
+                "failures",
+                "baseline_note",
+                "best_baseline",
+                "paired_diff_mean",
+                "paired_diff_low",
+                "paired_diff_high",
+                "paired_wins",
+                "normalised_score",
+                "normalised_score_low",
+                "normalised_score_high",
+                "wall_seconds",
+            ],
+            score_rows,
+        ),
+    )
+    atomic_write_text(
+        out / "episodes.csv",
+        _csv_text(["env_id", "controller", "seed", "return", "terminated", "normalised_score"], episode_rows),
+    )
+    atomic_write_text(
+        out / "aggregate.csv",
+        _csv_text(
+            ["row", "ids", "iqm", "iqm_low", "iqm_high", "mean", "mean_low", "mean_high", "env_ids"],
+            [
+                [
+                    row,
+                    v["ids"],
+                    v["iqm"],
+                    v["iqm_low"],
+                    v["iqm_high"],
+                    v["mean"],
+                    v["mean_low"],
+                    v["mean_high"],
+                    " ".join(v["env_ids"]),
+                ]
+                for row, v in results["aggregate"].items()
+            ],
+        ),
+    )
     written = [out / name for name in TABLE_FILES]
     if plots:
         plot_normalised_scores(results, out / "normalised_scores.png")
@@ -901,17 +1065,26 @@ def plot_normalised_scores(results: dict[str, Any], path: Path) -> None:
     :data:`SCORE_AXIS` are cut at its edge and labelled with their value."""
     plt = _pyplot()
     reference = results["settings"]["reference"]
-    ids = [env_id for env_id, entry in results["per_id"].items()
-           if any(item["normalised_score"] for item in entry["controllers"].values())]
+    ids = [
+        env_id
+        for env_id, entry in results["per_id"].items()
+        if any(item["normalised_score"] for item in entry["controllers"].values())
+    ]
     if not ids:
-        _placeholder(path, "normalised score",
-                     f"not available: {reference} did not run, or did not beat {ZERO}, on any id")
+        _placeholder(
+            path, "normalised score", f"not available: {reference} did not run, or did not beat {ZERO}, on any id"
+        )
         return
     columns = [name for name in _columns(results) if name != ZERO]
-    scores = [item["normalised_score"] for entry in results["per_id"].values()
-              for item in entry["controllers"].values() if item["normalised_score"]]
-    low_limit, high_limit = _score_axis([s[key] for s in scores for key in ("mean", "low", "high")
-                                         if s[key] is not None])
+    scores = [
+        item["normalised_score"]
+        for entry in results["per_id"].values()
+        for item in entry["controllers"].values()
+        if item["normalised_score"]
+    ]
+    low_limit, high_limit = _score_axis(
+        [s[key] for s in scores for key in ("mean", "low", "high") if s[key] is not None]
+    )
     fig, ax = plt.subplots(figsize=(max(8.0, 1.3 * len(ids) + 3), 5.2))
     width = 0.8 / max(len(columns), 1)
     for k, name in enumerate(columns):
@@ -924,9 +1097,15 @@ def plot_normalised_scores(results: dict[str, Any], path: Path) -> None:
                 mean.append(score["mean"])
                 # The interval's ends within the axis (none: no error bar), as distances from the
                 # bar's end, also cut at the axis.
-                low, high, end = np.clip([score["low"] if score["low"] is not None else score["mean"],
-                                          score["high"] if score["high"] is not None else score["mean"],
-                                          score["mean"]], low_limit, high_limit)
+                low, high, end = np.clip(
+                    [
+                        score["low"] if score["low"] is not None else score["mean"],
+                        score["high"] if score["high"] is not None else score["mean"],
+                        score["mean"],
+                    ],
+                    low_limit,
+                    high_limit,
+                )
                 error.append((max(end - low, 0.0), max(high - end, 0.0)))
         if not x:
             continue
@@ -934,18 +1113,27 @@ def plot_normalised_scores(results: dict[str, Any], path: Path) -> None:
         ax.bar(x, shown, width, yerr=np.transpose(error), capsize=2, label=name, error_kw={"linewidth": 0.8})
         for xi, value, cut in zip(x, mean, shown, strict=True):
             if value != cut:  # written inside the cut bar, from its cut end
-                ax.text(xi, 0.97 * cut, f"{value:.0f}", ha="center", va="bottom" if cut < 0 else "top",
-                        fontsize=7, rotation=90, color="white")
+                ax.text(
+                    xi,
+                    0.97 * cut,
+                    f"{value:.0f}",
+                    ha="center",
+                    va="bottom" if cut < 0 else "top",
+                    fontsize=7,
+                    rotation=90,
+                    color="white",
+                )
     ax.axhline(0, color="0.3", linewidth=0.8)
     ax.axhline(100, color="0.3", linewidth=0.8, linestyle="--")
     ax.set_ylim(low_limit, high_limit)
     ax.set_xticks(range(len(ids)), [env_id.removeprefix("Tether") for env_id in ids], rotation=20, ha="right")
     ax.set_ylabel(f"normalised score (0 = {ZERO}, 100 = {reference})")
-    ax.set_title(f"normalised score per id over {results['settings']['episodes']} episodes (95 % paired "
-                 "bootstrap interval)", fontsize=10)
+    ax.set_title(
+        f"normalised score per id over {results['settings']['episodes']} episodes (95 % paired bootstrap interval)",
+        fontsize=10,
+    )
     ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=8, ncol=min(len(columns), 5), loc="upper center", bbox_to_anchor=(0.5, -0.22),
-              frameon=False)
+    ax.legend(fontsize=8, ncol=min(len(columns), 5), loc="upper center", bbox_to_anchor=(0.5, -0.22), frameon=False)
     _save(fig, path)
 
 
@@ -975,8 +1163,7 @@ def plot_paired_differences(results: dict[str, Any], path: Path) -> None:
     ax.axvline(0, color="0.3", linewidth=0.8)
     ax.set_xscale("symlog", linthresh=10.0)
     ax.set_yticks(y, labels, fontsize=7)
-    ax.set_xlabel("return minus the best scripted baseline's, paired by seed (mean, 95 % t interval)",
-                  fontsize=9)
+    ax.set_xlabel("return minus the best scripted baseline's, paired by seed (mean, 95 % t interval)", fontsize=9)
     ax.grid(True, axis="x", alpha=0.3)
     _save(fig, path)
 
@@ -989,38 +1176,50 @@ def plot_aggregate(results: dict[str, Any], path: Path) -> None:
     reference = results["settings"]["reference"]
     aggregate = results["aggregate"]
     if not aggregate:
-        _placeholder(path, "aggregate over ids",
-                     f"not available: {reference} did not run, or did not beat {ZERO}, on any id")
+        _placeholder(
+            path, "aggregate over ids", f"not available: {reference} did not run, or did not beat {ZERO}, on any id"
+        )
         return
     rows = list(aggregate)
     keys = ("iqm", "iqm_low", "iqm_high", "mean", "mean_low", "mean_high")
-    low_limit, high_limit = _score_axis([aggregate[row][key] for row in rows for key in keys
-                                         if aggregate[row][key] is not None])
+    low_limit, high_limit = _score_axis(
+        [aggregate[row][key] for row in rows for key in keys if aggregate[row][key] is not None]
+    )
     fig, axes = plt.subplots(1, 2, figsize=(9, 0.45 * len(rows) + 1.6), sharey=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax, key, title in zip(axes, ("iqm", "mean"), ("IQM", "mean"), strict=True):
         for j, row in enumerate(rows):
             values = aggregate[row]
-            low, high, point = (float(np.clip(values[key] if values[k] is None else values[k], low_limit,
-                                              high_limit)) for k in (f"{key}_low", f"{key}_high", key))
-            ax.barh(j, max(high - low, 0.5), left=low, height=0.6, color=colours[j % len(colours)],
-                    alpha=0.75)
+            low, high, point = (
+                float(np.clip(values[key] if values[k] is None else values[k], low_limit, high_limit))
+                for k in (f"{key}_low", f"{key}_high", key)
+            )
+            ax.barh(j, max(high - low, 0.5), left=low, height=0.6, color=colours[j % len(colours)], alpha=0.75)
             ax.vlines(point, j - 0.3, j + 0.3, color="k", linewidth=1.5)
             if point != values[key]:
-                ax.text(point, j, f" {values[key]:.0f} ", ha="left" if point == low_limit else "right",
-                        va="center", fontsize=7)
+                ax.text(
+                    point,
+                    j,
+                    f" {values[key]:.0f} ",
+                    ha="left" if point == low_limit else "right",
+                    va="center",
+                    fontsize=7,
+                )
         ax.axvline(0, color="0.5", linewidth=0.8)
         ax.axvline(100, color="0.5", linewidth=0.8, linestyle="--")
         ax.set_xlim(low_limit, high_limit)
         ax.set_title(title)
         ax.grid(True, axis="x", alpha=0.3)
-    axes[0].set_yticks(range(len(rows)), [f"{row} ({aggregate[row]['ids']}/{results['aggregate_ids']} ids)"
-                                          for row in rows], fontsize=8)
+    axes[0].set_yticks(
+        range(len(rows)),
+        [f"{row} ({aggregate[row]['ids']}/{results['aggregate_ids']} ids)" for row in rows],
+        fontsize=8,
+    )
     axes[0].invert_yaxis()
-    fig.supxlabel(f"normalised score (0 = {ZERO}, 100 = {reference}); values off the axis written at its "
-                  "edge", fontsize=9)
-    fig.suptitle("aggregate over ids: point estimate and 95 % stratified-bootstrap interval (rliable)",
-                 fontsize=10)
+    fig.supxlabel(
+        f"normalised score (0 = {ZERO}, 100 = {reference}); values off the axis written at its edge", fontsize=9
+    )
+    fig.suptitle("aggregate over ids: point estimate and 95 % stratified-bootstrap interval (rliable)", fontsize=10)
     _save(fig, path)
 
 
@@ -1031,50 +1230,78 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m agents.benchmark",
         description="Every id, every scripted baseline, the mpc reference and every shipped model on "
-                    "held-out seeds: mean returns, paired differences against the best scripted baseline, "
-                    "normalised scores (0 = passive, 100 = mpc), and rliable's aggregate over ids.",
+        "held-out seeds: mean returns, paired differences against the best scripted baseline, "
+        "normalised scores (0 = passive, 100 = mpc), and rliable's aggregate over ids.",
         epilog="Trust: shipped models load without running code; a pickle-based SB3 model path in "
-               "--controllers is refused unless --trust-pickle is given.",
+        "--controllers is refused unless --trust-pickle is given.",
     )
-    parser.add_argument("--envs", nargs="+", choices=list(ENV_IDS), metavar="ID",
-                        help=f"ids to run (default: all {len(ENV_IDS)}: {', '.join(ENV_IDS)})")
-    parser.add_argument("--controllers", nargs="+", metavar="NAME",
-                        help="baseline names, mpc, shipped model names or policy directories, run on every "
-                             "id that has them (default: every baseline, mpc and every shipped model of each "
-                             "id; passive is always added)")
-    parser.add_argument("--episodes", type=int_at_least(2), default=64,
-                        help="held-out episodes per controller and id (default 64)")
-    parser.add_argument("--seed", type=int_at_least(0), default=HELD_OUT_SEED,
-                        help=f"first held-out seed (default {HELD_OUT_SEED}); also seeds the bootstrap")
-    parser.add_argument("--out", default="outputs/benchmark",
-                        help="output directory (default outputs/benchmark)")
-    parser.add_argument("--reference", default=REFERENCE,
-                        help=f"the controller that scores 100 (default {REFERENCE}; another one anchors a "
-                             "different score, labelled as such)")
-    parser.add_argument("--bootstrap-reps", type=int_at_least(100), default=50_000,
-                        help="bootstrap replications of the aggregate's intervals (default 50000, as in "
-                             "rliable)")
+    parser.add_argument(
+        "--envs",
+        nargs="+",
+        choices=list(ENV_IDS),
+        metavar="ID",
+        help=f"ids to run (default: all {len(ENV_IDS)}: {', '.join(ENV_IDS)})",
+    )
+    parser.add_argument(
+        "--controllers",
+        nargs="+",
+        metavar="NAME",
+        help="baseline names, mpc, shipped model names or policy directories, run on every "
+        "id that has them (default: every baseline, mpc and every shipped model of each "
+        "id; passive is always added)",
+    )
+    parser.add_argument(
+        "--episodes", type=int_at_least(2), default=64, help="held-out episodes per controller and id (default 64)"
+    )
+    parser.add_argument(
+        "--seed",
+        type=int_at_least(0),
+        default=HELD_OUT_SEED,
+        help=f"first held-out seed (default {HELD_OUT_SEED}); also seeds the bootstrap",
+    )
+    parser.add_argument("--out", default="outputs/benchmark", help="output directory (default outputs/benchmark)")
+    parser.add_argument(
+        "--reference",
+        default=REFERENCE,
+        help=f"the controller that scores 100 (default {REFERENCE}; another one anchors a "
+        "different score, labelled as such)",
+    )
+    parser.add_argument(
+        "--bootstrap-reps",
+        type=int_at_least(100),
+        default=50_000,
+        help="bootstrap replications of the aggregate's intervals (default 50000, as in rliable)",
+    )
     parser.add_argument("--no-plots", action="store_true")
     parser.add_argument("--force", action="store_true", help="replace an earlier benchmark in --out")
-    parser.add_argument("--trust-pickle", action="store_true",
-                        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code "
-                             "they hold)")
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)",
+    )
     return parser
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     arguments = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(arguments)
-    return benchmark(env_ids=args.envs, controllers=args.controllers, episodes=args.episodes,
-                     seed=args.seed, out=args.out, force=args.force, plots=not args.no_plots,
-                     trust_pickle=args.trust_pickle, reference=args.reference,
-                     bootstrap_reps=args.bootstrap_reps,
-                     command=shlex.join(["python", "-m", "agents.benchmark", *arguments]))
+    return benchmark(
+        env_ids=args.envs,
+        controllers=args.controllers,
+        episodes=args.episodes,
+        seed=args.seed,
+        out=args.out,
+        force=args.force,
+        plots=not args.no_plots,
+        trust_pickle=args.trust_pickle,
+        reference=args.reference,
+        bootstrap_reps=args.bootstrap_reps,
+        command=shlex.join(["python", "-m", "agents.benchmark", *arguments]),
+    )
 
 
 if __name__ == "__main__":
     try:
         main()
-    except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError,
-            ImportError) as error:
+    except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError, ImportError) as error:
         sys.exit(f"agents.benchmark: error: {error}")

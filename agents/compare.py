@@ -128,12 +128,23 @@ def compare(
     records = []
     for name, policy in zip(names, policies):
         label = getattr(policy, "name", name) if name in BASELINES else name
-        records.append(rollout(policy, env_id, seeds, name=label, satellite=satellite, env_kwargs=env_kwargs,
-                               progress=_progress_printer(label)))
+        records.append(
+            rollout(
+                policy,
+                env_id,
+                seeds,
+                name=label,
+                satellite=satellite,
+                env_kwargs=env_kwargs,
+                progress=_progress_printer(label),
+            )
+        )
     summaries = [summarise(record) for record in records]
     table = markdown_table(records, summaries)
-    header = (f"{env_id}, {episodes} episodes per controller, seeds {seed}..{seed + episodes - 1}, "
-              f"{records[0].time[-1]:.0f} s each\n\n")
+    header = (
+        f"{env_id}, {episodes} episodes per controller, seeds {seed}..{seed + episodes - 1}, "
+        f"{records[0].time[-1]:.0f} s each\n\n"
+    )
     atomic_write_text(out / "comparison.md", header + table + "\n")
     write_csv(out / "comparison.csv", records, summaries)
     print()
@@ -141,8 +152,10 @@ def compare(
     if plots:
         plot_energy(records, out / "energy.png", env_id)
         plot_displacement(records, out / "displacement.png", env_id, satellite)
-    print(f"\nwrote {out / 'comparison.md'}, {out / 'comparison.csv'}"
-          + (f", {out / 'energy.png'}, {out / 'displacement.png'}" if plots else ""))
+    print(
+        f"\nwrote {out / 'comparison.md'}, {out / 'comparison.csv'}"
+        + (f", {out / 'energy.png'}, {out / 'displacement.png'}" if plots else "")
+    )
     return records, summaries
 
 
@@ -183,7 +196,9 @@ def plot_energy(records: list[EpisodeRecord], path: Path, env_id: str) -> None:
     ax.axhline(0.05, color="0.5", linestyle=":", linewidth=1)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("vibration energy / initial")
-    ax.set_title(f"{env_id}: vibration energy, median and interquartile range over {records[0].energy.shape[0]} episodes")
+    ax.set_title(
+        f"{env_id}: vibration energy, median and interquartile range over {records[0].energy.shape[0]} episodes"
+    )
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -215,34 +230,54 @@ def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, sat
     plt.close(fig)
 
 
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.compare", description=__doc__.split("\n\n")[0].replace("``", ""),
+        prog="python -m agents.compare",
+        description=__doc__.split("\n\n")[0].replace("``", ""),
         epilog="Trust: shipped and agents.train models are JSON + safetensors and load without running code. "
-               "A pickle-based SB3 model (.zip + vecnormalize.pkl) runs any code a crafted file contains when "
-               "loaded: it is refused unless --trust-pickle is given (python -m agents.convert makes a safe copy).",
+        "A pickle-based SB3 model (.zip + vecnormalize.pkl) runs any code a crafted file contains when "
+        "loaded: it is refused unless --trust-pickle is given (python -m agents.convert makes a safe copy).",
     )
-    parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS), metavar="ID",
-                        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})")
-    parser.add_argument("--controllers", nargs="+", help="baseline names, shipped model names or policy directories "
-                        "(default: every baseline and every shipped model of the id)")
+    parser.add_argument(
+        "--env",
+        default=DEFAULT_ENV_ID,
+        choices=list(ENV_IDS),
+        metavar="ID",
+        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})",
+    )
+    parser.add_argument(
+        "--controllers",
+        nargs="+",
+        help="baseline names, shipped model names or policy directories "
+        "(default: every baseline and every shipped model of the id)",
+    )
     parser.add_argument("--episodes", type=int_at_least(2), default=64)
     parser.add_argument("--seed", type=int_at_least(0), default=HELD_OUT_SEED, help="first held-out seed")
     parser.add_argument("--satellite", type=int_at_least(0), default=0, help="satellite of the displacement plot")
     parser.add_argument("--out", default="outputs/compare", help="output directory (default outputs/compare)")
     parser.add_argument("--no-plots", action="store_true")
     parser.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")
-    parser.add_argument("--trust-pickle", action="store_true",
-                        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)")
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)",
+    )
     return parser
 
 
 def main(argv: list[str] | None = None) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
     args = build_parser().parse_args(argv)
-    return compare(env_id=args.env, controllers=args.controllers, episodes=args.episodes, seed=args.seed,
-                   out=args.out, satellite=args.satellite, plots=not args.no_plots, force=args.force,
-                   trust_pickle=args.trust_pickle)
+    return compare(
+        env_id=args.env,
+        controllers=args.controllers,
+        episodes=args.episodes,
+        seed=args.seed,
+        out=args.out,
+        satellite=args.satellite,
+        plots=not args.no_plots,
+        force=args.force,
+        trust_pickle=args.trust_pickle,
+    )
 
 
 if __name__ == "__main__":

@@ -72,8 +72,9 @@ def _safe_actions(directory: Path, observations: np.ndarray) -> np.ndarray:
     return loaded.policy.predict(obs, deterministic=True)[0]
 
 
-def trajectory_observations(act: Callable[[np.ndarray], np.ndarray], env_id: str,
-                            env_kwargs: dict[str, Any] | None = None) -> Callable[[int], np.ndarray]:
+def trajectory_observations(
+    act: Callable[[np.ndarray], np.ndarray], env_id: str, env_kwargs: dict[str, Any] | None = None
+) -> Callable[[int], np.ndarray]:
     """A function ``n -> (n, obs_dim)`` env observations along the trajectories of ``act`` (a batch
     of observations -> a batch of actions), 8 episodes in parallel, seeds 0-7."""
     import gymnasium as gym
@@ -128,8 +129,9 @@ def convert(
     if not trust_pickle:
         refuse_untrusted(source, opt_in="--trust-pickle")
     model_file = sb3_model_file(source, best)
-    config_file = next((d / "config.yml" for d in (model_file.parent, model_file.parent.parent)
-                        if (d / "config.yml").is_file()), None)
+    config_file = next(
+        (d / "config.yml" for d in (model_file.parent, model_file.parent.parent) if (d / "config.yml").is_file()), None
+    )
     prepare_output_dir(destination, argument="DST")
     copy_config = config_file is not None and config_file.resolve() != (destination / "config.yml").resolve()
     outputs = [*POLICY_FILES, REFERENCE_FILE] + (["config.yml"] if copy_config else [])
@@ -144,12 +146,16 @@ def convert(
             raise ValueError(f"--env {env_id!r} is not a tether-gym id; ids are {list(tether_gym.ENV_IDS)}")
     provenance = {
         "converted_from": [{"file": f.name, "sha256": _sha256(f)} for f in files],
-        "seed": config.get("seed"), "command": config.get("command"),
+        "seed": config.get("seed"),
+        "command": config.get("command"),
     }
     rng = np.random.default_rng(0)
     env_kwargs = (config.get("hyperparams") or {}).get("env_kwargs")
-    rollout = (trajectory_observations(lambda obs: _original_actions(model, normalizer, obs), env_id, env_kwargs)
-               if env_id is not None else None)
+    rollout = (
+        trajectory_observations(lambda obs: _original_actions(model, normalizer, obs), env_id, env_kwargs)
+        if env_id is not None
+        else None
+    )
     mean, var = (normalizer.obs_rms.mean, normalizer.obs_rms.var) if normalizer is not None else (0.0, 1.0)
     observations = reference_observations(check_observations, model.observation_space, mean, var, rng, rollout)
     expected = _original_actions(model, normalizer, observations)
@@ -175,18 +181,26 @@ def convert(
             atomic_write_bytes(destination / "config.yml", config_file.read_bytes())
         names.append("config.yml")
     if reference:
-        atomic_write_bytes(destination / REFERENCE_FILE, tensor_bytes(
-            {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(expected))},
-            metadata={"source": ", ".join(f"{entry['file']} sha256 {entry['sha256']}"
-                                          for entry in provenance["converted_from"]),
-                      "pipeline": "VecNormalize.normalize_obs, then <Algorithm>.predict(deterministic=True)"},
-        ))
+        atomic_write_bytes(
+            destination / REFERENCE_FILE,
+            tensor_bytes(
+                {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(expected))},
+                metadata={
+                    "source": ", ".join(
+                        f"{entry['file']} sha256 {entry['sha256']}" for entry in provenance["converted_from"]
+                    ),
+                    "pipeline": "VecNormalize.normalize_obs, then <Algorithm>.predict(deterministic=True)",
+                },
+            ),
+        )
         names.append(REFERENCE_FILE)
     for stale in set(outputs) - set(names) - {MANIFEST_FILE, "config.yml"}:
         (destination / stale).unlink(missing_ok=True)  # from an earlier conversion (only reached with --force)
     write_manifest(destination, names)
-    print(f"converted {', '.join(str(f) for f in files)} -> {destination} "
-          f"({len(observations)} observations checked: identical actions)")
+    print(
+        f"converted {', '.join(str(f) for f in files)} -> {destination} "
+        f"({len(observations)} observations checked: identical actions)"
+    )
     return destination
 
 
@@ -196,33 +210,48 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.convert", description=__doc__.split("\n\n")[0].replace("``", ""),
+        prog="python -m agents.convert",
+        description=__doc__.split("\n\n")[0].replace("``", ""),
         epilog="Converting unpickles SRC: a crafted SRC runs arbitrary code. Convert only files you trust.",
     )
     parser.add_argument("source", metavar="SRC", help="SB3 run directory or model .zip")
     parser.add_argument("destination", metavar="DST", help="directory for the safe format (may be SRC's directory)")
-    parser.add_argument("--trust-pickle", action="store_true",
-                        help="required: SRC is unpickled, which runs any code it contains")
+    parser.add_argument(
+        "--trust-pickle", action="store_true", help="required: SRC is unpickled, which runs any code it contains"
+    )
     parser.add_argument("--best", action="store_true", help="convert SRC/best/best_model.zip")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3"], help="algorithm, if SRC has no config.yml")
     parser.add_argument("--env", help="env id, if SRC has no config.yml")
     parser.add_argument("--training-state", action="store_true", help="keep the optimizer states (for --resume)")
-    parser.add_argument("--check-observations", type=int_at_least(16), default=512,
-                        help="observations on which the actions must be bit-identical (default 512)")
-    parser.add_argument("--reference", action="store_true",
-                        help=f"keep those observations and actions in DST/{REFERENCE_FILE}")
+    parser.add_argument(
+        "--check-observations",
+        type=int_at_least(16),
+        default=512,
+        help="observations on which the actions must be bit-identical (default 512)",
+    )
+    parser.add_argument(
+        "--reference", action="store_true", help=f"keep those observations and actions in DST/{REFERENCE_FILE}"
+    )
     parser.add_argument("--force", action="store_true", help="replace an earlier conversion in DST")
     return parser
 
 
 def main(argv: list[str] | None = None) -> Path:
     args = build_parser().parse_args(argv)
-    return convert(args.source, args.destination, trust_pickle=args.trust_pickle, best=args.best, algo=args.algo,
-                   env_id=args.env, training_state=args.training_state, check_observations=args.check_observations,
-                   reference=args.reference, force=args.force)
+    return convert(
+        args.source,
+        args.destination,
+        trust_pickle=args.trust_pickle,
+        best=args.best,
+        algo=args.algo,
+        env_id=args.env,
+        training_state=args.training_state,
+        check_observations=args.check_observations,
+        reference=args.reference,
+        force=args.force,
+    )
 
 
 if __name__ == "__main__":

@@ -146,10 +146,19 @@ def rollout(
             break
     envs.close()
     return EpisodeRecord(
-        name=name or getattr(controller, "name", type(controller).__name__), time=np.arange(steps + 1) * task.config.control_interval,
-        energy=energy, displacement=displacement, rewards=rewards, slack=slack, propellant=propellant,
-        peak_tension=peak, terminated=terminated, end_step=end_step, end_reason=end_reason,
-        saturation=float(getattr(controller, "saturation_fraction", 0.0)), seeds=seeds,
+        name=name or getattr(controller, "name", type(controller).__name__),
+        time=np.arange(steps + 1) * task.config.control_interval,
+        energy=energy,
+        displacement=displacement,
+        rewards=rewards,
+        slack=slack,
+        propellant=propellant,
+        peak_tension=peak,
+        terminated=terminated,
+        end_step=end_step,
+        end_reason=end_reason,
+        saturation=float(getattr(controller, "saturation_fraction", 0.0)),
+        seeds=seeds,
     )
 
 

@@ -64,7 +64,9 @@ def prepare_output_dir(path: str | Path, argument: str = "--out") -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise OutputError(f"{argument} {path} cannot be created ({error.strerror}): pass a writable directory") from error
+        raise OutputError(
+            f"{argument} {path} cannot be created ({error.strerror}): pass a writable directory"
+        ) from error
     try:
         with tempfile.TemporaryFile(dir=path, prefix=".write-probe-"):
             pass
@@ -90,7 +92,9 @@ def check_output_files(
                 f"remove it or pass another {argument}"
             )
         if target.is_dir():
-            raise OutputError(f"{target} is a directory where a file will be written: remove it or pass another {argument}")
+            raise OutputError(
+                f"{target} is a directory where a file will be written: remove it or pass another {argument}"
+            )
         if target.exists():
             existing.append(target.name)
     if existing and not force:
@@ -169,9 +173,11 @@ def prepare_table_outputs(
         try:
             import matplotlib  # noqa: F401 - checked now, not after every rollout
         except ImportError as error:
-            raise ImportError("the plots need matplotlib: pip install 'tether-gym[plots]', or pass --no-plots "
-                              "(plots=False)") from error
+            raise ImportError(
+                "the plots need matplotlib: pip install 'tether-gym[plots]', or pass --no-plots (plots=False)"
+            ) from error
     directory = prepare_output_dir(out, argument="--out")
-    check_output_files(directory, tuple(tables) + (tuple(plots) if with_plots else ()), force=force,
-                       argument="--out", what=what)
+    check_output_files(
+        directory, tuple(tables) + (tuple(plots) if with_plots else ()), force=force, argument="--out", what=what
+    )
     return directory

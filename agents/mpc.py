@@ -93,8 +93,14 @@ class MPCSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        whole = {"samples": (2, 100_000), "horizon": (1, 10_000), "control_horizon": (0, self.horizon),
-                 "knots": (1, self.control_horizon or self.horizon), "iterations": (1, 100), "seed": (0, 2**63 - 1)}
+        whole = {
+            "samples": (2, 100_000),
+            "horizon": (1, 10_000),
+            "control_horizon": (0, self.horizon),
+            "knots": (1, self.control_horizon or self.horizon),
+            "iterations": (1, 100),
+            "seed": (0, 2**63 - 1),
+        }
         for name, (low, high) in whole.items():
             value = getattr(self, name)
             if not is_whole_number(value) or not low <= value <= high:
@@ -103,8 +109,7 @@ class MPCSettings:
 
         if self.prior != "none" and self.prior not in BASELINES:
             raise ValueError(f"mpc setting prior must be 'none' or one of {sorted(BASELINES)}; got {self.prior!r}")
-        real = {"noise": (0.0, 10.0), "temperature": (0.0, 1e6), "discount": (0.0, 1.0),
-                "terminal_weight": (0.0, 1e6)}
+        real = {"noise": (0.0, 10.0), "temperature": (0.0, 1e6), "discount": (0.0, 1.0), "terminal_weight": (0.0, 1e6)}
         for name, (low, high) in real.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
@@ -180,12 +185,14 @@ class MPCController:
         steps = np.arange(s.horizon, dtype=float)
         # (horizon, knots) linear interpolation weights over the control horizon (a single knot
         # holds its value), zero past it.
-        self.interpolation = np.stack(
-            [np.interp(steps, knot_times, np.eye(s.knots)[k]) for k in range(s.knots)], axis=1
-        ) if s.knots > 1 else np.ones((s.horizon, 1))
+        self.interpolation = (
+            np.stack([np.interp(steps, knot_times, np.eye(s.knots)[k]) for k in range(s.knots)], axis=1)
+            if s.knots > 1
+            else np.ones((s.horizon, 1))
+        )
         self.interpolation[planned:] = 0.0
         self.planned_steps = planned
-        self.weights = s.discount ** steps
+        self.weights = s.discount**steps
 
     @property
     def seconds_per_step(self) -> float:
@@ -234,7 +241,7 @@ class MPCController:
         action = self._actions(self.task, self.plan[:, 0]).astype(np.float32)
         # Shift: the last planned command is held for the new last planned step.
         self.plan = np.concatenate([self.plan[:, 1:], self.plan[:, -1:]], axis=1)
-        self.plan[:, self.planned_steps:] = 0.0
+        self.plan[:, self.planned_steps :] = 0.0
         self.compute_seconds += time.perf_counter() - start
         self.env_steps += self.batch
         return (action[0] if single else action), None
@@ -293,8 +300,10 @@ class MPCController:
 
     def __repr__(self) -> str:
         s = self.settings
-        return (f"MPCController(samples={s.samples}, horizon={s.horizon}, knots={s.knots}, noise={s.noise}, "
-                f"iterations={s.iterations}, temperature={s.temperature}, prior={s.prior}, batch={self.batch})")
+        return (
+            f"MPCController(samples={s.samples}, horizon={s.horizon}, knots={s.knots}, noise={s.noise}, "
+            f"iterations={s.iterations}, temperature={s.temperature}, prior={s.prior}, batch={self.batch})"
+        )
 
 
 def expected_env_steps(settings: MPCSettings, episodes: int, steps: int) -> int:

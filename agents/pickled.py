@@ -50,7 +50,9 @@ def is_pickle_model(path: str | Path) -> bool:
     if path.is_file():
         return path.suffix in (".zip", ".pkl")
     if path.is_dir() and not (path / METADATA_FILE).is_file():
-        return any((path / name).is_file() for name in PICKLE_MODEL_NAMES) or (path / "best" / "best_model.zip").is_file()
+        return (
+            any((path / name).is_file() for name in PICKLE_MODEL_NAMES) or (path / "best" / "best_model.zip").is_file()
+        )
     return False
 
 
@@ -70,7 +72,8 @@ def _warn(files: list[Path]) -> None:
         f"loading pickle-based files {[str(f) for f in files]} because you passed --trust-pickle: unpickling runs "
         f"any code a crafted file contains. Do this only for files you made yourself or fully trust, and prefer "
         f"the safe format (python -m agents.convert).",
-        PickleTrustWarning, stacklevel=3,
+        PickleTrustWarning,
+        stacklevel=3,
     )
 
 
@@ -79,8 +82,11 @@ def sb3_model_file(path: str | Path, best: bool = False) -> Path:
     (``best/best_model.zip`` with ``best``)."""
     path = Path(path)
     if path.is_dir():
-        candidates = [path / "best" / "best_model.zip", path / "best_model.zip"] if best else [
-            path / "model.zip", path / "best_model.zip"]
+        candidates = (
+            [path / "best" / "best_model.zip", path / "best_model.zip"]
+            if best
+            else [path / "model.zip", path / "best_model.zip"]
+        )
         for candidate in candidates:
             if candidate.is_file():
                 return candidate
@@ -117,7 +123,11 @@ def run_config(model_file: Path) -> dict[str, Any]:
 
 
 def load_pickled_model(
-    path: str | Path, trust_pickle: bool, best: bool = False, algo: str | None = None, env: VecEnv | None = None,
+    path: str | Path,
+    trust_pickle: bool,
+    best: bool = False,
+    algo: str | None = None,
+    env: VecEnv | None = None,
     **load_kwargs: Any,
 ) -> tuple[BaseAlgorithm, VecNormalize | None, dict[str, Any], list[Path]]:
     """Load an SB3 model and its ``VecNormalize`` statistics by unpickling them -- only with

@@ -56,8 +56,9 @@ class TrainedPolicy:
             file that does not match its manifest.
     """
 
-    def __init__(self, path: str | Path, best: bool = False, name: str | None = None,
-                 trust_pickle: bool = False) -> None:
+    def __init__(
+        self, path: str | Path, best: bool = False, name: str | None = None, trust_pickle: bool = False
+    ) -> None:
         path = Path(path)
         if path.is_file() and is_policy_dir(path.parent) and path.suffix not in (".zip", ".pkl"):
             path = path.parent  # policy.json, policy.safetensors, ...: their directory
@@ -100,8 +101,15 @@ class TrainedPolicy:
         self.baseline: Any = None
 
     @classmethod
-    def from_parts(cls, policy: Any, normalizer: Any, env_id: str, algo: str, residual_on: str | None = None,
-                   name: str | None = None) -> TrainedPolicy:
+    def from_parts(
+        cls,
+        policy: Any,
+        normalizer: Any,
+        env_id: str,
+        algo: str,
+        residual_on: str | None = None,
+        name: str | None = None,
+    ) -> TrainedPolicy:
         """A TrainedPolicy around an in-memory SB3 ``policy`` and its observation ``normalizer``
         (a ``VecNormalize`` or None), e.g. the model being trained; nothing is copied, so it acts
         with the weights and statistics they hold when ``predict`` is called."""
@@ -169,8 +177,11 @@ def shipped_models(env_id: str) -> dict[str, Path]:
     root = MODELS_DIR / env_id
     if not root.is_dir():
         return {}
-    return {run.name: run for run in sorted(root.iterdir())
-            if (run / METADATA_FILE).is_file() and (run / MANIFEST_FILE).is_file()}
+    return {
+        run.name: run
+        for run in sorted(root.iterdir())
+        if (run / METADATA_FILE).is_file() and (run / MANIFEST_FILE).is_file()
+    }
 
 
 def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:

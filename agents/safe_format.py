@@ -87,16 +87,25 @@ POLICY_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE, TRAINING_STATE_
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
 #: Activation functions by the names that hyperparameter files and policy.json use.
 ACTIVATIONS: dict[str, type[torch.nn.Module]] = {
-    "tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU, "leaky_relu": torch.nn.LeakyReLU,
-    "gelu": torch.nn.GELU, "silu": torch.nn.SiLU,
+    "tanh": torch.nn.Tanh,
+    "relu": torch.nn.ReLU,
+    "elu": torch.nn.ELU,
+    "leaky_relu": torch.nn.LeakyReLU,
+    "gelu": torch.nn.GELU,
+    "silu": torch.nn.SiLU,
 }
 FEATURE_EXTRACTORS: dict[str, type[torch.nn.Module]] = {"FlattenExtractor": FlattenExtractor}
 OPTIMIZERS: dict[str, type[torch.optim.Optimizer]] = {
-    "Adam": torch.optim.Adam, "AdamW": torch.optim.AdamW, "RMSprop": torch.optim.RMSprop, "SGD": torch.optim.SGD,
+    "Adam": torch.optim.Adam,
+    "AdamW": torch.optim.AdamW,
+    "RMSprop": torch.optim.RMSprop,
+    "SGD": torch.optim.SGD,
 }
 #: Policy keyword arguments whose values are classes, and the only classes each may name.
 CLASS_KWARGS: dict[str, dict[str, type]] = {
-    "activation_fn": ACTIVATIONS, "features_extractor_class": FEATURE_EXTRACTORS, "optimizer_class": OPTIMIZERS,
+    "activation_fn": ACTIVATIONS,
+    "features_extractor_class": FEATURE_EXTRACTORS,
+    "optimizer_class": OPTIMIZERS,
 }
 #: Policy constructor arguments that the format stores separately (spaces) or replaces (schedule).
 _POSITIONAL = ("self", "observation_space", "action_space", "lr_schedule")
@@ -126,6 +135,7 @@ def _safetensors() -> Any:
 # ---------------------------------------------------------------------------------------------
 # JSON values
 # ---------------------------------------------------------------------------------------------
+
 
 def _reject_constant(name: str) -> None:
     raise ValueError(f"non-finite number {name} is not allowed here")
@@ -219,12 +229,15 @@ def _require(mapping: Any, key: str, kinds: type | tuple[type, ...], where: Path
 # Spaces and policy keyword arguments
 # ---------------------------------------------------------------------------------------------
 
+
 def encode_space(space: gymnasium.Space, where: str) -> dict[str, Any]:
     """A ``Box`` as JSON data: shape, dtype and every bound (non-finite bounds as text)."""
     if not isinstance(space, gymnasium.spaces.Box):
         raise PolicyFormatError(f"{where} is a {type(space).__name__}; the policy format stores Box spaces only")
     return {
-        "type": "Box", "shape": [int(n) for n in space.shape], "dtype": str(space.dtype),
+        "type": "Box",
+        "shape": [int(n) for n in space.shape],
+        "dtype": str(space.dtype),
         "low": [_encode_float(v) for v in np.ravel(space.low)],
         "high": [_encode_float(v) for v in np.ravel(space.high)],
     }
@@ -235,8 +248,11 @@ def decode_space(data: Any, where: str) -> gymnasium.spaces.Box:
     if not isinstance(data, dict) or data.get("type") != "Box":
         raise PolicyFormatError(f"{where} must be an object with type 'Box'; got {data!r}")
     shape = data.get("shape")
-    if not (isinstance(shape, list) and shape and all(isinstance(n, int) and not isinstance(n, bool) and n > 0
-                                                      for n in shape)):
+    if not (
+        isinstance(shape, list)
+        and shape
+        and all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in shape)
+    ):
         raise PolicyFormatError(f"{where}.shape must be a list of positive integers; got {shape!r}")
     dtype = data.get("dtype")
     if dtype not in ("float32", "float64"):
@@ -345,6 +361,7 @@ def _constant_schedule(_: float) -> float:
 # VecNormalize statistics
 # ---------------------------------------------------------------------------------------------
 
+
 @dataclasses.dataclass
 class NormalizationStatistics:
     """``VecNormalize``'s statistics and settings, without the wrapper and without pickle.
@@ -381,11 +398,17 @@ class NormalizationStatistics:
         if isinstance(normalizer.obs_rms, dict):
             raise PolicyFormatError("VecNormalize of dict observations is not supported by the policy format")
         return cls(
-            obs_mean=np.array(normalizer.obs_rms.mean), obs_var=np.array(normalizer.obs_rms.var),
-            obs_count=float(normalizer.obs_rms.count), ret_mean=np.array(normalizer.ret_rms.mean),
-            ret_var=np.array(normalizer.ret_rms.var), ret_count=float(normalizer.ret_rms.count),
-            clip_obs=float(normalizer.clip_obs), clip_reward=float(normalizer.clip_reward),
-            epsilon=float(normalizer.epsilon), gamma=float(normalizer.gamma), norm_obs=bool(normalizer.norm_obs),
+            obs_mean=np.array(normalizer.obs_rms.mean),
+            obs_var=np.array(normalizer.obs_rms.var),
+            obs_count=float(normalizer.obs_rms.count),
+            ret_mean=np.array(normalizer.ret_rms.mean),
+            ret_var=np.array(normalizer.ret_rms.var),
+            ret_count=float(normalizer.ret_rms.count),
+            clip_obs=float(normalizer.clip_obs),
+            clip_reward=float(normalizer.clip_reward),
+            epsilon=float(normalizer.epsilon),
+            gamma=float(normalizer.gamma),
+            norm_obs=bool(normalizer.norm_obs),
             norm_reward=bool(normalizer.norm_reward),
         )
 
@@ -409,18 +432,27 @@ class NormalizationStatistics:
         unchanged if ``norm_obs`` is off), as ``VecNormalize.normalize_obs`` does."""
         if not self.norm_obs:
             return np.array(obs, copy=True)
-        return np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs,
-                       self.clip_obs).astype(np.float32)
+        return np.clip(
+            (obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs, self.clip_obs
+        ).astype(np.float32)
 
     def to_json(self) -> str:
         def array(values: np.ndarray) -> dict[str, Any]:
-            return {"shape": list(values.shape), "dtype": str(values.dtype),
-                    "values": [_encode_float(v) for v in np.ravel(values)]}
+            return {
+                "shape": list(values.shape),
+                "dtype": str(values.dtype),
+                "values": [_encode_float(v) for v in np.ravel(values)],
+            }
 
         data = {
-            "format": "tether-gym-normalization", "format_version": FORMAT_VERSION,
-            "norm_obs": self.norm_obs, "norm_reward": self.norm_reward, "clip_obs": self.clip_obs,
-            "clip_reward": self.clip_reward, "epsilon": self.epsilon, "gamma": self.gamma,
+            "format": "tether-gym-normalization",
+            "format_version": FORMAT_VERSION,
+            "norm_obs": self.norm_obs,
+            "norm_reward": self.norm_reward,
+            "clip_obs": self.clip_obs,
+            "clip_reward": self.clip_reward,
+            "epsilon": self.epsilon,
+            "gamma": self.gamma,
             "obs_rms": {"mean": array(self.obs_mean), "var": array(self.obs_var), "count": self.obs_count},
             "ret_rms": {"mean": array(self.ret_mean), "var": array(self.ret_var), "count": self.ret_count},
         }
@@ -434,16 +466,20 @@ class NormalizationStatistics:
         if _require(table, "format", str, where) != "tether-gym-normalization":
             raise PolicyFormatError(f"{where} is not a tether-gym normalisation file (format {table['format']!r})")
         if _require(table, "format_version", int, where) != FORMAT_VERSION:
-            raise PolicyFormatError(f"{where}: format_version {table['format_version']} is not {FORMAT_VERSION}: "
-                                    f"use the tether-gym version that wrote it")
+            raise PolicyFormatError(
+                f"{where}: format_version {table['format_version']} is not {FORMAT_VERSION}: "
+                f"use the tether-gym version that wrote it"
+            )
 
         def array(entry: Any, key: str) -> np.ndarray:
             label = f"{where}: {key}"
             if not isinstance(entry, dict):
                 raise PolicyFormatError(f"{label} must be an object with shape, dtype and values")
             shape, dtype, values = entry.get("shape"), entry.get("dtype"), entry.get("values")
-            if not (isinstance(shape, list) and all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
-                                                    for n in shape)):
+            if not (
+                isinstance(shape, list)
+                and all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape)
+            ):
                 raise PolicyFormatError(f"{label}.shape must be a list of non-negative integers; got {shape!r}")
             if dtype not in ("float32", "float64"):
                 raise PolicyFormatError(f"{label}.dtype must be 'float32' or 'float64'; got {dtype!r}")
@@ -453,15 +489,18 @@ class NormalizationStatistics:
 
         obs_rms, ret_rms = _require(table, "obs_rms", dict, where), _require(table, "ret_rms", dict, where)
         statistics = cls(
-            obs_mean=array(obs_rms.get("mean"), "obs_rms.mean"), obs_var=array(obs_rms.get("var"), "obs_rms.var"),
+            obs_mean=array(obs_rms.get("mean"), "obs_rms.mean"),
+            obs_var=array(obs_rms.get("var"), "obs_rms.var"),
             obs_count=float(_require(obs_rms, "count", (int, float), where)),
-            ret_mean=array(ret_rms.get("mean"), "ret_rms.mean"), ret_var=array(ret_rms.get("var"), "ret_rms.var"),
+            ret_mean=array(ret_rms.get("mean"), "ret_rms.mean"),
+            ret_var=array(ret_rms.get("var"), "ret_rms.var"),
             ret_count=float(_require(ret_rms, "count", (int, float), where)),
             clip_obs=float(_require(table, "clip_obs", (int, float), where)),
             clip_reward=float(_require(table, "clip_reward", (int, float), where)),
             epsilon=float(_require(table, "epsilon", (int, float), where)),
             gamma=float(_require(table, "gamma", (int, float), where)),
-            norm_obs=_require(table, "norm_obs", bool, where), norm_reward=_require(table, "norm_reward", bool, where),
+            norm_obs=_require(table, "norm_obs", bool, where),
+            norm_reward=_require(table, "norm_reward", bool, where),
         )
         statistics._check(where)
         return statistics
@@ -485,6 +524,7 @@ class NormalizationStatistics:
 # ---------------------------------------------------------------------------------------------
 # Checksums
 # ---------------------------------------------------------------------------------------------
+
 
 def sha256_hex(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
@@ -568,21 +608,29 @@ def verify_manifest(directory: str | Path, strict: bool = True) -> None:
 # Saving
 # ---------------------------------------------------------------------------------------------
 
+
 def _versions() -> dict[str, str]:
     import stable_baselines3
 
     import tether_gym
 
-    return {"stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__,
-            "numpy": np.__version__, "gymnasium": gymnasium.__version__, "tether_gym": tether_gym.__version__,
-            "python": platform.python_version()}
+    return {
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "gymnasium": gymnasium.__version__,
+        "tether_gym": tether_gym.__version__,
+        "python": platform.python_version(),
+    }
 
 
 def tensor_bytes(tensors: Mapping[str, torch.Tensor], metadata: Mapping[str, str] | None = None) -> bytes:
     """``tensors`` (and text ``metadata``) as the bytes of a safetensors file."""
     # Cloned so that no two entries share storage, which safetensors refuses.
-    return _safetensors().save({key: value.detach().cpu().contiguous().clone() for key, value in tensors.items()},
-                               metadata=dict(metadata) if metadata else None)
+    return _safetensors().save(
+        {key: value.detach().cpu().contiguous().clone() for key, value in tensors.items()},
+        metadata=dict(metadata) if metadata else None,
+    )
 
 
 def load_tensors(data: bytes, where: Path) -> dict[str, torch.Tensor]:
@@ -590,23 +638,33 @@ def load_tensors(data: bytes, where: Path) -> dict[str, torch.Tensor]:
     try:
         return _safetensors().load(data)
     except Exception as error:  # noqa: BLE001 - safetensors raises its own error types for bad headers
-        raise PolicyFormatError(f"{where} is not a valid safetensors file ({error}): restore or re-create it") from error
+        raise PolicyFormatError(
+            f"{where} is not a valid safetensors file ({error}): restore or re-create it"
+        ) from error
 
 
 def policy_metadata(
-    model: BaseAlgorithm, env_id: str | None, provenance: Mapping[str, Any] | None, normalization: bool,
-    training_state: bool, residual_on: str | None = None,
+    model: BaseAlgorithm,
+    env_id: str | None,
+    provenance: Mapping[str, Any] | None,
+    normalization: bool,
+    training_state: bool,
+    residual_on: str | None = None,
 ) -> dict[str, Any]:
     """The ``policy.json`` of ``model`` (see the module docstring)."""
     policy_class = model.policy_class
     return {
-        "format": FORMAT, "format_version": FORMAT_VERSION,
-        "algo": _algo_name(model), "env_id": env_id, "policy": policy_alias(model),
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "algo": _algo_name(model),
+        "env_id": env_id,
+        "policy": policy_alias(model),
         "policy_kwargs": encode_policy_kwargs(policy_constructor_kwargs(model), policy_class),
         "observation_space": encode_space(model.observation_space, "observation_space"),
         "action_space": encode_space(model.action_space, "action_space"),
         "num_timesteps": int(model.num_timesteps),
-        "normalization": normalization, "training_state": training_state,
+        "normalization": normalization,
+        "training_state": training_state,
         "residual_on": residual_on,
         "versions": _versions(),
         "provenance": _json_value(dict(provenance or {}), "provenance"),
@@ -629,8 +687,9 @@ def save_policy(
     of files already in ``directory``, such as ``config.yml``). Returns the directory."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    statistics = (NormalizationStatistics.from_vec_normalize(normalizer) if isinstance(normalizer, VecNormalize)
-                  else normalizer)
+    statistics = (
+        NormalizationStatistics.from_vec_normalize(normalizer) if isinstance(normalizer, VecNormalize) else normalizer
+    )
     metadata = policy_metadata(model, env_id, provenance, statistics is not None, training_state, residual_on)
     written = [METADATA_FILE, WEIGHTS_FILE]
     atomic_write_bytes(directory / WEIGHTS_FILE, tensor_bytes(model.policy.state_dict()))
@@ -677,10 +736,15 @@ def _training_state(model: BaseAlgorithm) -> tuple[dict[str, torch.Tensor], dict
     for name in variable_names:
         tensors[f"variables/{name}"] = operator.attrgetter(name)(model)
     meta = {
-        "format": "tether-gym-training-state", "format_version": FORMAT_VERSION,
-        "optimizers": optimizers, "variables": list(variable_names),
-        "counters": {"num_timesteps": int(model.num_timesteps), "n_updates": int(getattr(model, "_n_updates", 0)),
-                     "episode_num": int(getattr(model, "_episode_num", 0))},
+        "format": "tether-gym-training-state",
+        "format_version": FORMAT_VERSION,
+        "optimizers": optimizers,
+        "variables": list(variable_names),
+        "counters": {
+            "num_timesteps": int(model.num_timesteps),
+            "n_updates": int(getattr(model, "_n_updates", 0)),
+            "episode_num": int(getattr(model, "_episode_num", 0)),
+        },
     }
     return tensors, meta
 
@@ -688,6 +752,7 @@ def _training_state(model: BaseAlgorithm) -> tuple[dict[str, torch.Tensor], dict
 # ---------------------------------------------------------------------------------------------
 # Loading
 # ---------------------------------------------------------------------------------------------
+
 
 @dataclasses.dataclass
 class LoadedPolicy:
@@ -813,19 +878,23 @@ def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer:
     where = directory / METADATA_FILE
     algo = _algo_name(model)
     if metadata["algo"] != algo:
-        raise PolicyFormatError(f"{where}: the checkpoint is a {metadata['algo']} model; resume it with --algo "
-                                f"{metadata['algo']} (not {algo})")
+        raise PolicyFormatError(
+            f"{where}: the checkpoint is a {metadata['algo']} model; resume it with --algo "
+            f"{metadata['algo']} (not {algo})"
+        )
     if not metadata["training_state"]:
         raise PolicyFormatError(
             f"{directory} holds a policy for inference only (no optimizer state): resume from a checkpoint "
             f"directory that agents.train wrote (checkpoints/<algo>_<steps>_steps, best/ or the run directory)"
         )
     ours = encode_policy_kwargs(policy_constructor_kwargs(model), model.policy_class)
-    differing = sorted(key for key in set(ours) | set(metadata["policy_kwargs"])
-                       if ours.get(key) != metadata["policy_kwargs"].get(key))
+    differing = sorted(
+        key for key in set(ours) | set(metadata["policy_kwargs"]) if ours.get(key) != metadata["policy_kwargs"].get(key)
+    )
     if differing or policy_alias(model) != metadata["policy"]:
-        details = "; ".join(f"{key}: checkpoint {metadata['policy_kwargs'].get(key)!r}, now {ours.get(key)!r}"
-                            for key in differing)
+        details = "; ".join(
+            f"{key}: checkpoint {metadata['policy_kwargs'].get(key)!r}, now {ours.get(key)!r}" for key in differing
+        )
         raise PolicyFormatError(
             f"{where}: the checkpoint's policy differs from the one the hyperparameters build ({details or 'policy'}): "
             f"resume with the run's hyperparameters (its config.yml)"
@@ -833,8 +902,9 @@ def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer:
     for key in ("observation_space", "action_space"):
         if decode_space(metadata.get(key), f"{where}: {key}") != getattr(model, key):
             raise PolicyFormatError(f"{where}: the checkpoint's {key} differs from the env's")
-    _load_state_dict(model.policy, load_tensors(reader.read(WEIGHTS_FILE), directory / WEIGHTS_FILE),
-                     directory / WEIGHTS_FILE)
+    _load_state_dict(
+        model.policy, load_tensors(reader.read(WEIGHTS_FILE), directory / WEIGHTS_FILE), directory / WEIGHTS_FILE
+    )
     meta_where = directory / TRAINING_META_FILE
     meta = _parse_json(reader.read(TRAINING_META_FILE), meta_where)
     if _require(meta, "format", str, meta_where) != "tether-gym-training-state":
@@ -885,13 +955,17 @@ def _restore_optimizer(
         if not isinstance(group, dict):
             raise PolicyFormatError(f"{where}: optimizer {name!r} has a malformed param group")
         # JSON has no tuples; give back tuples where the optimizer uses them (Adam's betas).
-        groups.append({key: tuple(value) if isinstance(current.get(key), tuple) and isinstance(value, list) else value
-                       for key, value in group.items()})
+        groups.append(
+            {
+                key: tuple(value) if isinstance(current.get(key), tuple) and isinstance(value, list) else value
+                for key, value in group.items()
+            }
+        )
     state: dict[int, dict[str, Any]] = {}
     prefix = f"{name}/state/"
     for key, tensor in tensors.items():
         if key.startswith(prefix):
-            index, _, entry = key[len(prefix):].partition("/")
+            index, _, entry = key[len(prefix) :].partition("/")
             state.setdefault(int(index), {})[entry] = tensor
     for index, entries in (saved.get("scalars") or {}).items():
         state.setdefault(int(index), {}).update(entries)
@@ -902,8 +976,12 @@ def _restore_optimizer(
 
 
 def reference_observations(
-    count: int, observation_space: gymnasium.spaces.Box, mean: np.ndarray | float, var: np.ndarray | float,
-    rng: np.random.Generator, rollout: Callable[[int], np.ndarray] | None = None,
+    count: int,
+    observation_space: gymnasium.spaces.Box,
+    mean: np.ndarray | float,
+    var: np.ndarray | float,
+    rng: np.random.Generator,
+    rollout: Callable[[int], np.ndarray] | None = None,
 ) -> np.ndarray:
     """(count, obs_dim) float32 observations to compare two implementations of a policy on: env
     observations from ``rollout(n)`` when given (half of them), the rest drawn around ``mean``

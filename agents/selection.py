@@ -35,8 +35,14 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.files import atomic_write_text
 
-__all__ = ["EVALUATIONS_FILE", "EVAL_SEEDS_START", "SeededEvaluation", "baseline_returns", "episode_returns",
-           "evaluation_seeds"]
+__all__ = [
+    "EVALUATIONS_FILE",
+    "EVAL_SEEDS_START",
+    "SeededEvaluation",
+    "baseline_returns",
+    "episode_returns",
+    "evaluation_seeds",
+]
 
 #: The evaluation log in the run's ``best/`` directory.
 EVALUATIONS_FILE = "evaluations.json"
@@ -51,15 +57,18 @@ def evaluation_seeds(episodes: int) -> list[int]:
     return list(range(EVAL_SEEDS_START, EVAL_SEEDS_START + int(episodes)))
 
 
-def episode_returns(controller: Any, env_id: str, seeds: list[int], env_kwargs: dict[str, Any] | None = None) -> np.ndarray:
+def episode_returns(
+    controller: Any, env_id: str, seeds: list[int], env_kwargs: dict[str, Any] | None = None
+) -> np.ndarray:
     """(E,) undiscounted return of ``controller`` in one episode per seed (``agents.evaluate.rollout``)."""
     from agents.evaluate import rollout
 
     return rollout(controller, env_id, seeds, env_kwargs=env_kwargs).rewards.sum(axis=1)
 
 
-def baseline_returns(env_id: str, seeds: list[int],
-                     env_kwargs: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], str]:
+def baseline_returns(
+    env_id: str, seeds: list[int], env_kwargs: dict[str, Any] | None = None
+) -> tuple[dict[str, np.ndarray], str]:
     """Every scripted baseline's (E,) returns on ``seeds``, and the bar: the best eligible one
     (:func:`agents.benchmark.best_eligible_baseline`)."""
     import gymnasium as gym
@@ -90,9 +99,18 @@ class SeededEvaluation(BaseCallback):
         verbose: 1 prints a line per evaluation.
     """
 
-    def __init__(self, env_id: str, episodes: int, every: int, log_dir: Path, on_new_best: BaseCallback,
-                 started: float, env_kwargs: dict[str, Any] | None = None, residual_on: str | None = None,
-                 verbose: int = 1) -> None:
+    def __init__(
+        self,
+        env_id: str,
+        episodes: int,
+        every: int,
+        log_dir: Path,
+        on_new_best: BaseCallback,
+        started: float,
+        env_kwargs: dict[str, Any] | None = None,
+        residual_on: str | None = None,
+        verbose: int = 1,
+    ) -> None:
         super().__init__(verbose=verbose)
         self.env_id, self.seeds, self.every = env_id, evaluation_seeds(episodes), max(int(every), 1)
         self.log_dir, self.on_new_best, self.started = Path(log_dir), on_new_best, started
@@ -123,8 +141,13 @@ class SeededEvaluation(BaseCallback):
         residual policy's baseline is designed once, not at every evaluation)."""
         from agents.policies import TrainedPolicy
 
-        policy = TrainedPolicy.from_parts(self.model.policy, self.model.get_vec_normalize_env(), self.env_id,
-                                          algo=type(self.model).__name__.lower(), residual_on=self.residual_on)
+        policy = TrainedPolicy.from_parts(
+            self.model.policy,
+            self.model.get_vec_normalize_env(),
+            self.env_id,
+            algo=type(self.model).__name__.lower(),
+            residual_on=self.residual_on,
+        )
         if self.residual_on is not None:
             import gymnasium as gym
 
@@ -147,9 +170,13 @@ class SeededEvaluation(BaseCallback):
         paired = paired_difference(returns, bar_returns)
         wall = time.perf_counter() - self.started
         entry = {
-            "timesteps": int(self.num_timesteps), "wall_time_s": round(wall, 2),
-            "mean_return": float(returns.mean()), "returns": returns.tolist(),
-            "difference_vs_bar": paired.mean, "difference_low": paired.low, "difference_high": paired.high,
+            "timesteps": int(self.num_timesteps),
+            "wall_time_s": round(wall, 2),
+            "mean_return": float(returns.mean()),
+            "returns": returns.tolist(),
+            "difference_vs_bar": paired.mean,
+            "difference_low": paired.low,
+            "difference_high": paired.high,
             "wins": paired.wins,
         }
         self.history.append(entry)
@@ -164,19 +191,26 @@ class SeededEvaluation(BaseCallback):
             self.best_mean = float(returns.mean())
             self.on_new_best.on_step()
         if self.verbose:
-            print(f"eval at {entry['timesteps']:,} steps ({wall:.0f} s): return {returns.mean():.2f}, "
-                  f"vs {self.bar} {paired.mean:+.2f} [{paired.low:+.2f}, {paired.high:+.2f}]"
-                  + (" (new best)" if new_best else ""), flush=True)
+            print(
+                f"eval at {entry['timesteps']:,} steps ({wall:.0f} s): return {returns.mean():.2f}, "
+                f"vs {self.bar} {paired.mean:+.2f} [{paired.low:+.2f}, {paired.high:+.2f}]"
+                + (" (new best)" if new_best else ""),
+                flush=True,
+            )
         self.write()
         return entry
 
     def summary(self) -> dict[str, Any]:
         """What the run's ``best/evaluations.json`` holds."""
         return {
-            "env_id": self.env_id, "seeds": [self.seeds[0], self.seeds[-1]],
+            "env_id": self.env_id,
+            "seeds": [self.seeds[0], self.seeds[-1]],
             "baselines": {name: float(r.mean()) for name, r in self.baseline_returns.items()},
-            "bar": self.bar, "best_mean_return": None if not self.history else self.best_mean,
-            "first_beat": self.first_beat, "training": self.finished, "evaluations": self.history,
+            "bar": self.bar,
+            "best_mean_return": None if not self.history else self.best_mean,
+            "first_beat": self.first_beat,
+            "training": self.finished,
+            "evaluations": self.history,
         }
 
     def finish(self, timesteps: int) -> None:

@@ -19,11 +19,12 @@ other ids or algorithms are kept, so runs can be shipped id by id.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import shlex
 import shutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,7 @@ from agents.safe_format import (
 )
 from agents.selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
 
-__all__ = ["evaluate_candidates", "main", "ship"]
+__all__ = ["evaluate_candidates", "main", "reproduce_command", "ship"]
 
 SHIPPED_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE)
 RUNS_TABLE = "training_runs"
@@ -81,8 +82,14 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
     seeds = evaluation_seeds(episodes)
     baselines: dict[str, tuple[dict[str, np.ndarray], str]] = {}
     candidates = []
+    weights_seen: set[str] = set()
     for run in map(Path, runs):
         policy_dir = _policy_dir(run)
+        # A shipped model passed beside the run it came from is one candidate, not two.
+        weights = hashlib.sha256((policy_dir / WEIGHTS_FILE).read_bytes()).hexdigest()
+        if weights in weights_seen:
+            continue
+        weights_seen.add(weights)
         metadata = read_metadata(policy_dir)
         env_id = metadata["env_id"]
         if env_id is None:
@@ -98,15 +105,28 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
         paired = paired_difference(returns, by_name[bar])
         config, log = _config(run, policy_dir), _training_log(run, policy_dir)
         training = (log or {}).get("training") or {}
-        candidates.append({
-            "env_id": env_id, "algo": metadata["algo"], "run": str(run), "policy": str(policy_dir),
-            "seed": config.get("seed"), "command": config.get("command"), "timesteps": metadata["num_timesteps"],
-            "wall_time_s": training.get("wall_time_s"), "residual_on": metadata.get("residual_on"),
-            "mean_return": float(returns.mean()), "bar": bar, "bar_mean_return": float(by_name[bar].mean()),
-            "difference": paired.mean, "difference_low": paired.low, "difference_high": paired.high,
-            "baselines": {name: float(r.mean()) for name, r in by_name.items()},
-            "first_beat": (log or {}).get("first_beat"), "seeds": [seeds[0], seeds[-1]],
-        })
+        candidates.append(
+            {
+                "env_id": env_id,
+                "algo": metadata["algo"],
+                "run": str(run),
+                "policy": str(policy_dir),
+                "seed": config.get("seed"),
+                "command": config.get("command"),
+                "timesteps": metadata["num_timesteps"],
+                "wall_time_s": training.get("wall_time_s"),
+                "residual_on": metadata.get("residual_on"),
+                "mean_return": float(returns.mean()),
+                "bar": bar,
+                "bar_mean_return": float(by_name[bar].mean()),
+                "difference": paired.mean,
+                "difference_low": paired.low,
+                "difference_high": paired.high,
+                "baselines": {name: float(r.mean()) for name, r in by_name.items()},
+                "first_beat": (log or {}).get("first_beat"),
+                "seeds": [seeds[0], seeds[-1]],
+            }
+        )
     return candidates
 
 
@@ -127,24 +147,35 @@ def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) ->
     env.close()
     statistics = policy.normalizer
     mean, var = (statistics.obs_mean, statistics.obs_var) if statistics is not None else (0.0, 1.0)
-    observations = reference_observations(count, policy.policy.observation_space, mean, var,
-                                           np.random.default_rng(0),
-                                           trajectory_observations(lambda obs: policy.predict(obs)[0], env_id))
+    observations = reference_observations(
+        count,
+        policy.policy.observation_space,
+        mean,
+        var,
+        np.random.default_rng(0),
+        trajectory_observations(lambda obs: policy.predict(obs)[0], env_id),
+    )
     actions = _safe_actions(directory, observations)
-    atomic_write_bytes(directory / REFERENCE_FILE, tensor_bytes(
-        {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(actions))},
-        metadata={"pipeline": "normalization.json, then the policy's predict(deterministic=True)"}))
+    atomic_write_bytes(
+        directory / REFERENCE_FILE,
+        tensor_bytes(
+            {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(actions))},
+            metadata={"pipeline": "normalization.json, then the policy's predict(deterministic=True)"},
+        ),
+    )
 
 
 def _markdown(entries: list[dict[str, Any]]) -> str:
     lines = [
         "# Training runs and the shipped models",
         "",
-        ("Every training run considered for shipping, evaluated on the evaluation seeds "
-        f"({entries[0]['seeds'][0]}..{entries[0]['seeds'][1]}, never the benchmark's held-out seeds). "
-        "Δ: paired difference of the mean return from the id's best scripted baseline on those seeds (95 % t "
-        "interval). Beat: wall time from the start of the training command to the first evaluation whose "
-        "mean return beat that baseline's (— never). Made by `python -m agents.ship`."),
+        (
+            "Every training run considered for shipping, evaluated on the evaluation seeds "
+            f"({entries[0]['seeds'][0]}..{entries[0]['seeds'][1]}, never the benchmark's held-out seeds). "
+            "Δ: paired difference of the mean return from the id's best scripted baseline on those seeds (95 % t "
+            "interval). Beat: wall time from the start of the training command to the first evaluation whose "
+            "mean return beat that baseline's (— never). Made by `python -m agents.ship`."
+        ),
         "",
         "| id | algo | seed | steps | wall time | mean return | best baseline | Δ vs best baseline | beat velocity feedback | beat best baseline | shipped |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -163,22 +194,41 @@ def _markdown(entries: list[dict[str, Any]]) -> str:
             f"| {entry['difference']:+.2f} [{entry['difference_low']:+.2f}, {entry['difference_high']:+.2f}] "
             f"| {beat(entry, 'velocity_feedback')} | {beat(entry, entry['bar'])} | {'**yes**' if entry['shipped'] else ''} |"
         )
-    lines += ["", "## Shipped models (the command that reproduces each)", "",
-              "| id | algo | seed | steps | wall time | command |", "|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "## Shipped models (the command that reproduces each)",
+        "",
+        "| id | algo | seed | steps | wall time | command |",
+        "|---|---|---|---|---|---|",
+    ]
     for entry in sorted((e for e in entries if e["shipped"]), key=lambda e: (e["env_id"], e["algo"])):
         wall = "?" if entry["wall_time_s"] is None else f"{entry['wall_time_s'] / 60:.1f} min"
-        lines.append(f"| {entry['env_id']} | {entry['algo']} | {entry['seed']} | {entry['timesteps'] / 1e6:.2f} M "
-                     f"| {wall} | `{entry['command']}` |")
+        lines.append(
+            f"| {entry['env_id']} | {entry['algo']} | {entry['seed']} | {entry['timesteps'] / 1e6:.2f} M "
+            f"| {wall} | `{entry.get('reproduce') or entry['command']}` |"
+        )
     return "\n".join(lines) + "\n"
 
 
-def ship(runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force: bool = False,
-         command: str | None = None) -> list[dict[str, Any]]:
+def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
+    """The training command that reproduces a shipped model: its own ``config.yml`` holds the
+    hyperparameters it was trained with, so the command stays true when the YAML files are retuned."""
+    env_id, algo = candidate["env_id"], candidate["algo"]
+    return (
+        f"python -m agents.train --algo {algo} --env {env_id} --seed {candidate['seed']} "
+        f"--hyperparams {Path(shipped_at) / env_id / algo / 'config.yml'}"
+    )
+
+
+def ship(
+    runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force: bool = False, command: str | None = None
+) -> list[dict[str, Any]]:
     """Evaluate ``runs``, ship the best per id and algorithm into ``out`` (see the module
     docstring) and return every candidate's record (with ``shipped``).
 
     An existing shipped model is replaced only with ``force``; to keep it in the running, pass
     its directory among ``runs`` (every candidate is evaluated before anything is replaced)."""
+    shipped_at = str(out)
     out = prepare_output_dir(out, argument="--out")
     candidates = evaluate_candidates(runs, episodes)
     chosen: dict[tuple[str, str], dict[str, Any]] = {}
@@ -192,6 +242,8 @@ def ship(runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force:
             raise OutputError(f"{target} already holds a shipped model: pass --force to replace it")
     for candidate in candidates:
         candidate["shipped"] = chosen[(candidate["env_id"], candidate["algo"])] is candidate
+        if candidate["shipped"]:
+            candidate["reproduce"] = reproduce_command(candidate, shipped_at)
     for (env_id, algo), candidate in chosen.items():
         target, source = out / env_id / algo, Path(candidate["policy"])
         if source.resolve() == target.resolve():
@@ -223,9 +275,11 @@ def ship(runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force:
     atomic_write_text(table, json.dumps({"command": command, "runs": entries}, indent=1) + "\n")
     atomic_write_text(out / f"{RUNS_TABLE}.md", _markdown(entries))
     for candidate in candidates:
-        print(f"{candidate['env_id']} {candidate['algo']} seed {candidate['seed']}: {candidate['mean_return']:.2f} "
-              f"(vs {candidate['bar']} {candidate['difference']:+.2f} [{candidate['difference_low']:+.2f}, "
-              f"{candidate['difference_high']:+.2f}]){'  <- shipped' if candidate['shipped'] else ''}")
+        print(
+            f"{candidate['env_id']} {candidate['algo']} seed {candidate['seed']}: {candidate['mean_return']:.2f} "
+            f"(vs {candidate['bar']} {candidate['difference']:+.2f} [{candidate['difference_low']:+.2f}, "
+            f"{candidate['difference_high']:+.2f}]){'  <- shipped' if candidate['shipped'] else ''}"
+        )
     return candidates
 
 
@@ -241,8 +295,13 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     arguments = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(arguments)
-    return ship(args.runs, args.out, episodes=args.episodes, force=args.force,
-                command=shlex.join(["python", "-m", "agents.ship", *arguments]))
+    return ship(
+        args.runs,
+        args.out,
+        episodes=args.episodes,
+        force=args.force,
+        command=shlex.join(["python", "-m", "agents.ship", *arguments]),
+    )
 
 
 if __name__ == "__main__":

@@ -88,17 +88,36 @@ from agents.selection import EVALUATIONS_FILE, SeededEvaluation
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
-__all__ = ["ACTIVATIONS", "ALGORITHMS", "HyperparameterError", "load_hyperparameters", "make_training_env", "train",
-           "validate_hyperparameters"]
+__all__ = [
+    "ACTIVATIONS",
+    "ALGORITHMS",
+    "HyperparameterError",
+    "load_hyperparameters",
+    "make_training_env",
+    "train",
+    "validate_hyperparameters",
+]
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 #: Keys of a hyperparameter entry that are not passed to the algorithm's constructor.
-RUN_KEYS = ("n_timesteps", "n_envs", "normalize", "policy", "env_kwargs", "curriculum", "residual_on",
-            "action_noise_std")
+RUN_KEYS = (
+    "n_timesteps",
+    "n_envs",
+    "normalize",
+    "policy",
+    "env_kwargs",
+    "curriculum",
+    "residual_on",
+    "action_noise_std",
+)
 #: Constructor arguments that agents.train sets itself, and where the user sets them instead.
 CONTROLLED_KEYS = {
-    "env": "the env comes from --env", "seed": "use --seed", "device": "training runs on the CPU",
-    "verbose": "use --verbose", "tensorboard_log": "logs go to <run>/tensorboard", "_init_setup_model": "internal to SB3",
+    "env": "the env comes from --env",
+    "seed": "use --seed",
+    "device": "training runs on the CPU",
+    "verbose": "use --verbose",
+    "tensorboard_log": "logs go to <run>/tensorboard",
+    "_init_setup_model": "internal to SB3",
 }
 #: Keys that take a number or "lin_<number>" (linear decay to 0 over training).
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
@@ -115,9 +134,14 @@ class HyperparameterError(ValueError):
 # Hyperparameters
 # ---------------------------------------------------------------------------------------------
 
+RUN_CONFIG_KEYS = frozenset({"algo", "env_id", "hyperparams"})
+
+
 def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
     """The checked hyperparameters of ``algo`` for ``env_id``: the id's entry of the YAML file, or
-    its ``default`` entry. ``path`` overrides ``agents/hyperparams/<algo>.yml``.
+    its ``default`` entry. ``path`` overrides ``agents/hyperparams/<algo>.yml``; it may also be a
+    run's ``config.yml`` (as every run directory and shipped model holds), whose recorded
+    hyperparameters are then used as they are.
 
     Raises :class:`HyperparameterError` (naming the file, the entry and the key) for unreadable
     YAML, a missing entry, a missing ``n_timesteps``, an unknown key, or a value of the wrong
@@ -136,8 +160,11 @@ def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None)
     if table is None:
         table = {}
     if not isinstance(table, dict):
-        raise HyperparameterError(f"{file} must map env ids (or 'default') to hyperparameter entries; "
-                                  f"got a {type(table).__name__}")
+        raise HyperparameterError(
+            f"{file} must map env ids (or 'default') to hyperparameter entries; got a {type(table).__name__}"
+        )
+    if RUN_CONFIG_KEYS <= table.keys():
+        return _run_config_hyperparameters(algo, env_id, file, table)
     name = env_id if env_id in table else "default"
     if name not in table:
         raise HyperparameterError(
@@ -147,6 +174,21 @@ def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None)
     if not isinstance(entry, dict):
         raise HyperparameterError(f"{file}, entry {name!r}: must be a mapping of hyperparameters; got {entry!r}")
     return validate_hyperparameters(algo, entry, where=f"{file}, entry {name!r}")
+
+
+def _run_config_hyperparameters(algo: str, env_id: str, file: Path, config: dict[str, Any]) -> dict[str, Any]:
+    """The hyperparameters recorded in a run's (or a shipped model's) ``config.yml``: training with
+    them reproduces that run whatever ``agents/hyperparams`` says today."""
+    for key, wanted in (("algo", algo), ("env_id", env_id)):
+        if config[key] != wanted:
+            option = "--algo" if key == "algo" else "--env"
+            raise HyperparameterError(
+                f"{file} records a {config['algo']} run on {config['env_id']}: pass "
+                f"{option} {config[key]} to reproduce it (got {wanted})"
+            )
+    if not isinstance(config["hyperparams"], dict):
+        raise HyperparameterError(f"{file}: 'hyperparams' must be a mapping; got {config['hyperparams']!r}")
+    return validate_hyperparameters(algo, config["hyperparams"], where=f"{file}, 'hyperparams'")
 
 
 def _components(annotation: Any) -> tuple[Any, ...]:
@@ -207,10 +249,16 @@ def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
     elif isinstance(value, str):
         if str in kinds:
             return value
-        raise HyperparameterError(f"{label} must be {_describe(kinds)}; got the text {value!r}{_number_text_hint(value)}")
+        raise HyperparameterError(
+            f"{label} must be {_describe(kinds)}; got the text {value!r}{_number_text_hint(value)}"
+        )
     elif isinstance(value, list) and tuple in kinds:
-        if len(value) == 2 and isinstance(value[0], int) and not isinstance(value[0], bool) and value[1] in (
-                "step", "episode"):
+        if (
+            len(value) == 2
+            and isinstance(value[0], int)
+            and not isinstance(value[0], bool)
+            and value[1] in ("step", "episode")
+        ):
             return (value[0], value[1])
         raise HyperparameterError(f"{label} must be an integer or [integer, 'step' or 'episode']; got {value!r}")
     elif isinstance(value, dict) and dict in kinds:
@@ -218,15 +266,23 @@ def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
             raise HyperparameterError(f"{label} must have string keys; got {list(value)}")
         for name, entry in value.items():
             if isinstance(entry, str) and _number_text_hint(entry):
-                raise HyperparameterError(f"{where}: '{key}.{name}' is the text {entry!r}, not a number"
-                                          f"{_number_text_hint(entry)}")
+                raise HyperparameterError(
+                    f"{where}: '{key}.{name}' is the text {entry!r}, not a number{_number_text_hint(entry)}"
+                )
         return value
     raise HyperparameterError(f"{label} must be {_describe(kinds)}; got {value!r} ({type(value).__name__})")
 
 
 def _describe(kinds: set[Any]) -> str:
-    names = {int: "an integer", float: "a number", bool: "true or false", str: "text", dict: "a mapping",
-             tuple: "[integer, 'step' or 'episode']", type(None): "empty"}
+    names = {
+        int: "an integer",
+        float: "a number",
+        bool: "true or false",
+        str: "text",
+        dict: "a mapping",
+        tuple: "[integer, 'step' or 'episode']",
+        type(None): "empty",
+    }
     if float in kinds:
         kinds = kinds - {int}
     return " or ".join(names[kind] for kind in sorted(kinds, key=lambda kind: list(names).index(kind)))
@@ -240,18 +296,38 @@ def _unknown_key(key: str, known: list[str], where: str, what: str) -> Hyperpara
 
 def _keyword_parameters(cls: type) -> dict[str, inspect.Parameter]:
     keyword = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    return {name: p for name, p in inspect.signature(cls.__init__).parameters.items()
-            if name != "self" and p.kind in keyword}
+    return {
+        name: p
+        for name, p in inspect.signature(cls.__init__).parameters.items()
+        if name != "self" and p.kind in keyword
+    }
 
 
 def _check_range(key: str, value: Any, where: str) -> None:
     """The ranges SB3 would otherwise reject deep inside, or silently misuse."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return
-    positive = ("n_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "buffer_size", "learning_rate",
-                "clip_range", "train_freq", "policy_delay", "target_update_interval")
-    non_negative = ("learning_starts", "vf_coef", "max_grad_norm", "target_policy_noise", "target_noise_clip",
-                    "action_noise_std")
+    positive = (
+        "n_timesteps",
+        "n_envs",
+        "n_steps",
+        "batch_size",
+        "n_epochs",
+        "buffer_size",
+        "learning_rate",
+        "clip_range",
+        "train_freq",
+        "policy_delay",
+        "target_update_interval",
+    )
+    non_negative = (
+        "learning_starts",
+        "vf_coef",
+        "max_grad_norm",
+        "target_policy_noise",
+        "target_noise_clip",
+        "action_noise_std",
+    )
     unit = ("gamma", "gae_lambda", "tau")
     if key in positive and not value > 0:
         raise HyperparameterError(f"{where}: {key!r} must be positive; got {value!r}")
@@ -274,13 +350,17 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
     if not isinstance(policy, str) or policy not in cls.policy_aliases:
         raise HyperparameterError(f"{where}: 'policy' must be one of {sorted(cls.policy_aliases)}; got {policy!r}")
     if "n_timesteps" not in entry:
-        raise HyperparameterError(f"{where}: 'n_timesteps' is missing: add the number of env steps to train for "
-                                  f"(e.g. n_timesteps: 2000000), or pass --timesteps")
+        raise HyperparameterError(
+            f"{where}: 'n_timesteps' is missing: add the number of env steps to train for "
+            f"(e.g. n_timesteps: 2000000), or pass --timesteps"
+        )
     for key, value in entry.items():
         if not isinstance(key, str):
             raise HyperparameterError(f"{where}: key {key!r} is not text")
         if key in CONTROLLED_KEYS:
-            raise HyperparameterError(f"{where}: {key!r} cannot be set in a hyperparameter file: {CONTROLLED_KEYS[key]}")
+            raise HyperparameterError(
+                f"{where}: {key!r} cannot be set in a hyperparameter file: {CONTROLLED_KEYS[key]}"
+            )
         if key == "n_timesteps":
             checked[key] = _check_value(key, value, int, where)
         elif key == "n_envs":
@@ -295,8 +375,10 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
             checked[key] = _check_curriculum(value, where)
         elif key == "action_noise_std":
             if algo == "ppo":
-                raise HyperparameterError(f"{where}: 'action_noise_std' is for sac and td3; PPO explores with "
-                                          "its own policy noise (policy_kwargs.log_std_init)")
+                raise HyperparameterError(
+                    f"{where}: 'action_noise_std' is for sac and td3; PPO explores with "
+                    "its own policy noise (policy_kwargs.log_std_init)"
+                )
             checked[key] = _check_value(key, value, float, where)
         elif key == "residual_on":
             try:
@@ -313,10 +395,11 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
                 checked[key] = value
         elif key in parameters:
             if key in ("ent_coef", "target_entropy") and isinstance(value, str) and algo == "sac":
-                if not (value == "auto" or key == "ent_coef" and value.startswith("auto_")
-                        and _is_number(value[5:])):
-                    raise HyperparameterError(f"{where}: {key!r} must be a number or 'auto'"
-                                              f"{' or auto_<number>' if key == 'ent_coef' else ''}; got {value!r}")
+                if not (value == "auto" or key == "ent_coef" and value.startswith("auto_") and _is_number(value[5:])):
+                    raise HyperparameterError(
+                        f"{where}: {key!r} must be a number or 'auto'"
+                        f"{' or auto_<number>' if key == 'ent_coef' else ''}; got {value!r}"
+                    )
                 checked[key] = value
             else:
                 checked[key] = _check_value(key, value, parameters[key].annotation, where)
@@ -338,8 +421,9 @@ def _check_normalize(value: Any, where: str) -> bool | dict[str, Any]:
     if isinstance(value, bool):
         return value
     if not isinstance(value, dict):
-        raise HyperparameterError(f"{where}: 'normalize' must be true, false or a mapping of VecNormalize "
-                                  f"options; got {value!r}")
+        raise HyperparameterError(
+            f"{where}: 'normalize' must be true, false or a mapping of VecNormalize options; got {value!r}"
+        )
     parameters = {name: p for name, p in _keyword_parameters(VecNormalize).items() if name not in ("venv", "training")}
     checked = {}
     for key, option in value.items():
@@ -356,8 +440,9 @@ def _check_curriculum(value: Any, where: str) -> dict[str, float] | None:
     if value is None or value is False:
         return None
     if not isinstance(value, dict) or set(value) != {"start", "fraction"}:
-        raise HyperparameterError(f"{where}: 'curriculum' must be a mapping with exactly 'start' and 'fraction'; "
-                                  f"got {value!r}")
+        raise HyperparameterError(
+            f"{where}: 'curriculum' must be a mapping with exactly 'start' and 'fraction'; got {value!r}"
+        )
     checked = {key: _check_value(f"curriculum.{key}", value[key], float, where) for key in ("start", "fraction")}
     if not (0.0 <= checked["start"] <= 1.0 and 0.0 < checked["fraction"] <= 1.0):
         raise HyperparameterError(f"{where}: 'curriculum' needs start in [0, 1] and fraction in (0, 1]; got {value}")
@@ -366,8 +451,9 @@ def _check_curriculum(value: Any, where: str) -> dict[str, float] | None:
 
 def _check_net_arch(value: Any, where: str) -> Any:
     def layers(sizes: Any, label: str) -> list[int]:
-        if not isinstance(sizes, list) or not all(isinstance(n, int) and not isinstance(n, bool) and n > 0
-                                                  for n in sizes):
+        if not isinstance(sizes, list) or not all(
+            isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in sizes
+        ):
             raise HyperparameterError(f"{where}: {label!r} must be a list of positive layer sizes; got {sizes!r}")
         return sizes
 
@@ -381,8 +467,11 @@ def _check_policy_kwargs(value: Any, policy_class: type, where: str) -> dict[str
         return {}
     if not isinstance(value, dict):
         raise HyperparameterError(f"{where}: 'policy_kwargs' must be a mapping; got {value!r}")
-    parameters = {name: p for name, p in _keyword_parameters(policy_class).items()
-                  if name not in ("observation_space", "action_space", "lr_schedule")}
+    parameters = {
+        name: p
+        for name, p in _keyword_parameters(policy_class).items()
+        if name not in ("observation_space", "action_space", "lr_schedule")
+    }
     checked = {}
     for key, option in value.items():
         label = f"policy_kwargs.{key}"
@@ -390,7 +479,9 @@ def _check_policy_kwargs(value: Any, policy_class: type, where: str) -> dict[str
             raise _unknown_key(str(key), list(parameters), f"{where}: policy_kwargs", policy_class.__name__)
         if key in CLASS_KWARGS:
             if option not in CLASS_KWARGS[key]:
-                raise HyperparameterError(f"{where}: {label!r} must be one of {sorted(CLASS_KWARGS[key])}; got {option!r}")
+                raise HyperparameterError(
+                    f"{where}: {label!r} must be one of {sorted(CLASS_KWARGS[key])}; got {option!r}"
+                )
             checked[key] = option
         elif key == "net_arch":
             checked[key] = _check_net_arch(option, where)
@@ -403,8 +494,10 @@ def _schedule(value: Any, name: str, where: str = "hyperparameters") -> float | 
     """A positive number, or "lin_<number>": linear decay from that number to 0 over training."""
     if isinstance(value, str):
         if not (value.startswith("lin_") and _is_number(value[4:]) and float(value[4:]) > 0):
-            raise HyperparameterError(f"{where}: {name!r} must be a positive number or 'lin_<number>' "
-                                      f"(linear decay to 0); got {value!r}{_number_text_hint(value)}")
+            raise HyperparameterError(
+                f"{where}: {name!r} must be a positive number or 'lin_<number>' "
+                f"(linear decay to 0); got {value!r}{_number_text_hint(value)}"
+            )
         start = float(value[4:])
         return lambda progress_remaining: progress_remaining * start
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
@@ -461,8 +554,13 @@ def start_at_the_baseline(model: BaseAlgorithm) -> None:
 
 
 def make_training_env(
-    env_id: str, num_envs: int, seed: int, normalize: Any, env_kwargs: Mapping[str, Any] | None = None,
-    training: bool = True, residual_on: str | None = None,
+    env_id: str,
+    num_envs: int,
+    seed: int,
+    normalize: Any,
+    env_kwargs: Mapping[str, Any] | None = None,
+    training: bool = True,
+    residual_on: str | None = None,
 ) -> VecEnv:
     """The native vector env of ``env_id`` through the SB3 adapter, with ``VecMonitor`` and, if
     ``normalize`` is truthy (a bool or ``VecNormalize`` keyword arguments), ``VecNormalize``;
@@ -484,14 +582,22 @@ def make_training_env(
 # Callbacks
 # ---------------------------------------------------------------------------------------------
 
+
 class SafePolicySaver(BaseCallback):
     """Saves the model, the training env's ``VecNormalize`` statistics and the optimizer state in
     the safe format: into ``directory`` on every call (as EvalCallback's ``callback_on_new_best``),
     or, with ``every`` steps, into ``directory/<prefix>_<timesteps>_steps/`` every ``every``
     calls (checkpoints)."""
 
-    def __init__(self, directory: Path, env_id: str, provenance: Mapping[str, Any], every: int | None = None,
-                 prefix: str = "", residual_on: str | None = None) -> None:
+    def __init__(
+        self,
+        directory: Path,
+        env_id: str,
+        provenance: Mapping[str, Any],
+        every: int | None = None,
+        prefix: str = "",
+        residual_on: str | None = None,
+    ) -> None:
         super().__init__()
         self.directory, self.env_id, self.provenance = directory, env_id, dict(provenance)
         self.every, self.prefix, self.residual_on = every, prefix, residual_on
@@ -504,8 +610,15 @@ class SafePolicySaver(BaseCallback):
         return True
 
     def _save(self, directory: Path) -> None:
-        save_policy(directory, self.model, self.model.get_vec_normalize_env(), self.env_id, self.provenance,
-                    training_state=True, residual_on=self.residual_on)
+        save_policy(
+            directory,
+            self.model,
+            self.model.get_vec_normalize_env(),
+            self.env_id,
+            self.provenance,
+            training_state=True,
+            residual_on=self.residual_on,
+        )
 
 
 class DifficultyCurriculum(BaseCallback):
@@ -551,6 +664,7 @@ class DifficultyCurriculum(BaseCallback):
 # ---------------------------------------------------------------------------------------------
 # The run directory
 # ---------------------------------------------------------------------------------------------
+
 
 def _earlier_run_files(run: Path) -> list[str]:
     """What an earlier run left in ``run`` (relative names), empty for a new run directory."""
@@ -604,7 +718,8 @@ def _clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
     if checkpoints.is_dir():
         for entry in checkpoints.iterdir():
             ours = (entry.is_dir() and (entry / METADATA_FILE).is_file()) or (
-                entry.suffix in (".zip", ".pkl") and entry.name.startswith(f"{algo}_"))
+                entry.suffix in (".zip", ".pkl") and entry.name.startswith(f"{algo}_")
+            )
             if ours:
                 remove(entry)
 
@@ -615,16 +730,22 @@ def _resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: st
     PolicyFormatError for a safe checkpoint of another algorithm or env, or without training state."""
     path = Path(resume)
     if not path.exists():
-        raise FileNotFoundError(f"--resume {path} does not exist: pass a checkpoint directory "
-                                f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory")
+        raise FileNotFoundError(
+            f"--resume {path} does not exist: pass a checkpoint directory "
+            f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory"
+        )
     if is_policy_dir(path):
         metadata = read_metadata(path)
         if metadata["algo"] != algo:
-            raise PolicyFormatError(f"--resume {path} is a {metadata['algo']} checkpoint; resume it with --algo "
-                                    f"{metadata['algo']} (not {algo})")
+            raise PolicyFormatError(
+                f"--resume {path} is a {metadata['algo']} checkpoint; resume it with --algo "
+                f"{metadata['algo']} (not {algo})"
+            )
         if metadata["env_id"] != env_id:
-            raise PolicyFormatError(f"--resume {path} was trained on {metadata['env_id']}; resume it with --env "
-                                    f"{metadata['env_id']} (not {env_id})")
+            raise PolicyFormatError(
+                f"--resume {path} was trained on {metadata['env_id']}; resume it with --env "
+                f"{metadata['env_id']} (not {env_id})"
+            )
         if not metadata["training_state"]:
             raise PolicyFormatError(
                 f"--resume {path} holds a policy for inference only (no optimizer state): resume from a checkpoint "
@@ -637,8 +758,10 @@ def _resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: st
         model_file = sb3_model_file(path)
         statistics = normalization_file_of(model_file)
         return "pickle", model_file, {model_file} | ({statistics} if statistics else set())
-    raise FileNotFoundError(f"--resume {path} holds no checkpoint: pass a directory with {METADATA_FILE} "
-                            f"(or, with --trust-pickle, an SB3 .zip)")
+    raise FileNotFoundError(
+        f"--resume {path} holds no checkpoint: pass a directory with {METADATA_FILE} "
+        f"(or, with --trust-pickle, an SB3 .zip)"
+    )
 
 
 def _positive_int(name: str, value: Any, minimum: int = 1) -> int:
@@ -650,6 +773,7 @@ def _positive_int(name: str, value: Any, minimum: int = 1) -> int:
 # ---------------------------------------------------------------------------------------------
 # Training
 # ---------------------------------------------------------------------------------------------
+
 
 def train(
     algo: str = "ppo",
@@ -700,13 +824,18 @@ def train(
     hyperparams = validate_hyperparameters(algo, hyperparams, where="hyperparameters (with overrides)")
     n_envs = int(hyperparams.get("n_envs", 1))
     total = int(hyperparams["n_timesteps"])
-    resume_kind, resume_path, keep = (_resume_source(resume, trust_pickle, algo, env_id) if resume is not None
-                                      else (None, None, set()))
+    resume_kind, resume_path, keep = (
+        _resume_source(resume, trust_pickle, algo, env_id) if resume is not None else (None, None, set())
+    )
     run = _prepare_run_dir(out, env_id, algo, seed, force)
 
     record = {
-        "algo": algo, "env_id": env_id, "seed": seed, "hyperparams": hyperparams,
-        "command": command, "resumed_from": str(resume_path) if resume_path else None,
+        "algo": algo,
+        "env_id": env_id,
+        "seed": seed,
+        "hyperparams": hyperparams,
+        "command": command,
+        "resumed_from": str(resume_path) if resume_path else None,
         "tether_gym_version": tether_gym.__version__,
     }
     normalize = hyperparams.get("normalize", False)
@@ -721,13 +850,25 @@ def train(
     atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
     provenance = {"seed": seed, "command": command, "config": "config.yml of the run directory"}
     callback_items: list[BaseCallback] = [
-        SafePolicySaver(run / "checkpoints", env_id, provenance, every=max(checkpoint_freq // n_envs, 1), prefix=algo,
-                        residual_on=residual_on),
+        SafePolicySaver(
+            run / "checkpoints",
+            env_id,
+            provenance,
+            every=max(checkpoint_freq // n_envs, 1),
+            prefix=algo,
+            residual_on=residual_on,
+        ),
     ]
     evaluation = SeededEvaluation(
-        env_id, eval_episodes, every=eval_freq // n_envs, log_dir=run / "best",
-        on_new_best=SafePolicySaver(run / "best", env_id, provenance, residual_on=residual_on), started=started,
-        env_kwargs=env_kwargs, residual_on=residual_on, verbose=1 if progress_bar or verbose else 0,
+        env_id,
+        eval_episodes,
+        every=eval_freq // n_envs,
+        log_dir=run / "best",
+        on_new_best=SafePolicySaver(run / "best", env_id, provenance, residual_on=residual_on),
+        started=started,
+        env_kwargs=env_kwargs,
+        residual_on=residual_on,
+        verbose=1 if progress_bar or verbose else 0,
     )
     callback_items.append(evaluation)
     curriculum = hyperparams.get("curriculum")
@@ -735,35 +876,62 @@ def train(
         callback_items.append(DifficultyCurriculum(curriculum["start"], curriculum["fraction"], total))
     start = time.perf_counter()
     model.learn(
-        total_timesteps=total, callback=CallbackList(callback_items), progress_bar=progress_bar, tb_log_name=algo,
+        total_timesteps=total,
+        callback=CallbackList(callback_items),
+        progress_bar=progress_bar,
+        tb_log_name=algo,
         reset_num_timesteps=resume_kind is None,
     )
-    save_policy(run, model, model.get_vec_normalize_env(), env_id, provenance, training_state=True,
-                extra_files=["config.yml"], residual_on=residual_on)
+    save_policy(
+        run,
+        model,
+        model.get_vec_normalize_env(),
+        env_id,
+        provenance,
+        training_state=True,
+        extra_files=["config.yml"],
+        residual_on=residual_on,
+    )
     elapsed = time.perf_counter() - start
     evaluation.finish(model.num_timesteps)
-    print(f"trained {algo} on {env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
-          f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}")
+    print(
+        f"trained {algo} on {env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
+        f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}"
+    )
     if evaluation.history:
         beat = evaluation.first_beat.get(evaluation.bar)
-        print(f"best evaluation return {evaluation.best_mean:.2f} against {evaluation.bar} "
-              f"{evaluation.baseline_returns[evaluation.bar].mean():.2f} on the evaluation seeds; "
-              + (f"first beat it at {beat['timesteps']:,} steps, {beat['wall_time_s']:.0f} s after the command started"
-                 if beat else "never beat it"))
+        print(
+            f"best evaluation return {evaluation.best_mean:.2f} against {evaluation.bar} "
+            f"{evaluation.baseline_returns[evaluation.bar].mean():.2f} on the evaluation seeds; "
+            + (
+                f"first beat it at {beat['timesteps']:,} steps, {beat['wall_time_s']:.0f} s after the command started"
+                if beat
+                else "never beat it"
+            )
+        )
     venv.close()
     return run
 
 
 def _build_model(
-    cls: type[BaseAlgorithm], hyperparams: Mapping[str, Any], venv: VecEnv, seed: int, verbose: int, run: Path,
-    resume_kind: str | None, resume_path: Path | None,
+    cls: type[BaseAlgorithm],
+    hyperparams: Mapping[str, Any],
+    venv: VecEnv,
+    seed: int,
+    verbose: int,
+    run: Path,
+    resume_kind: str | None,
+    resume_path: Path | None,
 ) -> BaseAlgorithm:
     """A new model, or one resumed from a safe checkpoint directory or (trusted) SB3 ``.zip``."""
     if resume_kind == "pickle":
         assert resume_path is not None
         normalized = isinstance(venv, VecNormalize)
         model, normalizer, _, _ = load_pickled_model(
-            resume_path, trust_pickle=True, algo=_algo_of(cls), env=venv.venv if normalized else venv,
+            resume_path,
+            trust_pickle=True,
+            algo=_algo_of(cls),
+            env=venv.venv if normalized else venv,
             tensorboard_log=str(run / "tensorboard"),
         )
         if normalized != (normalizer is not None):
@@ -775,8 +943,14 @@ def _build_model(
             normalizer.training = True
         return model
     model = cls(
-        hyperparams.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu", verbose=verbose,
-        tensorboard_log=str(run / "tensorboard"), **_algorithm_kwargs(hyperparams), **_action_noise(hyperparams, venv),
+        hyperparams.get("policy", "MlpPolicy"),
+        venv,
+        seed=seed,
+        device="cpu",
+        verbose=verbose,
+        tensorboard_log=str(run / "tensorboard"),
+        **_algorithm_kwargs(hyperparams),
+        **_action_noise(hyperparams, venv),
     )
     if hyperparams.get("residual_on") is not None and resume_kind is None:
         start_at_the_baseline(model)
@@ -790,36 +964,57 @@ def _algo_of(cls: type[BaseAlgorithm]) -> str:
     return next(name for name, candidate in ALGORITHMS.items() if candidate is cls)
 
 
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.train", description=__doc__.split("\n\n")[0].replace("``", ""),
+        prog="python -m agents.train",
+        description=__doc__.split("\n\n")[0].replace("``", ""),
         epilog="Trust: runs are written as JSON + safetensors, which load without running code. "
-               "--resume from an SB3 .zip/.pkl unpickles it, which runs any code a crafted file contains: "
-               "it needs --trust-pickle.",
+        "--resume from an SB3 .zip/.pkl unpickles it, which runs any code a crafted file contains: "
+        "it needs --trust-pickle.",
     )
     parser.add_argument("--algo", default="ppo", choices=sorted(ALGORITHMS))
-    parser.add_argument("--env", default=DEFAULT_ENV_ID, choices=list(ENV_IDS), metavar="ID",
-                        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})")
+    parser.add_argument(
+        "--env",
+        default=DEFAULT_ENV_ID,
+        choices=list(ENV_IDS),
+        metavar="ID",
+        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})",
+    )
     parser.add_argument("--seed", type=int_at_least(0), default=0)
     parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/<algo>_seed<seed>")
     parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps")
     parser.add_argument("--n-envs", type=int_at_least(1), help="override n_envs")
-    parser.add_argument("--hyperparams", help="YAML file instead of agents/hyperparams/<algo>.yml")
-    parser.add_argument("--resume", help="checkpoint directory (or run directory, or best/) to continue from")
-    parser.add_argument("--trust-pickle", action="store_true",
-                        help="allow --resume from a pickle-based SB3 .zip + .pkl (unpickling runs any code they hold)")
-    parser.add_argument("--force", action="store_true",
-                        help="replace an earlier run with the same --out, env, algorithm and seed")
     parser.add_argument(
-        "--curriculum", nargs=2, type=float, metavar=("START", "FRACTION"),
+        "--hyperparams",
+        help="YAML file instead of agents/hyperparams/<algo>.yml, or a run's "
+        "config.yml (reproduces that run's hyperparameters)",
+    )
+    parser.add_argument("--resume", help="checkpoint directory (or run directory, or best/) to continue from")
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow --resume from a pickle-based SB3 .zip + .pkl (unpickling runs any code they hold)",
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="replace an earlier run with the same --out, env, algorithm and seed"
+    )
+    parser.add_argument(
+        "--curriculum",
+        nargs=2,
+        type=float,
+        metavar=("START", "FRACTION"),
         help="raise the difficulty from START to 1 over the first FRACTION of the run",
     )
     parser.add_argument("--eval-freq", type=int_at_least(1), default=50_000, help="env steps between evaluations")
-    parser.add_argument("--eval-episodes", type=int_at_least(1), default=32,
-                        help="evaluation episodes, the same seeds (1 000 000 up) at every evaluation")
-    parser.add_argument("--checkpoint-freq", type=int_at_least(1), default=250_000,
-                        help="env steps between checkpoints")
+    parser.add_argument(
+        "--eval-episodes",
+        type=int_at_least(1),
+        default=32,
+        help="evaluation episodes, the same seeds (1 000 000 up) at every evaluation",
+    )
+    parser.add_argument(
+        "--checkpoint-freq", type=int_at_least(1), default=250_000, help="env steps between checkpoints"
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (for logs)")
     parser.add_argument("--verbose", type=int_at_least(0), default=0)
     return parser
@@ -828,11 +1023,24 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> Path:
     args = build_parser().parse_args(argv)
     return train(
-        algo=args.algo, env_id=args.env, seed=args.seed, out=args.out, timesteps=args.timesteps,
-        num_envs=args.n_envs, hyperparams_file=args.hyperparams, resume=args.resume, eval_freq=args.eval_freq,
-        overrides={"curriculum": {"start": args.curriculum[0], "fraction": args.curriculum[1]}} if args.curriculum else None,
-        eval_episodes=args.eval_episodes, checkpoint_freq=args.checkpoint_freq,
-        progress_bar=not args.no_progress, verbose=args.verbose, force=args.force, trust_pickle=args.trust_pickle,
+        algo=args.algo,
+        env_id=args.env,
+        seed=args.seed,
+        out=args.out,
+        timesteps=args.timesteps,
+        num_envs=args.n_envs,
+        hyperparams_file=args.hyperparams,
+        resume=args.resume,
+        eval_freq=args.eval_freq,
+        overrides={"curriculum": {"start": args.curriculum[0], "fraction": args.curriculum[1]}}
+        if args.curriculum
+        else None,
+        eval_episodes=args.eval_episodes,
+        checkpoint_freq=args.checkpoint_freq,
+        progress_bar=not args.no_progress,
+        verbose=args.verbose,
+        force=args.force,
+        trust_pickle=args.trust_pickle,
         command=shlex.join(["python", "-m", "agents.train", *(sys.argv[1:] if argv is None else argv)]),
     )
 

@@ -71,9 +71,7 @@ class Timing:
         return statistics.median(self.samples)
 
 
-def time_repeated(
-    run: Callable[[], object], repeats: int, setup: Callable[[], object] | None = None
-) -> Timing:
+def time_repeated(run: Callable[[], object], repeats: int, setup: Callable[[], object] | None = None) -> Timing:
     """Time ``run()`` ``repeats`` times with ``time.perf_counter``; ``setup()`` runs untimed before each."""
     samples = []
     for _ in range(repeats):
@@ -182,9 +180,7 @@ class EstimateRow:
     fd_over_closed_step: tuple[float, float]  # (min, max) of the FD step / closed-form step
 
 
-def measure_estimates(
-    cluster: tg.Cluster, batch: int, amplitude: float, repeats: int, seed: int
-) -> EstimateRow:
+def measure_estimates(cluster: tg.Cluster, batch: int, amplitude: float, repeats: int, seed: int) -> EstimateRow:
     """Cost of one force evaluation and of the two critical-step estimates at a slack/snap state."""
     sim = tg.BatchSimulator(cluster, batch)
     sim.reset(random_state(cluster, batch, amplitude, seed))
@@ -218,18 +214,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         description="Sub-step throughput of the physics core and cost of the critical-step estimates.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument(
-        "--batches", nargs="+", type=int, default=[1, 16, 64, 1024, 4096], help="batch sizes B"
-    )
+    parser.add_argument("--batches", nargs="+", type=int, default=[1, 16, 64, 1024, 4096], help="batch sizes B")
     parser.add_argument("--duration", type=float, default=10.0, help="simulated seconds per measurement")
     parser.add_argument("--repeats", type=int, default=5, help="timed repetitions of each measurement")
-    parser.add_argument("--estimate-batches", nargs="+", type=int, default=[1, 1024],
-                        help="batch sizes for the critical-step cost")
+    parser.add_argument(
+        "--estimate-batches", nargs="+", type=int, default=[1, 1024], help="batch sizes for the critical-step cost"
+    )
     parser.add_argument("--amplitude", type=float, default=2.0, help="std of the initial displacements, m")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--quick", action="store_true", help="smoke test: 1 s simulated, B up to 1024, 2 repeats"
-    )
+    parser.add_argument("--quick", action="store_true", help="smoke test: 1 s simulated, B up to 1024, 2 repeats")
     args = parser.parse_args(argv)
     if args.quick:
         args.duration, args.repeats = 1.0, 2

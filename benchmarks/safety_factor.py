@@ -266,9 +266,7 @@ def recommend(results: list[DriftResult], tolerance: float, attribute: str) -> d
     return chosen
 
 
-def save_plot(
-    results: list[DriftResult], tolerance: float, short_horizon: float, horizon: float, path: Path
-) -> None:
+def save_plot(results: list[DriftResult], tolerance: float, short_horizon: float, horizon: float, path: Path) -> None:
     """Worst and median drift against the safety factor, log y, one colour per preset."""
     import matplotlib
 
@@ -285,9 +283,7 @@ def save_plot(
         short = [min(float(r.drift_short.max()), cap) for r in rows]
         ax.semilogy(factors, worst, "o-", color=colour, label=f"{preset}: worst over {horizon:g} s")
         ax.semilogy(factors, median, "s--", color=colour, alpha=0.7, label=f"{preset}: median seed")
-        ax.semilogy(
-            factors, short, "^:", color=colour, alpha=0.7, label=f"{preset}: worst over {short_horizon:g} s"
-        )
+        ax.semilogy(factors, short, "^:", color=colour, alpha=0.7, label=f"{preset}: worst over {short_horizon:g} s")
     ax.axhline(tolerance, color="k", lw=0.8, ls="--", label=f"tolerance {tolerance:.0%}")
     ax.axvline(tg.DEFAULT_SAFETY_FACTOR, color="grey", lw=0.8, ls=":", label="current default")
     ax.set_xlabel("safety factor (sub-step / closed-form critical step)")
@@ -314,20 +310,24 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--short-horizon", type=float, default=100.0, help="also report the worst drift up to this time, s"
     )
-    parser.add_argument("--sample-interval", type=float, default=0.25,
-                        help="energy and slack are sampled about this often, s (below a taut phase, ~0.3 s)")
+    parser.add_argument(
+        "--sample-interval",
+        type=float,
+        default=0.25,
+        help="energy and slack are sampled about this often, s (below a taut phase, ~0.3 s)",
+    )
     parser.add_argument("--amplitude", type=float, default=2.0, help="std of the initial displacements, m")
     parser.add_argument("--speed", type=float, default=0.0, help="std of the initial velocities, m/s")
-    parser.add_argument("--residual-horizon", type=float, default=100.0,
-                        help="length of the damped, thrust-driven residual check, s (0 to skip)")
+    parser.add_argument(
+        "--residual-horizon",
+        type=float,
+        default=100.0,
+        help="length of the damped, thrust-driven residual check, s (0 to skip)",
+    )
     parser.add_argument("--tolerance", type=float, default=0.01, help="acceptable worst relative drift")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--plot", default="outputs/safety_factor.png", help="PNG path ('' to skip)"
-    )
-    parser.add_argument(
-        "--quick", action="store_true", help="smoke test: 50 s horizon, 16 seeds, 10 s residual check"
-    )
+    parser.add_argument("--plot", default="outputs/safety_factor.png", help="PNG path ('' to skip)")
+    parser.add_argument("--quick", action="store_true", help="smoke test: 50 s horizon, 16 seeds, 10 s residual check")
     args = parser.parse_args(argv)
     if args.quick:
         args.horizon, args.short_horizon, args.batch, args.residual_horizon = 50.0, 10.0, 16, 10.0
@@ -358,13 +358,23 @@ def main(argv: list[str] | None = None) -> int:
     for preset in args.presets:
         for factor in args.factors:
             result = measure_drift(
-                preset, factor, batch=args.batch, horizon=args.horizon, short_horizon=args.short_horizon,
-                sample_interval=args.sample_interval, amplitude=args.amplitude, speed=args.speed,
+                preset,
+                factor,
+                batch=args.batch,
+                horizon=args.horizon,
+                short_horizon=args.short_horizon,
+                sample_interval=args.sample_interval,
+                amplitude=args.amplitude,
+                speed=args.speed,
                 seed=args.seed,
             )
             if args.residual_horizon > 0:
                 result.residual_damped = measure_damped_residual(
-                    preset, factor, batch=args.batch, horizon=args.residual_horizon, amplitude=args.amplitude,
+                    preset,
+                    factor,
+                    batch=args.batch,
+                    horizon=args.residual_horizon,
+                    amplitude=args.amplitude,
                     seed=args.seed,
                 )
             results.append(result)
@@ -377,8 +387,7 @@ def main(argv: list[str] | None = None) -> int:
 
     tol = f"{args.tolerance:.0%}"
     print(
-        f"\nRecommendation: the largest factor whose worst drift stays below {tol} "
-        "(every smaller factor passing too)"
+        f"\nRecommendation: the largest factor whose worst drift stays below {tol} (every smaller factor passing too)"
     )
     full = recommend(results, args.tolerance, "drift")
     short = recommend(results, args.tolerance, "drift_short")

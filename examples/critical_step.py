@@ -129,9 +129,7 @@ def evaluate(clusters: list[tg.Cluster], positions: np.ndarray) -> dict[str, np.
     return result
 
 
-def random_cases(
-    cluster: tg.Cluster, count: int, rng: np.random.Generator
-) -> tuple[list[tg.Cluster], np.ndarray]:
+def random_cases(cluster: tg.Cluster, count: int, rng: np.random.Generator) -> tuple[list[tg.Cluster], np.ndarray]:
     """``count`` randomised copies of ``cluster`` (masses) and perturbed positions (count, n, 3).
 
     Positions: the nominal shape scaled about its centroid by 1 + U(-1 %, +2 %) (shrinking
@@ -164,8 +162,7 @@ def random_cases(
 
 def ratio_stats(ratio: np.ndarray) -> str:
     """min / median / max of a ratio array and the share of unsafe (> 1) values."""
-    return (f"{ratio.min():.3f}  {np.median(ratio):.3f}  {ratio.max():.3f}  "
-            f"{100.0 * np.mean(ratio > 1.0 + 1e-12):5.1f}%")
+    return f"{ratio.min():.3f}  {np.median(ratio):.3f}  {ratio.max():.3f}  {100.0 * np.mean(ratio > 1.0 + 1e-12):5.1f}%"
 
 
 def merge(results: dict[str, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -189,8 +186,16 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: Path, cases: int) -> N
     # Unsafe variants first, the safe estimates on top (closed form last, most visible).
     for name in [*UNSAFE_METHODS, "finite-difference", "closed-form"]:
         style = STYLE[name]
-        left.scatter(true, merged[name], s=7, alpha=0.45, color=style["color"], marker=style["marker"],
-                     linewidths=0, label=METHODS[name])
+        left.scatter(
+            true,
+            merged[name],
+            s=7,
+            alpha=0.45,
+            color=style["color"],
+            marker=style["marker"],
+            linewidths=0,
+            label=METHODS[name],
+        )
     left.set_xscale("log")
     left.set_yscale("log")
     left.set_xlim(lo, hi)
@@ -208,20 +213,26 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: Path, cases: int) -> N
     names = list(METHODS)
     ratios = [merged[name] / true for name in names]
     right.axhspan(1.0, 100.0, color="tab:red", alpha=0.07, linewidth=0)
-    boxes = right.boxplot(ratios, whis=(0, 100), widths=0.55, patch_artist=True,
-                          medianprops=dict(color="black"))
+    boxes = right.boxplot(ratios, whis=(0, 100), widths=0.55, patch_artist=True, medianprops=dict(color="black"))
     for patch, name in zip(boxes["boxes"], names):
         patch.set_facecolor(STYLE[name]["color"])
         patch.set_alpha(0.55)
     jitter = np.random.default_rng(0)
     for position, (name, ratio) in enumerate(zip(names, ratios), start=1):
-        right.scatter(position + jitter.uniform(-0.18, 0.18, ratio.size), ratio, s=3, alpha=0.3,
-                      color=STYLE[name]["color"], linewidths=0)
+        right.scatter(
+            position + jitter.uniform(-0.18, 0.18, ratio.size),
+            ratio,
+            s=3,
+            alpha=0.3,
+            color=STYLE[name]["color"],
+            linewidths=0,
+        )
     right.axhline(1.0, color="black", linewidth=1.0)
     right.set_yscale("log")
     right.set_ylim(min(r.min() for r in ratios) / 1.15, max(r.max() for r in ratios) * 1.15)
-    right.yaxis.set_major_locator(matplotlib.ticker.FixedLocator(
-        [0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0]))
+    right.yaxis.set_major_locator(
+        matplotlib.ticker.FixedLocator([0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0])
+    )
     right.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     right.yaxis.set_minor_locator(matplotlib.ticker.NullLocator())
     right.set_xticks(range(1, len(names) + 1))
@@ -231,7 +242,8 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: Path, cases: int) -> N
     right.set_title("ratio estimate / true (> 1 is unsafe); whiskers span min to max", fontsize=10)
     fig.suptitle(
         "Critical time step: element-by-element estimates vs the assembled tangent problem "
-        "(taut branch; random shapes, mass ratios up to 1:100)", fontsize=10.5,
+        "(taut branch; random shapes, mass ratios up to 1:100)",
+        fontsize=10.5,
     )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -239,8 +251,9 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: Path, cases: int) -> N
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
     parser.add_argument("--out", type=Path, default=Path("outputs"), help="output directory for the PNG")
     parser.add_argument("--docs", action="store_true", help="also write the figure to docs/img/")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random configurations")
@@ -249,8 +262,10 @@ def main(argv: list[str] | None = None) -> None:
     start = time.perf_counter()
     rng = np.random.default_rng(args.seed)
 
-    header = (f"{'preset':<12} {'n':>2} {'m':>3} {'true (s)':>9} {'closed (s)':>10} {'FD (s)':>8} "
-              f"{'closed/true':>11} {'FD/true':>8} {'(i)/true':>8} {'(ii)/true':>9} {'(iii)/true':>10}")
+    header = (
+        f"{'preset':<12} {'n':>2} {'m':>3} {'true (s)':>9} {'closed (s)':>10} {'FD (s)':>8} "
+        f"{'closed/true':>11} {'FD/true':>8} {'(i)/true':>8} {'(ii)/true':>9} {'(iii)/true':>10}"
+    )
     print("Nominal shapes (all cables taut, preset masses): critical step 2/omega_max, ratio estimate/true")
     print(header)
     print("-" * len(header))
@@ -259,16 +274,20 @@ def main(argv: list[str] | None = None) -> None:
         cluster = tg.make_cluster(name)
         nominal = evaluate([cluster], cluster.positions[None])
         t = nominal["true"][0]
-        print(f"{name:<12} {cluster.num_nodes:>2} {cluster.num_cables:>3} {t:9.4f} "
-              f"{nominal['closed-form'][0]:10.4f} {nominal['finite-difference'][0]:8.4f} "
-              f"{nominal['closed-form'][0] / t:11.3f} {nominal['finite-difference'][0] / t:8.3f} "
-              f"{nominal['eq17-full'][0] / t:8.3f} {nominal['eq17-split'][0] / t:9.3f} "
-              f"{nominal['full-node'][0] / t:10.3f}")
+        print(
+            f"{name:<12} {cluster.num_nodes:>2} {cluster.num_cables:>3} {t:9.4f} "
+            f"{nominal['closed-form'][0]:10.4f} {nominal['finite-difference'][0]:8.4f} "
+            f"{nominal['closed-form'][0] / t:11.3f} {nominal['finite-difference'][0] / t:8.3f} "
+            f"{nominal['eq17-full'][0] / t:8.3f} {nominal['eq17-split'][0] / t:9.3f} "
+            f"{nominal['full-node'][0] / t:10.3f}"
+        )
         clusters, positions = random_cases(cluster, args.cases, rng)
         results[name] = evaluate(clusters, positions)
 
-    print(f"\nRandom configurations ({args.cases} per preset): ratio estimate/true (min, median, max) "
-          "and share of unsafe cases (ratio > 1)")
+    print(
+        f"\nRandom configurations ({args.cases} per preset): ratio estimate/true (min, median, max) "
+        "and share of unsafe cases (ratio > 1)"
+    )
     print(f"{'':<12} {'slack':>7} {'max mass':>9}" + "".join(f" | {short:^29}" for short in SHORT.values()))
     print(f"{'preset':<12} {'cables':>7} {'ratio':>9}" + " | min    median max    unsafe" * len(SHORT))
     for name, r in results.items():
@@ -279,18 +298,21 @@ def main(argv: list[str] | None = None) -> None:
 
     merged = merge(results)
     total = merged["true"].size
-    print(f"\nAll {total} random cases ({np.mean(merged['slack'] > 0):.0%} with at least one slack cable, "
-          f"{np.mean(merged['all_slack']):.0%} with every cable slack, "
-          f"{np.mean(merged['slack'] == 0):.0%} all taut; mass ratios up to 1:{merged['mass_ratio'].max():.0f}):")
+    print(
+        f"\nAll {total} random cases ({np.mean(merged['slack'] > 0):.0%} with at least one slack cable, "
+        f"{np.mean(merged['all_slack']):.0%} with every cable slack, "
+        f"{np.mean(merged['slack'] == 0):.0%} all taut; mass ratios up to 1:{merged['mass_ratio'].max():.0f}):"
+    )
     for key in METHODS:
         ratio = merged[key] / merged["true"]
         unsafe = np.mean(ratio > 1.0 + 1e-12)
         verdict = "safe" if unsafe == 0.0 else f"UNSAFE in {unsafe:.0%} of cases"
-        print(f"  {SHORT[key]:<24} estimate/true min {ratio.min():.3f}  median {np.median(ratio):.3f}  "
-              f"max {ratio.max():.3f}  -> {verdict}")
+        print(
+            f"  {SHORT[key]:<24} estimate/true min {ratio.min():.3f}  median {np.median(ratio):.3f}  "
+            f"max {ratio.max():.3f}  -> {verdict}"
+        )
     fd_above = int(np.sum(merged["finite-difference"] > merged["closed-form"] * (1 + 1e-9)))
-    print(f"  finite-difference step larger than the closed form's in {fd_above} of {total} cases "
-          "(documented: never)")
+    print(f"  finite-difference step larger than the closed form's in {fd_above} of {total} cases (documented: never)")
 
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "critical_step.png"

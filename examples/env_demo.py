@@ -160,11 +160,15 @@ def print_table(results: dict[str, list[Episode]], dt: float) -> None:
     """One row per controller."""
     seeds = len(next(iter(results.values())))
     initial = np.array([e.energy[0] for e in next(iter(results.values()))])
-    print(f"{ENV_ID}: {seeds} episodes per controller (seeds 0..{seeds - 1}), "
-          f"initial vibration energy {initial.min():.3g} .. {initial.max():.3g} J")
+    print(
+        f"{ENV_ID}: {seeds} episodes per controller (seeds 0..{seeds - 1}), "
+        f"initial vibration energy {initial.min():.3g} .. {initial.max():.3g} J"
+    )
     print("E(t)/E(0): median over the seeds [min, max]")
-    header = (f"{'controller':<28} {'mean return':>12} {'E(10 s)/E(0)':>24} {'E(30 s)/E(0)':>24} "
-              f"{'propellant (N*s)':>17} {'failures':>9}")
+    header = (
+        f"{'controller':<28} {'mean return':>12} {'E(10 s)/E(0)':>24} {'E(30 s)/E(0)':>24} "
+        f"{'propellant (N*s)':>17} {'failures':>9}"
+    )
     print(header)
     print("-" * len(header))
     for name, episodes in results.items():
@@ -176,8 +180,10 @@ def print_table(results: dict[str, list[Episode]], dt: float) -> None:
         returns = np.array([e.ret for e in episodes])
         propellant = np.mean([e.propellant for e in episodes])
         failures = [e for e in episodes if e.failed]
-        print(f"{CONTROLLERS[name][0]:<28} {returns.mean():12.1f} {cells[0]:>24} {cells[1]:>24} "
-              f"{propellant:17.1f} {len(failures):>4}/{len(episodes)}")
+        print(
+            f"{CONTROLLERS[name][0]:<28} {returns.mean():12.1f} {cells[0]:>24} {cells[1]:>24} "
+            f"{propellant:17.1f} {len(failures):>4}/{len(episodes)}"
+        )
         for e in failures:
             print(f"    failure: {e.end_reason} after {e.steps} steps")
 
@@ -250,8 +256,7 @@ def render_episode(name: str, seed: int, steps: int) -> tuple[list[np.ndarray], 
                 if terminated:
                     print(f"  animation: {name} ended ({info['end_reason']}) at {info['time']:.1f} s")
             pictures.append(picture)
-            captions.append(f"E_vib = {info['vibration_energy']:.3f} J   "
-                            f"propellant {info['propellant_used']:.1f} N*s")
+            captions.append(f"E_vib = {info['vibration_energy']:.3f} J   propellant {info['propellant_used']:.1f} N*s")
         return pictures, captions
     finally:
         env.close()
@@ -290,8 +295,12 @@ def crop_margins(frames: list[Image.Image], pad: int = 6) -> list[Image.Image]:
     for frame in frames:
         ink |= np.asarray(frame).min(axis=2) < 250
     rows, cols = np.flatnonzero(ink.any(axis=1)), np.flatnonzero(ink.any(axis=0))
-    box = (max(cols[0] - pad, 0), max(rows[0] - pad, 0),
-           min(cols[-1] + pad + 1, frames[0].width), min(rows[-1] + pad + 1, frames[0].height))
+    box = (
+        max(cols[0] - pad, 0),
+        max(rows[0] - pad, 0),
+        min(cols[-1] + pad + 1, frames[0].width),
+        min(rows[-1] + pad + 1, frames[0].height),
+    )
     return [frame.crop(box) for frame in frames]
 
 
@@ -318,8 +327,7 @@ def encode_gif(frames: list[Image.Image], scale: float, frame_ms: int) -> bytes:
     try:
         import imageio.v3 as iio
     except ImportError:
-        paletted[0].save(buffer, format="GIF", save_all=True, append_images=paletted[1:],
-                         duration=frame_ms, loop=0)
+        paletted[0].save(buffer, format="GIF", save_all=True, append_images=paletted[1:], duration=frame_ms, loop=0)
     else:
         rgb = np.stack([np.asarray(f.convert("RGB")) for f in paletted])
         iio.imwrite(buffer, rgb, extension=".gif", duration=frame_ms, loop=0)
@@ -339,14 +347,15 @@ def write_gif(frames: list[Image.Image], path: Path, frame_ms: int) -> float:
 
 # ---------------------------------------------------------------------------------- main
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
     parser.add_argument("--out", type=Path, default=Path("outputs"), help="output directory")
-    parser.add_argument("--docs", action="store_true",
-                        help="also write docs/img/env_demo.gif and docs/img/env_energy.png")
+    parser.add_argument(
+        "--docs", action="store_true", help="also write docs/img/env_demo.gif and docs/img/env_energy.png"
+    )
     parser.add_argument("--seeds", type=int, default=5, help="episodes per controller (seeds 0..N-1)")
-    parser.add_argument("--gif-steps", type=int, default=150,
-                        help="control steps in the animation (0: none)")
+    parser.add_argument("--gif-steps", type=int, default=150, help="control steps in the animation (0: none)")
     parser.add_argument("--gif-seed", type=int, default=1, help="seed of the animated episode")
     args = parser.parse_args(argv)
     if args.seeds < 1:
@@ -364,8 +373,10 @@ def main(argv: list[str] | None = None) -> None:
         frame_ms = round(1000 * dt)  # real time: one frame per control step
         scale = write_gif(frames, args.out / "env_demo.gif", frame_ms)
         written.append(args.out / "env_demo.gif")
-        print(f"animation: seed {args.gif_seed}, {len(frames)} frames of "
-              f"{frames[0].width}x{frames[0].height} px, scaled by {scale:.2f}")
+        print(
+            f"animation: seed {args.gif_seed}, {len(frames)} frames of "
+            f"{frames[0].width}x{frames[0].height} px, scaled by {scale:.2f}"
+        )
     if args.docs:
         DOCS_IMG.mkdir(parents=True, exist_ok=True)
         for path in list(written):

@@ -116,8 +116,9 @@ def rigid_free_initial_conditions(
     return x0, v
 
 
-def simulate(seed: int, disp: float, vel: float, duration: float, interval: float, satellite: int,
-             N0: float | None = None) -> Run:
+def simulate(
+    seed: int, disp: float, vel: float, duration: float, interval: float, satellite: int, N0: float | None = None
+) -> Run:
     """Integrate the held tetrahedron from random large initial conditions and record the run."""
     cluster = tg.make_cluster("tetrahedron") if N0 is None else tg.make_cluster("tetrahedron", N0=N0)
     nominal = cluster.positions
@@ -139,10 +140,22 @@ def simulate(seed: int, disp: float, vel: float, duration: float, interval: floa
     # Record more sub-steps per interval than the integrator can take at the default safety factor.
     max_per_interval = int(np.ceil(interval / (sim.batch.safety_factor * 0.5 * sim.critical_time_step()))) + 8
 
-    samples: dict[str, list] = {key: [] for key in (
-        "displacement", "slack_count", "max_tension", "step_closed_form", "step_fd", "step_true",
-        "kinetic", "strain", "dissipated", "work", "residual",
-    )}
+    samples: dict[str, list] = {
+        key: []
+        for key in (
+            "displacement",
+            "slack_count",
+            "max_tension",
+            "step_closed_form",
+            "step_fd",
+            "step_true",
+            "kinetic",
+            "strain",
+            "dissipated",
+            "work",
+            "residual",
+        )
+    }
 
     def sample() -> None:
         x = sim.positions.copy()
@@ -189,8 +202,16 @@ def simulate(seed: int, disp: float, vel: float, duration: float, interval: floa
 def shade_slack(ax: plt.Axes, t: np.ndarray, slack: np.ndarray, label: str | None = None) -> None:
     """Shade the spans of ``t`` where ``slack`` is true (each sample covers half an interval each side)."""
     ax.fill_between(
-        t, 0.0, 1.0, where=slack, step="mid", transform=ax.get_xaxis_transform(),
-        color="0.85", linewidth=0.0, label=label, zorder=0,
+        t,
+        0.0,
+        1.0,
+        where=slack,
+        step="mid",
+        transform=ax.get_xaxis_transform(),
+        color="0.85",
+        linewidth=0.0,
+        label=label,
+        zorder=0,
     )
 
 
@@ -201,8 +222,9 @@ def plot_displacements(run: Run, path: Path) -> None:
     slack = run.slack_count > 0
     for d, ax in enumerate(axes):
         shade_slack(ax, run.t, slack, label="at least one cable slack" if d == 0 else None)
-        ax.plot(run.t, run.displacement[:, run.satellite, d], color=colours[d], linewidth=1.0,
-                label=f"$u_{AXIS_NAMES[d]}$")
+        ax.plot(
+            run.t, run.displacement[:, run.satellite, d], color=colours[d], linewidth=1.0, label=f"$u_{AXIS_NAMES[d]}$"
+        )
         ax.axhline(0.0, color="0.4", linewidth=0.6)
         ax.set_ylabel(f"$u_{AXIS_NAMES[d]}$ (m)")
         ax.grid(alpha=0.3)
@@ -227,22 +249,49 @@ def plot_displacements(run: Run, path: Path) -> None:
 def plot_substeps(run: Run, path: Path) -> None:
     """Sub-step sizes against the estimated and true critical steps, with the slack-cable count."""
     fig, (ax, low) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [2.3, 1]})
-    ax.plot(run.t, run.step_true, color="black", linewidth=1.4,
-            label=r"true linear limit $2/\omega_{max}$ (tangent stiffness, taut branch)")
-    ax.plot(run.t, run.step_closed_form, color="tab:blue", linewidth=1.5,
-            label="estimated critical step, closed form (used by the integrator)")
-    ax.plot(run.t, run.step_fd, color="tab:purple", linestyle="--", linewidth=1.2,
-            label="estimated critical step, paper's finite-difference reference")
-    ax.plot(run.t, run.safety_factor * run.step_closed_form, color="tab:blue", linestyle=":",
-            linewidth=1.2, label=f"safety factor {run.safety_factor:g} x closed-form estimate (step cap)")
-    ax.plot(run.substep_end, run.substep_size, ".", color="tab:red", markersize=2.5,
-            label=f"sub-steps taken ({run.substep_size.size}; {run.t[1] - run.t[0]:g} s intervals split evenly)")
+    ax.plot(
+        run.t,
+        run.step_true,
+        color="black",
+        linewidth=1.4,
+        label=r"true linear limit $2/\omega_{max}$ (tangent stiffness, taut branch)",
+    )
+    ax.plot(
+        run.t,
+        run.step_closed_form,
+        color="tab:blue",
+        linewidth=1.5,
+        label="estimated critical step, closed form (used by the integrator)",
+    )
+    ax.plot(
+        run.t,
+        run.step_fd,
+        color="tab:purple",
+        linestyle="--",
+        linewidth=1.2,
+        label="estimated critical step, paper's finite-difference reference",
+    )
+    ax.plot(
+        run.t,
+        run.safety_factor * run.step_closed_form,
+        color="tab:blue",
+        linestyle=":",
+        linewidth=1.2,
+        label=f"safety factor {run.safety_factor:g} x closed-form estimate (step cap)",
+    )
+    ax.plot(
+        run.substep_end,
+        run.substep_size,
+        ".",
+        color="tab:red",
+        markersize=2.5,
+        label=f"sub-steps taken ({run.substep_size.size}; {run.t[1] - run.t[0]:g} s intervals split evenly)",
+    )
     ax.set_ylabel("time step (s)")
     ax.set_ylim(0.0, 1.45 * max(run.step_true.max(), run.step_closed_form.max()))
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right", fontsize=7.5)
-    ax.set_title("Integrator sub-steps and critical time step, tetrahedron in free damped vibration",
-                 fontsize=10)
+    ax.set_title("Integrator sub-steps and critical time step, tetrahedron in free damped vibration", fontsize=10)
 
     low.fill_between(run.t, run.slack_count, step="mid", color="tab:orange", alpha=0.35, linewidth=0.0)
     low.plot(run.t, run.slack_count, drawstyle="steps-mid", color="tab:orange", linewidth=0.8)
@@ -259,17 +308,26 @@ def plot_substeps(run: Run, path: Path) -> None:
 
 def plot_energy(run: Run, path: Path) -> None:
     """Energy account over time and the energy-balance residual."""
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9.5, 7), sharex=True,
-                                      gridspec_kw={"height_ratios": [2.2, 1]})
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9.5, 7), sharex=True, gridspec_kw={"height_ratios": [2.2, 1]})
     top.plot(run.t, run.kinetic, color="tab:red", linewidth=0.9, label="kinetic")
     top.plot(run.t, run.strain, color="tab:green", linewidth=0.9, label="strain (cables)")
     top.plot(run.t, run.dissipated, color="tab:blue", linewidth=1.5, label="dissipated by damping")
     top.plot(run.t, run.work, color="tab:purple", linewidth=1.0, label="work done by the bias force")
-    top.plot(run.t, vibration_energy(run), color="black", linestyle="--", linewidth=1.1,
-             label="vibration energy = kinetic + strain + bias potential\n"
-                   "   - strain of the pretensioned nominal shape")
-    top.axhline(run.initial_energy, color="0.5", linestyle=":", linewidth=1.0,
-                label=f"initial kinetic + strain {run.initial_energy:.1f} J")
+    top.plot(
+        run.t,
+        vibration_energy(run),
+        color="black",
+        linestyle="--",
+        linewidth=1.1,
+        label="vibration energy = kinetic + strain + bias potential\n   - strain of the pretensioned nominal shape",
+    )
+    top.axhline(
+        run.initial_energy,
+        color="0.5",
+        linestyle=":",
+        linewidth=1.0,
+        label=f"initial kinetic + strain {run.initial_energy:.1f} J",
+    )
     top.set_ylabel("energy (J)")
     top.legend(fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.01), ncol=2, frameon=False)
     top.grid(alpha=0.3)
@@ -281,8 +339,8 @@ def plot_energy(run: Run, path: Path) -> None:
     bottom.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
     bottom.set_xlim(run.t[0], run.t[-1])
     fig.suptitle(
-        "Energy account (residual = kinetic + strain - initial + dissipated - work; zero for the exact "
-        "solution)", fontsize=10,
+        "Energy account (residual = kinetic + strain - initial + dissipated - work; zero for the exact solution)",
+        fontsize=10,
     )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -329,37 +387,48 @@ def summarise(run: Run, interval: float) -> str:
         f"final energy fraction: vibration energy (kinetic + strain + bias potential - nominal strain) "
         f"{vibration[-1]:.3g} J / initial {vibration[0]:.4g} J = {vibration[-1] / vibration[0]:.2e} "
         f"(kinetic + strain alone: {(run.kinetic[-1] + run.strain[-1]) / run.initial_energy:.2e})",
-        f"energy-balance residual / initial energy: final {residual[-1]:+.2e}, "
-        f"max |.| {np.abs(residual).max():.2e}",
+        f"energy-balance residual / initial energy: final {residual[-1]:+.2e}, max |.| {np.abs(residual).max():.2e}",
     ]
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
     parser.add_argument("--out", type=Path, default=Path("outputs"), help="output directory for the PNGs")
     parser.add_argument("--docs", action="store_true", help="also write the figures to docs/img/")
     parser.add_argument("--seed", type=int, default=7, help="seed of the random initial conditions")
-    parser.add_argument("--disp", type=float, default=1.0,
-                        help="std of the initial displacements per component, m")
+    parser.add_argument("--disp", type=float, default=1.0, help="std of the initial displacements per component, m")
     parser.add_argument("--vel", type=float, default=1.0, help="std of the initial velocities per component, m/s")
     parser.add_argument("--duration", type=float, default=50.0, help="simulated time, s")
-    parser.add_argument("--interval", type=float, default=0.02,
-                        help="sampling interval (one advance call), s; short enough to see the snaps")
-    parser.add_argument("--N0", type=float, default=100.0,
-                        help="cable pretension, N: 100 N makes a pretensioned net that vibrates about its "
-                             "shape as in the paper; the preset's own 0.2 N (light, thruster-held) crumples")
-    parser.add_argument("--satellite", type=int, default=0, choices=range(4),
-                        help="corner satellite whose displacements are plotted")
+    parser.add_argument(
+        "--interval",
+        type=float,
+        default=0.02,
+        help="sampling interval (one advance call), s; short enough to see the snaps",
+    )
+    parser.add_argument(
+        "--N0",
+        type=float,
+        default=100.0,
+        help="cable pretension, N: 100 N makes a pretensioned net that vibrates about its "
+        "shape as in the paper; the preset's own 0.2 N (light, thruster-held) crumples",
+    )
+    parser.add_argument(
+        "--satellite", type=int, default=0, choices=range(4), help="corner satellite whose displacements are plotted"
+    )
     args = parser.parse_args(argv)
 
     start = time.perf_counter()
     run = simulate(args.seed, args.disp, args.vel, args.duration, args.interval, args.satellite, args.N0)
     args.out.mkdir(parents=True, exist_ok=True)
     written = []
-    for name, plot in (("paper_fig3.png", plot_displacements), ("substeps.png", plot_substeps),
-                       ("energy.png", plot_energy)):
+    for name, plot in (
+        ("paper_fig3.png", plot_displacements),
+        ("substeps.png", plot_substeps),
+        ("energy.png", plot_energy),
+    ):
         path = args.out / name
         plot(run, path)
         written.append(path)

@@ -167,8 +167,16 @@ def trained_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A few hundred PPO steps, with a checkpoint, through the project's own training script."""
     out = tmp_path_factory.mktemp("runs")
     return train(
-        "ppo", "TetherTetrahedron-v0", seed=0, out=out, timesteps=512, num_envs=4,
-        overrides={"n_steps": 64, "batch_size": 64}, eval_freq=256, eval_episodes=2, checkpoint_freq=256,
+        "ppo",
+        "TetherTetrahedron-v0",
+        seed=0,
+        out=out,
+        timesteps=512,
+        num_envs=4,
+        overrides={"n_steps": 64, "batch_size": 64},
+        eval_freq=256,
+        eval_episodes=2,
+        checkpoint_freq=256,
         progress_bar=False,
     )
 
@@ -183,7 +191,9 @@ def _check_evaluations(run: Path) -> None:
     seeds = evaluation_seeds(2)
     assert log["seeds"] == [seeds[0], seeds[-1]] and log["bar"] == max(log["baselines"], key=log["baselines"].get)
     assert [entry["timesteps"] for entry in log["evaluations"]] == [256, 512]
-    assert log["training"]["timesteps"] == 512 and log["training"]["wall_time_s"] >= log["evaluations"][-1]["wall_time_s"]
+    assert (
+        log["training"]["timesteps"] == 512 and log["training"]["wall_time_s"] >= log["evaluations"][-1]["wall_time_s"]
+    )
     env = gym.make("TetherTetrahedron-v0")
     bar = rollout(make_controller(log["bar"], env), "TetherTetrahedron-v0", seeds).rewards.sum(axis=1)
     assert bar.mean() == pytest.approx(log["baselines"][log["bar"]], rel=1e-12)
@@ -198,13 +208,22 @@ def _check_evaluations(run: Path) -> None:
     for name, beat in log["first_beat"].items():
         first = next(entry for entry in log["evaluations"] if entry["mean_return"] > log["baselines"][name])
         assert beat == {"timesteps": first["timesteps"], "wall_time_s": first["wall_time_s"]}
-    assert set(log["first_beat"]) == {name for name, value in log["baselines"].items()
-                                      if any(entry["mean_return"] > value for entry in log["evaluations"])}
+    assert set(log["first_beat"]) == {
+        name
+        for name, value in log["baselines"].items()
+        if any(entry["mean_return"] > value for entry in log["evaluations"])
+    }
 
 
 def test_training_smoke_writes_everything(trained_run: Path) -> None:
-    safe = ("policy.json", "policy.safetensors", "normalization.json", "training.safetensors", "training.json",
-            "MANIFEST.sha256")
+    safe = (
+        "policy.json",
+        "policy.safetensors",
+        "normalization.json",
+        "training.safetensors",
+        "training.json",
+        "MANIFEST.sha256",
+    )
     for name in ("config.yml", *safe, *(f"best/{name}" for name in safe), "best/evaluations.json"):
         assert (trained_run / name).is_file(), name
     assert any((trained_run / "tensorboard").rglob("events.out.tfevents.*"))
@@ -223,9 +242,18 @@ def test_training_smoke_writes_everything(trained_run: Path) -> None:
 
 def test_training_resumes_from_a_checkpoint(trained_run: Path, tmp_path: Path) -> None:
     run = train(
-        "ppo", "TetherTetrahedron-v0", seed=0, out=tmp_path, timesteps=256, num_envs=4,
-        overrides={"n_steps": 64, "batch_size": 64}, resume=trained_run / "checkpoints" / "ppo_256_steps",
-        eval_freq=10_000, eval_episodes=2, checkpoint_freq=10_000, progress_bar=False,
+        "ppo",
+        "TetherTetrahedron-v0",
+        seed=0,
+        out=tmp_path,
+        timesteps=256,
+        num_envs=4,
+        overrides={"n_steps": 64, "batch_size": 64},
+        resume=trained_run / "checkpoints" / "ppo_256_steps",
+        eval_freq=10_000,
+        eval_episodes=2,
+        checkpoint_freq=10_000,
+        progress_bar=False,
     )
     assert TrainedPolicy(run).metadata["num_timesteps"] == 512  # 256 from the checkpoint + 256 more
 
@@ -248,17 +276,30 @@ def test_curriculum_raises_the_training_difficulty_on_schedule(tmp_path: Path) -
 
 def test_sac_training_smoke(tmp_path: Path) -> None:
     run = train(
-        "sac", "TetherTetrahedron-v0", seed=0, out=tmp_path, timesteps=200, num_envs=2,
-        overrides={"learning_starts": 50, "batch_size": 32, "gradient_steps": 1}, eval_freq=10_000,
-        eval_episodes=2, checkpoint_freq=10_000, progress_bar=False,
+        "sac",
+        "TetherTetrahedron-v0",
+        seed=0,
+        out=tmp_path,
+        timesteps=200,
+        num_envs=2,
+        overrides={"learning_starts": 50, "batch_size": 32, "gradient_steps": 1},
+        eval_freq=10_000,
+        eval_episodes=2,
+        checkpoint_freq=10_000,
+        progress_bar=False,
     )
     assert TrainedPolicy(run).algo == "sac"
 
 
 def test_comparison_loads_a_trained_model_and_is_reproducible(trained_run: Path, tmp_path: Path) -> None:
     controllers = ["passive", "velocity_feedback", "lqr", "tension_aware", str(trained_run)]
-    kwargs = dict(env_id="TetherTetrahedron-v0", controllers=controllers, episodes=3, seed=123,
-                  env_kwargs={"max_episode_steps": 40})
+    kwargs = dict(
+        env_id="TetherTetrahedron-v0",
+        controllers=controllers,
+        episodes=3,
+        seed=123,
+        env_kwargs={"max_episode_steps": 40},
+    )
     records, summaries = compare(out=tmp_path / "a", **kwargs)
     assert [r.name for r in records[:4]] == ["passive", "velocity_feedback", "lqr", "tension_aware"]
     table = (tmp_path / "a" / "comparison.md").read_text()

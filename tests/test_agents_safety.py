@@ -55,12 +55,21 @@ SHORT = {"max_episode_steps": 20}
 # Fixtures: a tiny SB3 model, its pickle-based files, and crafted copies with payloads
 # ---------------------------------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def sb3_model() -> tuple[PPO, object]:
     """A tiny PPO (256 steps) with VecNormalize statistics, in memory."""
     venv = make_training_env(ENV, 4, seed=0, normalize={"norm_obs": True, "norm_reward": True}, env_kwargs=SHORT)
-    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu",
-                policy_kwargs={"net_arch": [32, 32], "log_std_init": -1.0})
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=64,
+        batch_size=64,
+        n_epochs=2,
+        seed=0,
+        device="cpu",
+        policy_kwargs={"net_arch": [32, 32], "log_std_init": -1.0},
+    )
     model.learn(256)
     return model, venv
 
@@ -78,8 +87,9 @@ def sb3_run(sb3_model: tuple[PPO, object], tmp_path_factory: pytest.TempPathFact
 
 def payload(marker: Path, genuine: bytes) -> bytes:
     """Pickle bytes that write ``marker`` when unpickled, then return ``pickle.loads(genuine)``."""
-    code = (f"(__import__('pathlib').Path({str(marker)!r}).write_text('pwned'), "
-            f"__import__('pickle').loads({genuine!r}))[1]")
+    code = (
+        f"(__import__('pathlib').Path({str(marker)!r}).write_text('pwned'), __import__('pickle').loads({genuine!r}))[1]"
+    )
 
     class Payload:
         def __reduce__(self) -> tuple:
@@ -132,10 +142,22 @@ def test_no_loader_or_command_unpickles_without_the_opt_in(crafted: tuple[Path, 
         lambda: TrainedPolicy(run),
         lambda: TrainedPolicy(run / "model.zip"),
         lambda: make_controller(str(run), env),
-        lambda: agents.compare.main(["--controllers", "passive", str(run), "--episodes", "2",
-                                     "--out", str(tmp_path / "compare")]),
-        lambda: agents.train.main(["--resume", str(run / "model.zip"), "--out", str(tmp_path / "runs"),
-                                   "--timesteps", "64", "--n-envs", "4", "--no-progress"]),
+        lambda: agents.compare.main(
+            ["--controllers", "passive", str(run), "--episodes", "2", "--out", str(tmp_path / "compare")]
+        ),
+        lambda: agents.train.main(
+            [
+                "--resume",
+                str(run / "model.zip"),
+                "--out",
+                str(tmp_path / "runs"),
+                "--timesteps",
+                "64",
+                "--n-envs",
+                "4",
+                "--no-progress",
+            ]
+        ),
         lambda: agents.train.main(["--resume", str(run), "--out", str(tmp_path / "runs"), "--timesteps", "64"]),
         lambda: agents.convert.main([str(run), str(tmp_path / "converted")]),
     ]
@@ -156,11 +178,39 @@ def test_opting_in_loads_pickle_files_with_a_warning(crafted: tuple[Path, Path],
     attempts = [
         lambda: TrainedPolicy(run, trust_pickle=True).predict(np.zeros((2, 30), dtype=np.float32)),
         lambda: make_controller(str(run), env, trust_pickle=True),
-        lambda: agents.compare.main(["--controllers", "passive", str(run), "--episodes", "2", "--no-plots",
-                                     "--trust-pickle", "--out", str(tmp_path / "compare")]),
-        lambda: agents.train.main(["--resume", str(run / "model.zip"), "--trust-pickle", "--out", str(tmp_path / "runs"),
-                                   "--timesteps", "64", "--n-envs", "4", "--no-progress", "--eval-freq", "100000",
-                                   "--checkpoint-freq", "100000", "--eval-episodes", "2"]),
+        lambda: agents.compare.main(
+            [
+                "--controllers",
+                "passive",
+                str(run),
+                "--episodes",
+                "2",
+                "--no-plots",
+                "--trust-pickle",
+                "--out",
+                str(tmp_path / "compare"),
+            ]
+        ),
+        lambda: agents.train.main(
+            [
+                "--resume",
+                str(run / "model.zip"),
+                "--trust-pickle",
+                "--out",
+                str(tmp_path / "runs"),
+                "--timesteps",
+                "64",
+                "--n-envs",
+                "4",
+                "--no-progress",
+                "--eval-freq",
+                "100000",
+                "--checkpoint-freq",
+                "100000",
+                "--eval-episodes",
+                "2",
+            ]
+        ),
         lambda: agents.convert.main([str(run), str(tmp_path / "converted"), "--trust-pickle"]),
     ]
     for attempt in attempts:
@@ -189,13 +239,16 @@ def test_safe_files_that_hold_pickle_payloads_are_rejected(sb3_model: tuple[PPO,
     assert not marker.exists()
 
 
-@pytest.mark.parametrize(("key", "value", "message"), [
-    ("algo", "evil", "algorithm 'evil'"),
-    ("policy", "builtins.eval", "policy 'builtins.eval'"),
-    ("policy_kwargs", {"activation_fn": "os.system"}, "activation_fn"),
-    ("policy_kwargs", {"features_extractor_class": "subprocess.Popen"}, "features_extractor_class"),
-    ("policy_kwargs", {"__init__": 1}, "__init__"),
-])
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("algo", "evil", "algorithm 'evil'"),
+        ("policy", "builtins.eval", "policy 'builtins.eval'"),
+        ("policy_kwargs", {"activation_fn": "os.system"}, "activation_fn"),
+        ("policy_kwargs", {"features_extractor_class": "subprocess.Popen"}, "features_extractor_class"),
+        ("policy_kwargs", {"__init__": 1}, "__init__"),
+    ],
+)
 def test_policy_metadata_cannot_name_arbitrary_code(
     sb3_model: tuple[PPO, object], tmp_path: Path, key: str, value: object, message: str
 ) -> None:
@@ -224,6 +277,7 @@ def test_policy_metadata_numbers_must_be_finite(sb3_model: tuple[PPO, object], t
 # The safe format: round trips, conversion, the shipped models and their checksums
 # ---------------------------------------------------------------------------------------------
 
+
 def sb3_actions(model: object, normalizer: object, observations: np.ndarray) -> np.ndarray:
     """The SB3 pipeline: VecNormalize.normalize_obs, then model.predict(deterministic=True)."""
     return model.predict(normalizer.normalize_obs(observations).astype(np.float32), deterministic=True)[0]
@@ -231,8 +285,9 @@ def sb3_actions(model: object, normalizer: object, observations: np.ndarray) -> 
 
 def test_safe_round_trip_gives_bit_identical_actions(sb3_model: tuple[PPO, object], tmp_path: Path) -> None:
     model, venv = sb3_model
-    observations = reference_observations(4000, model.observation_space, venv.obs_rms.mean, venv.obs_rms.var,
-                                          np.random.default_rng(1))
+    observations = reference_observations(
+        4000, model.observation_space, venv.obs_rms.mean, venv.obs_rms.var, np.random.default_rng(1)
+    )
     directory = save_policy(tmp_path / "policy", model, venv, ENV)
     rng_state = torch.random.get_rng_state()
     policy = TrainedPolicy(directory)
@@ -244,14 +299,24 @@ def test_safe_round_trip_gives_bit_identical_actions(sb3_model: tuple[PPO, objec
 
 def test_sac_round_trip_and_resume_state(tmp_path: Path) -> None:
     venv = make_training_env(ENV, 2, seed=0, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
-    kwargs = dict(learning_starts=20, batch_size=16, gradient_steps=1, buffer_size=1000, seed=0, device="cpu",
-                  policy_kwargs={"net_arch": [16, 16]})
+    kwargs = dict(
+        learning_starts=20,
+        batch_size=16,
+        gradient_steps=1,
+        buffer_size=1000,
+        seed=0,
+        device="cpu",
+        policy_kwargs={"net_arch": [16, 16]},
+    )
     model = SAC("MlpPolicy", venv, **kwargs)
     model.learn(60)
     directory = save_policy(tmp_path / "sac", model, venv, ENV, training_state=True)
-    observations = reference_observations(500, model.observation_space, venv.obs_rms.mean, venv.obs_rms.var,
-                                          np.random.default_rng(2))
-    assert TrainedPolicy(directory).predict(observations)[0].tobytes() == sb3_actions(model, venv, observations).tobytes()
+    observations = reference_observations(
+        500, model.observation_space, venv.obs_rms.mean, venv.obs_rms.var, np.random.default_rng(2)
+    )
+    assert (
+        TrainedPolicy(directory).predict(observations)[0].tobytes() == sb3_actions(model, venv, observations).tobytes()
+    )
     fresh_venv = make_training_env(ENV, 2, seed=5, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
     fresh = SAC("MlpPolicy", fresh_venv, **kwargs)
     load_training_state(fresh, directory, fresh_venv)
@@ -271,12 +336,14 @@ def test_converter_output_matches_sb3_load(sb3_run: Path, tmp_path: Path) -> Non
     with pytest.warns(PickleTrustWarning):
         convert(sb3_run, target, trust_pickle=True, reference=True)
     assert sorted(p.name for p in target.iterdir()) == sorted(
-        ["MANIFEST.sha256", "config.yml", "normalization.json", "policy.json", "policy.safetensors", REFERENCE_FILE])
+        ["MANIFEST.sha256", "config.yml", "normalization.json", "policy.json", "policy.safetensors", REFERENCE_FILE]
+    )
     loaded = PPO.load(sb3_run / "model.zip", device="cpu")
     with open(sb3_run / "vecnormalize.pkl", "rb") as stream:
         normalizer = pickle.load(stream)
-    observations = reference_observations(3000, loaded.observation_space, normalizer.obs_rms.mean,
-                                          normalizer.obs_rms.var, np.random.default_rng(3))
+    observations = reference_observations(
+        3000, loaded.observation_space, normalizer.obs_rms.mean, normalizer.obs_rms.var, np.random.default_rng(3)
+    )
     actions = TrainedPolicy(target).predict(observations)[0]
     assert actions.tobytes() == sb3_actions(loaded, normalizer, observations).tobytes()
     with pytest.raises(OutputExistsError, match="--force"):
@@ -346,9 +413,11 @@ def test_shipped_models_need_an_exact_manifest(fake_models_dir: Path) -> None:
 # Careful commands
 # ---------------------------------------------------------------------------------------------
 
+
 @pytest.fixture
 def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
     """Make any rollout, controller load or env build fail the test: a refusal must come first."""
+
     def forbidden(*args: object, **kwargs: object) -> None:
         raise AssertionError("work started before the outputs were checked")
 
@@ -415,8 +484,14 @@ def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path: Path) -> N
     assert target.stat().st_mode & 0o777 == 0o666 & ~umask  # the mode a plain open() would give
 
 
-TINY = dict(timesteps=256, num_envs=4, overrides={"n_steps": 64, "batch_size": 64, "n_epochs": 1}, eval_freq=128,
-            eval_episodes=2, progress_bar=False)
+TINY = dict(
+    timesteps=256,
+    num_envs=4,
+    overrides={"n_steps": 64, "batch_size": 64, "n_epochs": 1},
+    eval_freq=128,
+    eval_episodes=2,
+    progress_bar=False,
+)
 
 
 def test_train_refuses_to_overwrite_a_run_without_force(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -465,29 +540,47 @@ def test_resume_refuses_a_checkpoint_that_does_not_fit(tmp_path: Path) -> None:
 # Errors that name the key or the argument
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("default: {n_envs: 4}", "'n_timesteps' is missing"),
-    ("default: {n_timesteps: 1e6}", r"'n_timesteps' must be an integer; got the text '1e6' \(YAML reads"),
-    ("default: {n_timesteps: 1000, n_steps: lots}", "'n_steps' must be an integer; got the text 'lots'"),
-    ("default: {n_timesteps: 1000, n_steps: 12.5}", "'n_steps' must be an integer; got 12.5"),
-    ("default: {n_timesteps: 1000, learning_rat: 0.001}", "unknown key 'learning_rat' .did you mean 'learning_rate'"),
-    ("default: {n_timesteps: 1000, learning_rate: lin_fast}", "'learning_rate' must be a positive number or 'lin_"),
-    ("default: {n_timesteps: 1000, gamma: 1.5}", r"'gamma' must be in \(0, 1\]"),
-    ("default: {n_timesteps: 1000, n_epochs: true}", "'n_epochs' must be an integer, not true"),
-    ("default: {n_timesteps: 1000, seed: 3}", "'seed' cannot be set in a hyperparameter file: use --seed"),
-    ("default: {n_timesteps: 1000, policy: TransformerPolicy}", "'policy' must be one of"),
-    ("default: {n_timesteps: 1000, policy_kwargs: {activation_fn: sigmoid}}", "'policy_kwargs.activation_fn' must be"),
-    ("default: {n_timesteps: 1000, policy_kwargs: {net_arch: [64, wide]}}", "'policy_kwargs.net_arch' must be a list"),
-    ("default: {n_timesteps: 1000, policy_kwargs: {netarch: [64]}}", "unknown key 'netarch' .did you mean 'net_arch'"),
-    ("default: {n_timesteps: 1000, normalize: {clip_ob: 5}}", "unknown key 'clip_ob'"),
-    ("default: {n_timesteps: 1000, curriculum: {start: 0.2}}", "'curriculum' must be a mapping with exactly"),
-    ("default: {n_timesteps: 1000, rollout_buffer_class: RolloutBuffer}", "'rollout_buffer_class' cannot be set"),
-    ("default: {n_timesteps: 1000, policy_kwargs: {optimizer_kwargs: {eps: 1e-5}}}",
-     "'policy_kwargs.optimizer_kwargs.eps' is the text '1e-5', not a number"),
-    ("default: [1, 2]", "entry 'default': must be a mapping"),
-    ("TetherChain-v0: {n_timesteps: 5}", "no entry for 'TetherTetrahedron-v0' and no 'default'"),
-    ("default: {n_timesteps: [1000", "not valid YAML"),
-])
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("default: {n_envs: 4}", "'n_timesteps' is missing"),
+        ("default: {n_timesteps: 1e6}", r"'n_timesteps' must be an integer; got the text '1e6' \(YAML reads"),
+        ("default: {n_timesteps: 1000, n_steps: lots}", "'n_steps' must be an integer; got the text 'lots'"),
+        ("default: {n_timesteps: 1000, n_steps: 12.5}", "'n_steps' must be an integer; got 12.5"),
+        (
+            "default: {n_timesteps: 1000, learning_rat: 0.001}",
+            "unknown key 'learning_rat' .did you mean 'learning_rate'",
+        ),
+        ("default: {n_timesteps: 1000, learning_rate: lin_fast}", "'learning_rate' must be a positive number or 'lin_"),
+        ("default: {n_timesteps: 1000, gamma: 1.5}", r"'gamma' must be in \(0, 1\]"),
+        ("default: {n_timesteps: 1000, n_epochs: true}", "'n_epochs' must be an integer, not true"),
+        ("default: {n_timesteps: 1000, seed: 3}", "'seed' cannot be set in a hyperparameter file: use --seed"),
+        ("default: {n_timesteps: 1000, policy: TransformerPolicy}", "'policy' must be one of"),
+        (
+            "default: {n_timesteps: 1000, policy_kwargs: {activation_fn: sigmoid}}",
+            "'policy_kwargs.activation_fn' must be",
+        ),
+        (
+            "default: {n_timesteps: 1000, policy_kwargs: {net_arch: [64, wide]}}",
+            "'policy_kwargs.net_arch' must be a list",
+        ),
+        (
+            "default: {n_timesteps: 1000, policy_kwargs: {netarch: [64]}}",
+            "unknown key 'netarch' .did you mean 'net_arch'",
+        ),
+        ("default: {n_timesteps: 1000, normalize: {clip_ob: 5}}", "unknown key 'clip_ob'"),
+        ("default: {n_timesteps: 1000, curriculum: {start: 0.2}}", "'curriculum' must be a mapping with exactly"),
+        ("default: {n_timesteps: 1000, rollout_buffer_class: RolloutBuffer}", "'rollout_buffer_class' cannot be set"),
+        (
+            "default: {n_timesteps: 1000, policy_kwargs: {optimizer_kwargs: {eps: 1e-5}}}",
+            "'policy_kwargs.optimizer_kwargs.eps' is the text '1e-5', not a number",
+        ),
+        ("default: [1, 2]", "entry 'default': must be a mapping"),
+        ("TetherChain-v0: {n_timesteps: 5}", "no entry for 'TetherTetrahedron-v0' and no 'default'"),
+        ("default: {n_timesteps: [1000", "not valid YAML"),
+    ],
+)
 def test_hyperparameter_errors_name_the_key(tmp_path: Path, text: str, message: str) -> None:
     file = tmp_path / "ppo.yml"
     file.write_text(text)
@@ -514,15 +607,21 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
         (lambda: compare(ENV, controllers=["lqr", "lqr"], out=out), r"\['lqr'\] more than once"),
         (lambda: compare(ENV, controllers=[], out=out), "at least one controller"),
         (lambda: compare(ENV, satellite=9, out=out, episodes=2), r"satellite must be in 0\.\.3"),
-        (lambda: rollout(make_controller("passive", gym.make_vec(ENV, num_envs=1)), ENV, [1.5]),
-         r"seeds must be non-negative integers; got \[1\.5\]"),
+        (
+            lambda: rollout(make_controller("passive", gym.make_vec(ENV, num_envs=1)), ENV, [1.5]),
+            r"seeds must be non-negative integers; got \[1\.5\]",
+        ),
         (lambda: train("ppo", ENV, seed=-1, out=out), "seed must be an integer >= 0"),
         (lambda: train("ppo", ENV, eval_episodes=0, out=out), "eval_episodes must be an integer >= 1"),
         (lambda: train("ppo", ENV, timesteps=0, out=out), "timesteps must be an integer >= 1"),
         (lambda: train("a2c", ENV, out=out), "unknown algorithm 'a2c'"),
         (lambda: train("ppo", "Nope-v0", out=out), "unknown env id 'Nope-v0'"),
-        (lambda: make_controller(str(shipped_models("TetherSpinningTriangle-v0")["ppo"]), gym.make_vec(ENV, num_envs=1)),
-         "takes observations of shape .21,., but TetherTetrahedron-v0 gives .30,."),
+        (
+            lambda: make_controller(
+                str(shipped_models("TetherSpinningTriangle-v0")["ppo"]), gym.make_vec(ENV, num_envs=1)
+            ),
+            "takes observations of shape .21,., but TetherTetrahedron-v0 gives .30,.",
+        ),
     ]
     shipped = TrainedPolicy(shipped_models(ENV)["ppo"])
     cases += [

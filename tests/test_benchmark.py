@@ -116,8 +116,12 @@ def test_best_baseline_excludes_baselines_below_passive() -> None:
     means = {"passive": -127.2, "velocity_feedback": -67.6, "lqr": -2091.0, "tension_aware": -68.4}
     best, notes = best_eligible_baseline(means)
     assert best == "velocity_feedback"
-    assert notes == {"passive": "eligible", "velocity_feedback": "best",
-                     "lqr": "not eligible: mean return below passive's", "tension_aware": "eligible"}
+    assert notes == {
+        "passive": "eligible",
+        "velocity_feedback": "best",
+        "lqr": "not eligible: mean return below passive's",
+        "tension_aware": "eligible",
+    }
     # When every scripted law loses to doing nothing, passive is the best baseline.
     best, notes = best_eligible_baseline({"passive": -10.0, "lqr": -11.0, "velocity_feedback": -10.5})
     assert best == "passive"
@@ -138,8 +142,10 @@ def test_aggregate_iqm_on_a_hand_case() -> None:
     passive = np.array([-100.0, -200.0])
     reference = np.array([-50.0, -100.0])
     per_id_scores = [-50.0, 0.0, 10.0, 20.0, 30.0, 40.0, 100.0, 1000.0]
-    controller = {env_id: passive + score / 100.0 * (reference - passive)
-                  for env_id, score in zip(ids, per_id_scores, strict=True)}
+    controller = {
+        env_id: passive + score / 100.0 * (reference - passive)
+        for env_id, score in zip(ids, per_id_scores, strict=True)
+    }
     zero = dict.fromkeys(ids, passive)
     ref = dict.fromkeys(ids, reference)
     result = aggregate_scores({"x": controller}, zero, ref, reps=300, seed=3)["x"]
@@ -163,8 +169,9 @@ def test_aggregate_intervals_are_paired_and_seeded() -> None:
     result = aggregate_scores({"noisy": noisy, "reference": ref}, zero, ref, reps=500, seed=7)
     # The reference scores 100 in every resample, however its returns spread.
     reference_row = result["reference"]
-    assert [reference_row[key] for key in ("iqm", "iqm_low", "iqm_high", "mean_low", "mean_high")] == \
-        pytest.approx([100.0] * 5)
+    assert [reference_row[key] for key in ("iqm", "iqm_low", "iqm_high", "mean_low", "mean_high")] == pytest.approx(
+        [100.0] * 5
+    )
     row = result["noisy"]
     assert row["iqm_low"] < row["iqm"] < row["iqm_high"]
     assert row["mean_low"] < row["mean"] < row["mean_high"]
@@ -191,8 +198,18 @@ SMOKE_IDS = ["TetherTetrahedron-v0", "TetherTriangle-v0"]
 def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _without_mpc(monkeypatch)
     out = tmp_path / "bench"
-    arguments = ["--envs", *SMOKE_IDS, "--episodes", "4", "--reference", "tension_aware", "--bootstrap-reps",
-                 "200", "--out", str(out)]
+    arguments = [
+        "--envs",
+        *SMOKE_IDS,
+        "--episodes",
+        "4",
+        "--reference",
+        "tension_aware",
+        "--bootstrap-reps",
+        "200",
+        "--out",
+        str(out),
+    ]
     results = main([*arguments, "--controllers", "velocity_feedback", "tension_aware", "mpc"])
     for name in agents.benchmark.TABLE_FILES:
         assert (out / name).stat().st_size > 0
@@ -206,17 +223,20 @@ def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     for env_id in SMOKE_IDS:
         assert f"### {env_id}" in report
         entry = data["per_id"][env_id]
-        assert entry["missing"] == [{"controller": "mpc",
-                                     "reason": "unknown controller 'mpc' (test: as if it did not exist)"}]
+        assert entry["missing"] == [
+            {"controller": "mpc", "reason": "unknown controller 'mpc' (test: as if it did not exist)"}
+        ]
         controllers = entry["controllers"]
         assert list(controllers) == ["passive", "velocity_feedback", "tension_aware"]
         assert controllers["passive"]["normalised_scores"] == [0.0] * 4
         reference_score = controllers["tension_aware"]["normalised_score"]
         assert (reference_score["mean"], reference_score["low"], reference_score["high"]) == pytest.approx(
-            (100.0, 100.0, 100.0))
+            (100.0, 100.0, 100.0)
+        )
         best = entry["best_baseline"]
-        assert best == max(("passive", "velocity_feedback", "tension_aware"),
-                           key=lambda name: controllers[name]["mean_return"])
+        assert best == max(
+            ("passive", "velocity_feedback", "tension_aware"), key=lambda name: controllers[name]["mean_return"]
+        )
         for name, item in controllers.items():
             if name == best:
                 assert item["paired_vs_best"] is None
@@ -234,12 +254,12 @@ def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     with open(out / "episodes.csv", newline="") as stream:
         rows = list(csv.DictReader(stream))
     assert len(rows) == len(SMOKE_IDS) * 3 * 4
-    from_csv = [float(row["return"]) for row in rows
-                if row["env_id"] == env_id and row["controller"] == "velocity_feedback"]
+    from_csv = [
+        float(row["return"]) for row in rows if row["env_id"] == env_id and row["controller"] == "velocity_feedback"
+    ]
     assert from_csv == direct_returns
     aggregate = data["aggregate"]
-    assert set(aggregate) == {"passive", "velocity_feedback", "tension_aware",
-                              agents.benchmark.BEST_BASELINE_ROW}
+    assert set(aggregate) == {"passive", "velocity_feedback", "tension_aware", agents.benchmark.BEST_BASELINE_ROW}
     assert aggregate["passive"]["iqm"] == 0.0 and aggregate["velocity_feedback"]["ids"] == 2
     assert "| velocity_feedback | 2/2 |" in report
     assert "| id | passive | velocity_feedback | tension_aware |" in report  # the reference once
@@ -252,18 +272,26 @@ def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 
     def numbers(result: dict[str, Any]) -> dict[str, Any]:
         """Every per-id number but the wall times."""
-        return {env_id: {name: {key: value for key, value in item.items() if not key.startswith("wall")}
-                         for name, item in entry["controllers"].items()}
-                for env_id, entry in result["per_id"].items()}
+        return {
+            env_id: {
+                name: {key: value for key, value in item.items() if not key.startswith("wall")}
+                for name, item in entry["controllers"].items()
+            }
+            for env_id, entry in result["per_id"].items()
+        }
 
     assert numbers(again) == numbers(results)
 
 
-def test_benchmark_says_the_score_is_not_available_without_mpc(tmp_path: Path,
-                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+def test_benchmark_says_the_score_is_not_available_without_mpc(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _without_mpc(monkeypatch)
-    results = benchmark(env_ids=[SMOKE_IDS[1]], controllers=["passive", "velocity_feedback"], episodes=3,
-                        out=tmp_path, bootstrap_reps=200)
+    results = benchmark(
+        env_ids=[SMOKE_IDS[1]],
+        controllers=["passive", "velocity_feedback"],
+        episodes=3,
+        out=tmp_path,
+        bootstrap_reps=200,
+    )
     entry = results["per_id"][SMOKE_IDS[1]]
     assert entry["score"] == "not available: mpc did not run on this id"
     assert all(item["normalised_score"] is None for item in entry["controllers"].values())
@@ -274,8 +302,9 @@ def test_benchmark_says_the_score_is_not_available_without_mpc(tmp_path: Path,
     assert (tmp_path / "aggregate.png").stat().st_size > 0  # a figure that says why it is empty
 
 
-def test_bad_output_or_controller_is_refused_before_any_rollout(tmp_path: Path,
-                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+def test_bad_output_or_controller_is_refused_before_any_rollout(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     def no_rollout(*args: Any, **kwargs: Any) -> None:
         raise AssertionError("a rollout ran before the arguments were checked")
 

@@ -98,8 +98,12 @@ def test_closed_form_is_the_exact_element_eigenvalue() -> None:
     split = cluster.masses / cluster.degree
     for c, (i, j) in enumerate(cluster.cables):
         sub = tg.Cluster(
-            positions=cluster.positions[[i, j]], masses=[split[i], split[j]], cables=[(0, 1)],
-            EA=cluster.EA[c], N0=cluster.N0[c], L0=cluster.L0[c],
+            positions=cluster.positions[[i, j]],
+            masses=[split[i], split[j]],
+            cables=[(0, 1)],
+            EA=cluster.EA[c],
+            N0=cluster.N0[c],
+            L0=cluster.L0[c],
         )
         element_omega2 = max_frequency(sub, x[[i, j]], taut_branch=True) ** 2
         bound = sim.element_omega2_finite_difference()[0, c]

@@ -79,8 +79,15 @@ def test_make_works_without_importing_the_package_first() -> None:
 
 
 def test_keyword_arguments_pass_through_make() -> None:
-    env = gym.make("TetherChain-v0", preset_kwargs={"n": 7}, thrusters=[0, 6], max_thrust=[2.0, 0.5],
-                   thrust_limit="magnitude", observe_tensions=True, observed_satellites=[0, 3, 6])
+    env = gym.make(
+        "TetherChain-v0",
+        preset_kwargs={"n": 7},
+        thrusters=[0, 6],
+        max_thrust=[2.0, 0.5],
+        thrust_limit="magnitude",
+        observe_tensions=True,
+        observed_satellites=[0, 3, 6],
+    )
     assert env.action_space.shape == (6,)
     assert env.observation_space.shape == (6 * 3 + 6 + 6,)
     task = env.unwrapped.task
@@ -118,9 +125,23 @@ def test_reward_terms_add_up_and_info_is_complete() -> None:
         assert info["reward_slack"] == pytest.approx(-0.5 * info["slack_count"] / 6)
         if terminated:
             break
-    for key in ("substeps", "step_min", "step_max", "vibration_energy", "kinetic_energy", "strain_energy",
-                "dissipated_energy", "external_work", "energy_residual", "tensions", "slack_count",
-                "propellant_used", "end_reason", "time", "thrust"):
+    for key in (
+        "substeps",
+        "step_min",
+        "step_max",
+        "vibration_energy",
+        "kinetic_energy",
+        "strain_energy",
+        "dissipated_energy",
+        "external_work",
+        "energy_residual",
+        "tensions",
+        "slack_count",
+        "propellant_used",
+        "end_reason",
+        "time",
+        "thrust",
+    ):
         assert key in info
     assert info["propellant_used"] > 0 and info["reward_propellant"] < 0
 
@@ -148,7 +169,7 @@ def episode_energy(env: gym.Env, seed: int, policy: str) -> np.ndarray:
         if policy == "zero":
             action = np.zeros(env.action_space.shape)
         else:  # push against the velocity relative to the centre of mass
-            action = np.clip(-2.0 * obs[3 * n:6 * n], -1, 1)
+            action = np.clip(-2.0 * obs[3 * n : 6 * n], -1, 1)
         obs, _, terminated, _, info = env.step(action)
         energies.append(info["vibration_energy"])
         assert not terminated
@@ -175,7 +196,9 @@ def test_sub_steps_follow_the_critical_step_and_intervals_end_on_time() -> None:
         for k in range(1, 6):
             *_, info = env.step(np.zeros(12))
             assert info["time"] == pytest.approx(0.2 * k, rel=1e-14)
-            assert info["step_max"] <= tg.DEFAULT_SAFETY_FACTOR * env.unwrapped.task.sim.critical_time_step()[0] * (1 + 1e-9)
+            assert info["step_max"] <= tg.DEFAULT_SAFETY_FACTOR * env.unwrapped.task.sim.critical_time_step()[0] * (
+                1 + 1e-9
+            )
         counts.append(info["substeps"])
     assert counts[1] >= 2 * counts[0] - 1
 
@@ -240,7 +263,9 @@ def test_render_rgb_array_and_video(tmp_path: Path) -> None:
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3 and frame.std() > 0
     pytest.importorskip("moviepy")
-    recorder = gym.wrappers.RecordVideo(env, str(tmp_path / "video"), episode_trigger=lambda e: True, disable_logger=True)
+    recorder = gym.wrappers.RecordVideo(
+        env, str(tmp_path / "video"), episode_trigger=lambda e: True, disable_logger=True
+    )
     recorder.reset(seed=0)
     for _ in range(10):
         recorder.step(np.zeros(12))

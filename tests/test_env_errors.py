@@ -173,9 +173,7 @@ def test_the_sub_step_budget_names_the_longest_control_interval_and_it_is_accept
     cluster = tg.make_cluster("tetrahedron")
     scales = ClusterScales.of(cluster)
     safety = 1e-6
-    longest = (
-        scales.max_substeps // SUBSTEP_HEADROOM * safety * min(scales.critical_step, scales.damping_step)
-    )
+    longest = scales.max_substeps // SUBSTEP_HEADROOM * safety * min(scales.critical_step, scales.damping_step)
     with pytest.raises(
         EnvArgumentError, match=r"control_interval=1 s needs about .* lower control_interval to at most"
     ) as error:
@@ -184,9 +182,7 @@ def test_the_sub_step_budget_names_the_longest_control_interval_and_it_is_accept
     TaskConfig(safety_factor=safety, control_interval=0.99 * longest).validate(cluster)
     # The worst randomised cluster (light, stiff) needs smaller sub-steps still.
     with pytest.raises(EnvArgumentError, match="control_interval"):
-        TaskConfig(safety_factor=safety, control_interval=0.99 * longest, randomize={"masses": 0.5}).validate(
-            cluster
-        )
+        TaskConfig(safety_factor=safety, control_interval=0.99 * longest, randomize={"masses": 0.5}).validate(cluster)
 
 
 def test_the_damping_time_scale_counts_in_the_sub_step_budget() -> None:
@@ -314,9 +310,7 @@ BAD_ACTIONS = [
 ]
 
 
-@pytest.mark.parametrize(
-    ("action", "why"), BAD_ACTIONS, ids=[f"{w}-{i}" for i, (_, w) in enumerate(BAD_ACTIONS)]
-)
+@pytest.mark.parametrize(("action", "why"), BAD_ACTIONS, ids=[f"{w}-{i}" for i, (_, w) in enumerate(BAD_ACTIONS)])
 def test_bad_actions_are_named_and_change_nothing(action: object, why: str) -> None:
     env = gym.make(ENV_ID)
     env.reset(seed=0)
@@ -341,10 +335,6 @@ def test_actions_of_any_real_dtype_act_alike_and_huge_ones_are_clipped() -> None
         results.append(env.step(action)[:2])
     for obs, reward in results[1:]:
         assert np.array_equal(obs, results[0][0]) and reward == results[0][1]
-
-
-
-
 
 
 def test_a_refused_reset_leaves_the_generator_as_it_was() -> None:
@@ -498,9 +488,7 @@ def test_vector_and_sb3_runaways_end_with_finite_rewards(how: str) -> None:
     runaway(sb3.venv.unwrapped.task, how)
     sb3.step_async(np.zeros((3, 12), np.float32))
     obs, rewards, dones, infos = sb3.step_wait()
-    assert (
-        dones.all() and rewards.dtype == np.float32 and np.isfinite(rewards).all() and np.isfinite(obs).all()
-    )
+    assert dones.all() and rewards.dtype == np.float32 and np.isfinite(rewards).all() and np.isfinite(obs).all()
     assert [info["end_reason"] for info in infos] == ["numerics_diverged"] * 3
     assert all(np.isfinite(info["terminal_observation"]).all() for info in infos)
 

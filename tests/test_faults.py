@@ -39,7 +39,11 @@ def test_periodic_force_has_the_set_amplitude_and_period() -> None:
     force = np.array([info["disturbance"] for info in infos[1:]])  # (T, n, 3)
     task = env.unwrapped.task
     midpoints = (np.arange(60) + 0.5) * 0.1
-    expected = 0.4 * np.sin(2 * math.pi * midpoints[:, None] / 2.0 + task.periodic_phase[0])[:, :, None] * task.periodic_direction[0]
+    expected = (
+        0.4
+        * np.sin(2 * math.pi * midpoints[:, None] / 2.0 + task.periodic_phase[0])[:, :, None]
+        * task.periodic_direction[0]
+    )
     np.testing.assert_allclose(force, expected, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(task.periodic_direction[0], axis=1), 1.0)
     # Every satellite sees the full amplitude within a period.
@@ -123,8 +127,9 @@ def test_a_cable_past_its_breaking_load_breaks_for_the_rest_of_the_episode(mode:
 
 
 def test_a_cluster_with_every_cable_broken_drifts_on_without_crashing() -> None:
-    env = gym.make("TetherSpinningTriangle-v0", preset_kwargs={"breaking_load": 0.5}, cable_failure="continue",
-                   max_deviation=1e6)
+    env = gym.make(
+        "TetherSpinningTriangle-v0", preset_kwargs={"breaking_load": 0.5}, cable_failure="continue", max_deviation=1e6
+    )
     env.reset(seed=0)
     for _ in range(100):
         obs, reward, terminated, _, info = env.step(np.zeros(9))
@@ -132,8 +137,16 @@ def test_a_cluster_with_every_cable_broken_drifts_on_without_crashing() -> None:
     assert info["broken_cables"].all() and np.all(info["tensions"] == 0)
 
 
-FAULTS = dict(impulse_magnitude=1.0, impulse_rate=0.5, periodic_amplitude=0.2, thrust_noise=0.1, thrust_delay=1,
-              thruster_failure_probability=0.5, randomize={"masses": 0.1, "EA": 0.1}, cable_failure="continue")
+FAULTS = dict(
+    impulse_magnitude=1.0,
+    impulse_rate=0.5,
+    periodic_amplitude=0.2,
+    thrust_noise=0.1,
+    thrust_delay=1,
+    thruster_failure_probability=0.5,
+    randomize={"masses": 0.1, "EA": 0.1},
+    cable_failure="continue",
+)
 
 
 def test_faulty_episodes_are_bit_identical_for_the_same_seed() -> None:
@@ -159,8 +172,9 @@ def test_difficulty_scales_initial_conditions_and_randomisation_together() -> No
     np.testing.assert_allclose(deviation(half), 0.5 * deviation(full), atol=1e-12)
     np.testing.assert_allclose(spread(half), 0.5 * spread(full), atol=1e-12)
     # Velocities scale too, up to the rigid rotation removed about the (differently) displaced shape.
-    np.testing.assert_allclose(half.unwrapped.task.sim.velocities, 0.5 * full.unwrapped.task.sim.velocities,
-                               rtol=0, atol=1e-3 * 0.1)
+    np.testing.assert_allclose(
+        half.unwrapped.task.sim.velocities, 0.5 * full.unwrapped.task.sim.velocities, rtol=0, atol=1e-3 * 0.1
+    )
     # The observation units and the reward's energy scale do not move with the difficulty.
     assert half.unwrapped.task.energy_scale == full.unwrapped.task.energy_scale
     assert half.unwrapped.task.length_scale == full.unwrapped.task.length_scale

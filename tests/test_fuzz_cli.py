@@ -18,20 +18,46 @@ from hypothesis import strategies as st
 
 from agents import benchmark, compare, convert, train
 
-PARSERS = {"compare": compare.build_parser, "train": train.build_parser, "benchmark": benchmark.build_parser,
-           "convert": convert.build_parser}
+PARSERS = {
+    "compare": compare.build_parser,
+    "train": train.build_parser,
+    "benchmark": benchmark.build_parser,
+    "convert": convert.build_parser,
+}
 
 
 def options_of(parser: argparse.ArgumentParser) -> list[str]:
     """The long options of ``parser``, without --help (which exits 0 by design)."""
-    return [option for action in parser._actions for option in action.option_strings
-            if option.startswith("--") and option != "--help"]
+    return [
+        option
+        for action in parser._actions
+        for option in action.option_strings
+        if option.startswith("--") and option != "--help"
+    ]
 
 
 values = st.one_of(
-    st.integers(-10**6, 10**12).map(str), st.floats(allow_nan=True, allow_infinity=True).map(repr),
-    st.sampled_from(["", "-", "--", "ppo", "lqr", "mpc", "TetherTetrahedron-v0", "NoSuchEnv-v0", "1e6", "0x10",
-                     "nan", "inf", "/dev/null", "out dir", "é"]),
+    st.integers(-(10**6), 10**12).map(str),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.sampled_from(
+        [
+            "",
+            "-",
+            "--",
+            "ppo",
+            "lqr",
+            "mpc",
+            "TetherTetrahedron-v0",
+            "NoSuchEnv-v0",
+            "1e6",
+            "0x10",
+            "nan",
+            "inf",
+            "/dev/null",
+            "out dir",
+            "é",
+        ]
+    ),
     st.text(max_size=6),
 )
 
@@ -62,8 +88,18 @@ def test_any_argument_list_parses_or_names_the_option(command: str, data: st.Dat
 
 def check_parsed(arguments: dict[str, Any]) -> None:
     """What a successful parse may hold: the commands' whole-number options are in range."""
-    minimum = {"episodes": 2, "seed": 0, "satellite": 0, "timesteps": 1, "n_envs": 1, "eval_freq": 1,
-               "eval_episodes": 1, "checkpoint_freq": 1, "verbose": 0, "check_observations": 16}
+    minimum = {
+        "episodes": 2,
+        "seed": 0,
+        "satellite": 0,
+        "timesteps": 1,
+        "n_envs": 1,
+        "eval_freq": 1,
+        "eval_episodes": 1,
+        "checkpoint_freq": 1,
+        "verbose": 0,
+        "check_observations": 16,
+    }
     for key, low in minimum.items():
         value = arguments.get(key)
         if isinstance(value, int):

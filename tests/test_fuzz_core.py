@@ -26,25 +26,67 @@ from hypothesis import strategies as st
 import tether_gym as tg
 from tether_gym import Cluster, ClusterError, SimulationDiverged
 
-FUZZ = settings(max_examples=150, deadline=None, derandomize=True,
-                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=150,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
 #: The floats that break naive code: signed zeros, subnormals, the extremes, infinities and NaN.
-SPECIAL_FLOATS = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, 1e-7, 1.0, -1.0, 1e7, 1e12,
-                  1e13, 1e300, 1.7976931348623157e308, -1.7976931348623157e308, math.inf, -math.inf, math.nan]
+SPECIAL_FLOATS = [
+    0.0,
+    -0.0,
+    5e-324,
+    -5e-324,
+    2.2250738585072014e-308,
+    1e-300,
+    1e-7,
+    1.0,
+    -1.0,
+    1e7,
+    1e12,
+    1e13,
+    1e300,
+    1.7976931348623157e308,
+    -1.7976931348623157e308,
+    math.inf,
+    -math.inf,
+    math.nan,
+]
 
 TRIANGLE: dict[str, Any] = dict(
-    positions=[[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]], masses=5.0, cables=[(0, 1), (1, 2), (0, 2)],
-    EA=1e4, N0=0.5, damping=0.1, breaking_load=500.0, axial_damping=0.0,
+    positions=[[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]],
+    masses=5.0,
+    cables=[(0, 1), (1, 2), (0, 2)],
+    EA=1e4,
+    N0=0.5,
+    damping=0.1,
+    breaking_load=500.0,
+    axial_damping=0.0,
 )
-FIELD_SHAPES = {"positions": (3, 3), "masses": (3,), "damping": (3,), "EA": (3,), "N0": (3,), "L0": (3,),
-                "breaking_load": (3,), "axial_damping": (3,)}
+FIELD_SHAPES = {
+    "positions": (3, 3),
+    "masses": (3,),
+    "damping": (3,),
+    "EA": (3,),
+    "N0": (3,),
+    "L0": (3,),
+    "breaking_load": (3,),
+    "axial_damping": (3,),
+}
 ACCEPTED = (ClusterError, ValueError, TypeError)
 
 special = st.sampled_from(SPECIAL_FLOATS)
 anything_float = st.floats(allow_nan=True, allow_infinity=True) | special
-junk = st.one_of(st.text(max_size=4), st.booleans(), st.none(), st.complex_numbers(max_magnitude=10),
-                 st.integers(-(10**400), 10**400), st.dictionaries(st.text(max_size=2), st.integers(), max_size=2))
+junk = st.one_of(
+    st.text(max_size=4),
+    st.booleans(),
+    st.none(),
+    st.complex_numbers(max_magnitude=10),
+    st.integers(-(10**400), 10**400),
+    st.dictionaries(st.text(max_size=2), st.integers(), max_size=2),
+)
 
 
 def values_for(shape: tuple[int, ...]) -> st.SearchStrategy[Any]:
@@ -84,8 +126,7 @@ def test_one_bad_field_is_named_or_the_cluster_is_valid(field: str, data: st.Dat
     try:
         cluster = Cluster(**{**TRIANGLE, field: value})
     except ACCEPTED as error:
-        assert_names(error, field, "the distance between a cable's satellites", "zero length",
-                     "disconnected")
+        assert_names(error, field, "the distance between a cable's satellites", "zero length", "disconnected")
         return
     stored = getattr(cluster, field)
     finite = np.where(np.isinf(stored), 0.0, stored) if field == "breaking_load" else stored
@@ -94,13 +135,18 @@ def test_one_bad_field_is_named_or_the_cluster_is_valid(field: str, data: st.Dat
 
 
 @FUZZ
-@given(cables=st.one_of(st.lists(st.tuples(st.integers(-3, 5), st.integers(-3, 5)), max_size=5),
-                        st.lists(st.lists(st.one_of(st.integers(-2, 4), special, junk), max_size=3), max_size=4),
-                        junk))
+@given(
+    cables=st.one_of(
+        st.lists(st.tuples(st.integers(-3, 5), st.integers(-3, 5)), max_size=5),
+        st.lists(st.lists(st.one_of(st.integers(-2, 4), special, junk), max_size=3), max_size=4),
+        junk,
+    )
+)
 def test_bad_cable_lists_are_named(cables: Any) -> None:
     try:
-        cluster = Cluster(**{**TRIANGLE, "cables": cables, "EA": 1e4, "N0": 0.5, "breaking_load": 500.0,
-                             "axial_damping": 0.0})
+        cluster = Cluster(
+            **{**TRIANGLE, "cables": cables, "EA": 1e4, "N0": 0.5, "breaking_load": 500.0, "axial_damping": 0.0}
+        )
     except ACCEPTED as error:
         assert_names(error, "cable", "disconnected")
         return
@@ -108,9 +154,15 @@ def test_bad_cable_lists_are_named(cables: Any) -> None:
 
 
 @FUZZ
-@given(frame=st.one_of(st.fixed_dictionaries({"kind": st.sampled_from(["inertial", "hill", "rotating", "warp"]),
-                                              "rate": st.one_of(anything_float, junk)}),
-                       st.dictionaries(st.text(max_size=5), st.one_of(anything_float, junk), max_size=3), junk))
+@given(
+    frame=st.one_of(
+        st.fixed_dictionaries(
+            {"kind": st.sampled_from(["inertial", "hill", "rotating", "warp"]), "rate": st.one_of(anything_float, junk)}
+        ),
+        st.dictionaries(st.text(max_size=5), st.one_of(anything_float, junk), max_size=3),
+        junk,
+    )
+)
 def test_bad_frames_are_named(frame: Any) -> None:
     try:
         cluster = Cluster(**{**TRIANGLE, "frame": frame})
@@ -132,20 +184,31 @@ def valid_clusters(draw: st.DrawFn) -> Cluster:
     """Valid clusters whose every field holds awkward but legal floats (signed zeros, subnormals,
     extremes within range, unbreakable inf loads, a turning frame)."""
     offsets = draw(st.lists(finite_in_range, min_size=9, max_size=9))
-    positions = np.array(TRIANGLE["positions"]) * draw(st.sampled_from([1.0, 1e-3, 1e6])) + np.reshape(offsets, (3, 3)) * 1e-9
+    positions = (
+        np.array(TRIANGLE["positions"]) * draw(st.sampled_from([1.0, 1e-3, 1e6])) + np.reshape(offsets, (3, 3)) * 1e-9
+    )
     m = st.one_of(st.floats(1e-6, 1e9), st.sampled_from([1e-6, 1e9, 3.0]))
     nonneg = st.one_of(st.sampled_from([0.0, -0.0, 5e-324, 1e12]), st.floats(0.0, 1e12))
     load = st.one_of(st.sampled_from([math.inf, 1e12, 5e-324]), st.floats(1e-300, 1e12))
-    frame = draw(st.one_of(st.none(), st.builds(lambda r: {"kind": "rotating", "rate": r}, st.floats(-100, 100)),
-                           st.builds(lambda r: {"kind": "hill", "rate": r}, st.floats(1e-6, 100))))
+    frame = draw(
+        st.one_of(
+            st.none(),
+            st.builds(lambda r: {"kind": "rotating", "rate": r}, st.floats(-100, 100)),
+            st.builds(lambda r: {"kind": "hill", "rate": r}, st.floats(1e-6, 100)),
+        )
+    )
     return Cluster(
-        positions=positions, masses=draw(st.lists(m, min_size=3, max_size=3)), cables=TRIANGLE["cables"],
+        positions=positions,
+        masses=draw(st.lists(m, min_size=3, max_size=3)),
+        cables=TRIANGLE["cables"],
         EA=draw(st.lists(st.floats(1e-6, 1e12), min_size=3, max_size=3)),
-        N0=draw(st.lists(nonneg, min_size=3, max_size=3)), damping=draw(st.lists(nonneg, min_size=3, max_size=3)),
+        N0=draw(st.lists(nonneg, min_size=3, max_size=3)),
+        damping=draw(st.lists(nonneg, min_size=3, max_size=3)),
         L0=draw(st.one_of(st.none(), st.lists(st.floats(1e-6, 1e9), min_size=3, max_size=3))),
         breaking_load=draw(st.lists(load, min_size=3, max_size=3)),
         axial_damping=draw(st.lists(nonneg, min_size=3, max_size=3)),
-        frame=frame or tg.Frame.inertial(), name=draw(st.text(max_size=12)),
+        frame=frame or tg.Frame.inertial(),
+        name=draw(st.text(max_size=12)),
     )
 
 
@@ -167,11 +230,18 @@ def test_partly_infinite_breaking_loads_survive_a_file(tmp_path: Path) -> None:
 
 
 @FUZZ
-@given(content=st.one_of(st.binary(max_size=200), st.text(max_size=200).map(str.encode),
-                         st.dictionaries(st.sampled_from(["positions", "masses", "cables", "EA", "N0", "colour"]),
-                                         st.one_of(anything_float, junk, st.lists(anything_float, max_size=3)),
-                                         max_size=6).map(lambda d: repr(d).encode())),
-       suffix=st.sampled_from([".json", ".toml", ".yaml"]))
+@given(
+    content=st.one_of(
+        st.binary(max_size=200),
+        st.text(max_size=200).map(str.encode),
+        st.dictionaries(
+            st.sampled_from(["positions", "masses", "cables", "EA", "N0", "colour"]),
+            st.one_of(anything_float, junk, st.lists(anything_float, max_size=3)),
+            max_size=6,
+        ).map(lambda d: repr(d).encode()),
+    ),
+    suffix=st.sampled_from([".json", ".toml", ".yaml"]),
+)
 def test_any_file_content_loads_or_gets_a_cluster_error(tmp_path: Path, content: bytes, suffix: str) -> None:
     path = tmp_path / f"any{suffix}"
     path.write_bytes(content)
@@ -183,12 +253,34 @@ def test_any_file_content_loads_or_gets_a_cluster_error(tmp_path: Path, content:
 
 # ---------------------------------------------------------------------- presets
 @FUZZ
-@given(name=st.one_of(st.sampled_from(tg.preset_names()), st.text(max_size=6), junk),
-       overrides=st.dictionaries(
-           st.sampled_from(["edge", "mass", "EA", "N0", "n", "spokes", "rim", "spin_rate", "orbit_rate", "spacing",
-                            "radius", "damping_rate", "breaking_load", "rim_share", "axial_damping_ratio", "hub_mass",
-                            "colour"]),
-           st.one_of(anything_float, junk, st.integers(-3, 20)), max_size=3))
+@given(
+    name=st.one_of(st.sampled_from(tg.preset_names()), st.text(max_size=6), junk),
+    overrides=st.dictionaries(
+        st.sampled_from(
+            [
+                "edge",
+                "mass",
+                "EA",
+                "N0",
+                "n",
+                "spokes",
+                "rim",
+                "spin_rate",
+                "orbit_rate",
+                "spacing",
+                "radius",
+                "damping_rate",
+                "breaking_load",
+                "rim_share",
+                "axial_damping_ratio",
+                "hub_mass",
+                "colour",
+            ]
+        ),
+        st.one_of(anything_float, junk, st.integers(-3, 20)),
+        max_size=3,
+    ),
+)
 def test_presets_build_or_name_the_argument(name: Any, overrides: dict[str, Any]) -> None:
     try:
         cluster = tg.make_cluster(name, **overrides)
@@ -200,8 +292,12 @@ def test_presets_build_or_name_the_argument(name: Any, overrides: dict[str, Any]
 
 # ---------------------------------------------------------------------- simulator
 @FUZZ
-@given(cluster=valid_clusters(), duration=st.one_of(anything_float, junk, st.floats(1e-9, 1.0)),
-       kick=st.floats(-1e3, 1e3), force=st.one_of(st.none(), st.floats(-1e13, 1e13), special))
+@given(
+    cluster=valid_clusters(),
+    duration=st.one_of(anything_float, junk, st.floats(1e-9, 1.0)),
+    kick=st.floats(-1e3, 1e3),
+    force=st.one_of(st.none(), st.floats(-1e13, 1e13), special),
+)
 def test_advance_stays_finite_or_refuses_clearly(cluster: Cluster, duration: Any, kick: float, force: Any) -> None:
     sim = tg.Simulator(cluster, max_substeps=20_000)
     sim.reset(velocities=np.full((3, 3), kick))
@@ -223,8 +319,11 @@ def test_advance_stays_finite_or_refuses_clearly(cluster: Cluster, duration: Any
 
 
 @FUZZ
-@given(positions=values_for((4, 3)), velocities=st.one_of(st.none(), values_for((4, 3))),
-       indices=st.one_of(st.none(), st.lists(st.one_of(st.integers(-2, 3), junk), max_size=3), junk))
+@given(
+    positions=values_for((4, 3)),
+    velocities=st.one_of(st.none(), values_for((4, 3))),
+    indices=st.one_of(st.none(), st.lists(st.one_of(st.integers(-2, 3), junk), max_size=3), junk),
+)
 def test_reset_accepts_or_names_the_argument_and_changes_nothing(positions: Any, velocities: Any, indices: Any) -> None:
     batch = tg.BatchSimulator(tg.make_cluster("tetrahedron"), 2)
     before = (batch.positions.copy(), batch.velocities.copy(), batch.intact.copy(), batch.time.copy())
@@ -244,10 +343,14 @@ def test_reset_accepts_or_names_the_argument_and_changes_nothing(positions: Any,
 
 
 @FUZZ
-@given(options=st.dictionaries(st.sampled_from(["safety_factor", "max_step", "max_substeps", "elongation"]),
-                               st.one_of(anything_float, junk, st.integers(-5, 10**20), st.text(max_size=10)),
-                               max_size=3),
-       count=st.one_of(st.integers(-2, 4), junk))
+@given(
+    options=st.dictionaries(
+        st.sampled_from(["safety_factor", "max_step", "max_substeps", "elongation"]),
+        st.one_of(anything_float, junk, st.integers(-5, 10**20), st.text(max_size=10)),
+        max_size=3,
+    ),
+    count=st.one_of(st.integers(-2, 4), junk),
+)
 def test_simulator_options_are_named(options: dict[str, Any], count: Any) -> None:
     try:
         batch = tg.BatchSimulator(tg.make_cluster("triangle"), count, **options)

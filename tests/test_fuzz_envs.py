@@ -195,9 +195,7 @@ def assert_clear_error(error: BaseException, names: set[str]) -> None:
     event("clear error")
 
 
-def assert_step_ok(
-    space: gym.Space, obs: Any, reward: Any, terminated: Any, truncated: Any, info: dict
-) -> None:
+def assert_step_ok(space: gym.Space, obs: Any, reward: Any, terminated: Any, truncated: Any, info: dict) -> None:
     """Outcome (b) for one single-env step."""
     event("stepped")
     assert isinstance(obs, np.ndarray) and obs.dtype == np.float32 and np.isfinite(obs).all()
@@ -225,9 +223,7 @@ def rollout(env: gym.Env, seed: int, steps: int, data: st.DataObject) -> None:
     obs, info = quietly(lambda: env.reset(seed=seed))
     assert_reset_ok(env.observation_space, obs, info)
     for _ in range(steps):
-        action = data.draw(
-            hnp.arrays(np.float32, env.action_space.shape, elements=floats(-2, 2)), label="action"
-        )
+        action = data.draw(hnp.arrays(np.float32, env.action_space.shape, elements=floats(-2, 2)), label="action")
         obs, reward, terminated, truncated, info = quietly(lambda action=action: env.step(action))
         assert_step_ok(env.observation_space, obs, reward, terminated, truncated, info)
         if terminated or truncated:
@@ -242,9 +238,7 @@ def test_make_with_any_task_arguments(env_id: str, kwargs: dict, data: st.DataOb
 
 
 @fuzz(250)
-@given(
-    env_id=st.sampled_from(SMALL_IDS), kwargs=st.fixed_dictionaries({}, optional=PLAUSIBLE), data=st.data()
-)
+@given(env_id=st.sampled_from(SMALL_IDS), kwargs=st.fixed_dictionaries({}, optional=PLAUSIBLE), data=st.data())
 def test_make_with_plausible_task_arguments(env_id: str, kwargs: dict, data: st.DataObject) -> None:
     """The same, with values near their ranges: mostly accepted, so the rollouts are exercised."""
     make_and_roll_out(env_id, kwargs, data)
@@ -274,9 +268,7 @@ def make_and_roll_out(env_id: str, kwargs: dict, data: st.DataObject) -> None:
     ),
     data=st.data(),
 )
-def test_make_with_any_preset_arguments(
-    env_id: str, preset_kwargs: Any, extra: dict, data: st.DataObject
-) -> None:
+def test_make_with_any_preset_arguments(env_id: str, preset_kwargs: Any, extra: dict, data: st.DataObject) -> None:
     kwargs = dict(extra, preset_kwargs=preset_kwargs)
     if kwargs.get("render_mode") in (None, "rgb_array"):
         make = lambda: gym.make(env_id, **kwargs)
@@ -345,9 +337,7 @@ def test_make_vec_with_any_arguments_and_seeds(
     assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
     event("vector stepped")
     for _ in range(3):
-        actions = data.draw(
-            hnp.arrays(np.float64, envs.action_space.shape, elements=floats(-3, 3)), label="actions"
-        )
+        actions = data.draw(hnp.arrays(np.float64, envs.action_space.shape, elements=floats(-3, 3)), label="actions")
         obs, rewards, terminated, truncated, infos = quietly(lambda actions=actions: envs.step(actions))
         assert obs.dtype == np.float32 and np.isfinite(obs).all() and envs.observation_space.contains(obs)
         assert rewards.dtype == np.float64 and rewards.shape == (count,) and np.isfinite(rewards).all()
@@ -409,10 +399,6 @@ for _env in ENVS.values():
     _env.reset(seed=0)
 
 
-
-
-
-
 def action_like(size: int) -> st.SearchStrategy[Any]:
     """Arrays of every dtype and many shapes (the right one often), lists, scalars and junk."""
     dtypes = st.sampled_from(
@@ -464,16 +450,16 @@ def state_like(shape: tuple[int, ...], nominal: np.ndarray | None) -> st.SearchS
         near,
         near,
         hnp.arrays(np.float64, hnp.array_shapes(max_dims=3, max_side=5)),
-        hnp.arrays(
-            st.sampled_from([np.int64, np.bool_, np.complex128, object]), shape, elements=st.integers(0, 1)
-        ),
+        hnp.arrays(st.sampled_from([np.int64, np.bool_, np.complex128, object]), shape, elements=st.integers(0, 1)),
         near.map(lambda x: x.tolist()),
         special,
         junk,
     )
 
 
-def reset_options(nominal: np.ndarray, unknown_key: str, unknown_values: st.SearchStrategy[Any]) -> st.SearchStrategy[Any]:
+def reset_options(
+    nominal: np.ndarray, unknown_key: str, unknown_values: st.SearchStrategy[Any]
+) -> st.SearchStrategy[Any]:
     """Reset options: none, junk, or a dict with any of exact positions/velocities shaped like
     ``nominal`` and a key the env does not know."""
     return st.one_of(
@@ -516,17 +502,13 @@ def test_reset_with_any_options_and_seed(name: str, seed: Any, data: st.DataObje
         return
     assert_reset_ok(env.observation_space, obs, info)
     if isinstance(options, Mapping) and options.get("positions") is not None:
-        assert np.array_equal(
-            env.unwrapped.task.sim.positions[0], np.asarray(options["positions"], dtype=float)
-        )
+        assert np.array_equal(env.unwrapped.task.sim.positions[0], np.asarray(options["positions"], dtype=float))
     rollout_from_here(env, data)
 
 
 def rollout_from_here(env: gym.Env, data: st.DataObject) -> None:
     for _ in range(2):
-        action = data.draw(
-            hnp.arrays(np.float32, env.action_space.shape, elements=floats(-1, 1)), label="action"
-        )
+        action = data.draw(hnp.arrays(np.float32, env.action_space.shape, elements=floats(-1, 1)), label="action")
         result = quietly(lambda action=action: env.step(action))
         assert_step_ok(env.observation_space, *result)
         if result[2] or result[3]:
@@ -553,8 +535,6 @@ def test_set_difficulty_with_any_value(name: str, difficulty: Any) -> None:
 
 VECTOR = gym.make_vec("TetherTriangle-v0", num_envs=3, randomize={"masses": 0.1}, thrust_delay=1)
 VECTOR.reset(seed=0)
-
-
 
 
 @fuzz(150)

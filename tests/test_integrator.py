@@ -45,7 +45,9 @@ def test_half_step_form_equals_the_papers_three_level_form_at_constant_step() ->
     k_hat = m / h**2 + cd / (2 * h)
     slack_seen = False
     for _ in range(400):
-        p_hat = p + 2 * m / h**2 * current - (m / h**2 - cd / (2 * h)) * previous - reference_internal_forces(c, current)
+        p_hat = (
+            p + 2 * m / h**2 * current - (m / h**2 - cd / (2 * h)) * previous - reference_internal_forces(c, current)
+        )
         previous, current = current, p_hat / k_hat
         sim.advance(h, p)
         slack_seen |= bool(sim.slack.any())
@@ -386,8 +388,10 @@ def test_work_and_dissipation_close_the_energy_balance_at_second_order() -> None
         (lambda s: s.advance(0.1, record_steps=-1), "record_steps must be a whole number"),
         (lambda s: s.advance(True), "duration must be a finite number"),
         (lambda s: s.reset(velocities=np.full((4, 3), 1e7)), r"velocities must lie in \[0, 1e\+06\] m/s"),
-        (lambda s: s.critical_time_step("finite-difference") and s.batch.element_omega2_finite_difference(0.0),
-         "relative_perturbation must lie in"),
+        (
+            lambda s: s.critical_time_step("finite-difference") and s.batch.element_omega2_finite_difference(0.0),
+            "relative_perturbation must lie in",
+        ),
         (lambda s: s.reset(np.zeros((4, 2))), r"positions must have shape \(4, 3\)"),
         (lambda s: s.reset(velocities=np.full((4, 3), np.inf)), "velocities contains an infinite value"),
         (lambda s: s.reset(np.zeros((4, 3))), "zero-length cable"),
@@ -431,7 +435,9 @@ def test_refused_updates_leave_the_batch_unchanged() -> None:
     batch = tg.BatchSimulator(c, 3)
     batch.reset(np.stack([c.positions + 0.01 * k for k in range(3)]))
     batch.advance(0.3)
-    snapshot = {name: np.copy(getattr(batch, name)) for name in vars(batch) if isinstance(getattr(batch, name), np.ndarray)}
+    snapshot = {
+        name: np.copy(getattr(batch, name)) for name in vars(batch) if isinstance(getattr(batch, name), np.ndarray)
+    }
     clusters = list(batch.clusters)
     other = c.replace(masses=20.0)
     for call in (
@@ -490,8 +496,9 @@ def test_heavily_damped_free_masses_follow_the_exact_exponential_decay(damping: 
     ``safety_factor * 2 m/c`` instead, so they decay monotonically, to second-order accuracy.
     """
     masses = np.array([1.0, 3.0])
-    c = tg.Cluster(positions=[[0, 0, 0], [10, 0, 0]], masses=masses, cables=[(0, 1)], EA=1e-6, L0=1e3,
-                   damping=damping * masses)  # c/m = damping for both
+    c = tg.Cluster(
+        positions=[[0, 0, 0], [10, 0, 0]], masses=masses, cables=[(0, 1)], EA=1e-6, L0=1e3, damping=damping * masses
+    )  # c/m = damping for both
     v0 = np.array([[0.3, -0.2, 0.1], [-0.1, 0.05, 0.2]])
     interval = 1.0 / damping  # ten intervals span ten time constants
     errors = []
@@ -518,8 +525,9 @@ def test_heavily_damped_free_masses_follow_the_exact_exponential_decay(damping: 
 
 def test_damping_never_reverses_a_velocity_once_every_cable_broke() -> None:
     """With every cable broken nothing limits the step but the damping time scale."""
-    c = tg.Cluster(positions=[[0, 0, 0], [10, 0, 0]], masses=1.0, cables=[(0, 1)], EA=1e4, L0=9.9,
-                   breaking_load=1e-3, damping=50.0)
+    c = tg.Cluster(
+        positions=[[0, 0, 0], [10, 0, 0]], masses=1.0, cables=[(0, 1)], EA=1e4, L0=9.9, breaking_load=1e-3, damping=50.0
+    )
     sim = tg.Simulator(c)
     sim.reset(velocities=[[1.0, 0, 0], [0, 1.0, 0]])
     sim.advance(0.01)

@@ -37,13 +37,17 @@ def problem() -> dict:
 
     times = INTERVAL * np.arange(1, round(DURATION / INTERVAL) + 1)
     solution = solve_ivp(
-        rhs, (0.0, DURATION), np.concatenate([x0.ravel(), v0.ravel()]), method="DOP853",
-        t_eval=times, rtol=1e-12, atol=1e-12,
+        rhs,
+        (0.0, DURATION),
+        np.concatenate([x0.ravel(), v0.ravel()]),
+        method="DOP853",
+        t_eval=times,
+        rtol=1e-12,
+        atol=1e-12,
     )
     assert solution.success
     reference = solution.y[:12].T.reshape(-1, 4, 3)
-    return dict(cluster=c, x0=x0, v0=v0, bias=bias, reference=reference,
-                scale=np.abs(reference - c.positions).max())
+    return dict(cluster=c, x0=x0, v0=v0, bias=bias, reference=reference, scale=np.abs(reference - c.positions).max())
 
 
 def worst_error(problem: dict, **step_options: float) -> tuple[float, int]:

@@ -20,9 +20,17 @@ from tether_gym.sb3 import make_sb3_vec_env
 def residual_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("runs")
     return train(
-        "ppo", "TetherTriangle-v0", seed=0, out=out, timesteps=256, num_envs=4,
-        overrides={"n_steps": 64, "batch_size": 64, "residual_on": "lqr"}, eval_freq=256, eval_episodes=2,
-        checkpoint_freq=256, progress_bar=False,
+        "ppo",
+        "TetherTriangle-v0",
+        seed=0,
+        out=out,
+        timesteps=256,
+        num_envs=4,
+        overrides={"n_steps": 64, "batch_size": 64, "residual_on": "lqr"},
+        eval_freq=256,
+        eval_episodes=2,
+        checkpoint_freq=256,
+        progress_bar=False,
     )
 
 
@@ -47,8 +55,9 @@ def test_a_residual_policy_records_and_applies_its_baseline(residual_run: Path) 
     observation, _ = envs.reset(seed=[1, 2])
     policy = make_controller(str(residual_run), envs)
     assert isinstance(policy, TrainedPolicy) and policy.residual_on == "lqr"
-    correction = policy.policy.predict(policy.normalizer.normalize_obs(observation).astype(np.float32),
-                                       deterministic=True)[0]
+    correction = policy.policy.predict(
+        policy.normalizer.normalize_obs(observation).astype(np.float32), deterministic=True
+    )[0]
     base = make_baseline("lqr", envs).predict(observation)[0]
     assert np.array_equal(policy.predict(observation)[0], np.clip(base + correction, -1, 1).astype(np.float32))
     unattached = TrainedPolicy(residual_run)

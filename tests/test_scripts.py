@@ -42,7 +42,10 @@ def test_benchmarks_run_in_quick_mode(script: str, tmp_path: Path) -> None:
 def test_env_benchmark_runs() -> None:
     result = subprocess.run(
         [sys.executable, "-m", "tether_gym.bench", "--steps", "300", "--repeats", "1"],
-        capture_output=True, text=True, timeout=600, cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
     )
     assert result.returncode == 0, result.stderr
     assert "TetherTetrahedron-v0" in result.stdout and "steps/s" in result.stdout

@@ -14,13 +14,19 @@ from agents.policies import TrainedPolicy, make_controller, shipped_models
 from agents.safe_format import verify_manifest
 from agents.selection import evaluation_seeds
 from agents.ship import main, ship
-from agents.train import train
+from agents.train import HyperparameterError, load_hyperparameters, train
 from tether_gym import ENV_IDS
 
 ENV = "TetherTetrahedron-v0"
-TINY = dict(timesteps=256, num_envs=4, overrides={"n_steps": 64, "batch_size": 64, "n_epochs": 1,
-                                                  "policy_kwargs": {"log_std_init": 0.0}},
-            eval_freq=128, eval_episodes=2, checkpoint_freq=10_000, progress_bar=False)
+TINY = dict(
+    timesteps=256,
+    num_envs=4,
+    overrides={"n_steps": 64, "batch_size": 64, "n_epochs": 1, "policy_kwargs": {"log_std_init": 0.0}},
+    eval_freq=128,
+    eval_episodes=2,
+    checkpoint_freq=10_000,
+    progress_bar=False,
+)
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +49,16 @@ def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_p
     shipped = tmp_path / "models" / ENV / "ppo"
     verify_manifest(shipped)
     assert sorted(p.name for p in shipped.iterdir()) == sorted(
-        ["policy.json", "policy.safetensors", "normalization.json", "config.yml", "evaluations.json",
-         "reference_actions.safetensors", "MANIFEST.sha256"])
+        [
+            "policy.json",
+            "policy.safetensors",
+            "normalization.json",
+            "config.yml",
+            "evaluations.json",
+            "reference_actions.safetensors",
+            "MANIFEST.sha256",
+        ]
+    )
     assert _mean_on_evaluation_seeds(shipped, 4) == pytest.approx(means[best], rel=1e-12)
     table = json.loads((tmp_path / "models" / "training_runs.json").read_text())
     assert sorted(entry["seed"] for entry in table["runs"]) == [0, 1, 2]
@@ -52,9 +66,37 @@ def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_p
     assert bar == max(records[0]["baselines"], key=records[0]["baselines"].get)
     for record, run in zip(records, runs):
         assert record["difference"] == pytest.approx(record["mean_return"] - record["bar_mean_return"], abs=1e-9)
-        assert record["wall_time_s"] > 0 and record["timesteps"] == TrainedPolicy(run / "best").metadata["num_timesteps"]
+        assert (
+            record["wall_time_s"] > 0 and record["timesteps"] == TrainedPolicy(run / "best").metadata["num_timesteps"]
+        )
     markdown = (tmp_path / "models" / "training_runs.md").read_text()
     assert markdown.count(f"| {ENV} | ppo |") == 3 + 1 and markdown.count("**yes**") == 1  # 3 runs, 1 shipped row
+    # The shipped copy passed again beside the run it came from is one candidate, not two.
+    again = ship([*runs, shipped], tmp_path / "models", episodes=4, force=True)
+    assert len(again) == 3 and [r["shipped"] for r in again] == [i == best for i in range(3)]
+
+
+def test_the_shipped_reproduce_command_retrains_the_same_weights(runs: list[Path], tmp_path: Path) -> None:
+    out = tmp_path / "models"
+    (record,) = ship(runs[:1], out, episodes=2)
+    command = record["reproduce"].split()
+    assert command[:3] == ["python", "-m", "agents.train"]
+    config = out / ENV / "ppo" / "config.yml"
+    assert command[command.index("--hyperparams") + 1] == str(config)
+    # The reproduce command holds whatever the YAML files say today: tiny settings no YAML has.
+    again = train(
+        "ppo",
+        ENV,
+        seed=int(command[command.index("--seed") + 1]),
+        out=tmp_path / "again",
+        hyperparams_file=config,
+        **{k: v for k, v in TINY.items() if k not in ("timesteps", "num_envs", "overrides")},
+    )
+    assert (again / "policy.safetensors").read_bytes() == (runs[0] / "policy.safetensors").read_bytes()
+    with pytest.raises(HyperparameterError, match="--env TetherTetrahedron-v0"):
+        load_hyperparameters("ppo", "TetherChain-v0", config)
+    with pytest.raises(HyperparameterError, match="--algo ppo"):
+        load_hyperparameters("sac", ENV, config)
 
 
 def test_ship_refuses_to_replace_a_shipped_model_without_force(runs: list[Path], tmp_path: Path) -> None:

@@ -72,8 +72,10 @@ def test_states_move_between_batches_and_clone() -> None:
     assert target.clusters[4] is source.clusters[2]
     # One cluster cloned into four: all follow the original.
     clones = tg.BatchSimulator(tg.make_cluster("spinning_triangle"), 4)
-    clones.restore(saved.__class__(saved.clusters[:1], {k: v[:1] for k, v in saved.arrays.items()}, saved.settings),
-                   indices=np.arange(4))
+    clones.restore(
+        saved.__class__(saved.clusters[:1], {k: v[:1] for k, v in saved.arrays.items()}, saved.settings),
+        indices=np.arange(4),
+    )
     for p in pushes:
         clones.advance(0.1, np.repeat(p[2:3], 4, axis=0))
     assert all(identical(state_of(clones, b), state_of(source, 2)) for b in range(4))
@@ -121,8 +123,14 @@ def test_a_restored_task_continues_bit_identically_with_every_fault_on() -> None
     """Delay line, thruster failure, kicks, periodic force, thrust noise, randomisation and cable
     breaking: the task's own state must travel with the simulator's."""
     options = dict(
-        randomize={"masses": 0.2, "EA": 0.2}, impulse_magnitude=0.5, impulse_rate=0.5, periodic_amplitude=0.2,
-        thrust_noise=0.1, thrust_delay=2, thruster_failure_probability=1.0, thruster_failure_window=(0.2, 0.6),
+        randomize={"masses": 0.2, "EA": 0.2},
+        impulse_magnitude=0.5,
+        impulse_rate=0.5,
+        periodic_amplitude=0.2,
+        thrust_noise=0.1,
+        thrust_delay=2,
+        thruster_failure_probability=1.0,
+        thruster_failure_window=(0.2, 0.6),
         cable_failure="continue",
     )
     task = task_from_arguments(3, "tetrahedron", **options)

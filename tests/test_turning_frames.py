@@ -45,8 +45,15 @@ def test_damping_relative_to_the_hill_frame_destabilises_the_centre_of_mass() ->
     follow the damped HCW equations exactly (matrix exponential of the linear system)."""
     n, alpha = 0.01, 0.05
     masses = np.array([10.0, 30.0])
-    cluster = Cluster(positions=[[-7.5, 0.0, 0.0], [2.5, 0.0, 0.0]], masses=masses, cables=[(0, 1)], EA=1e3,
-                      N0=0.0, damping=alpha * masses, frame=Frame.hill(n))  # centre of mass at the origin
+    cluster = Cluster(
+        positions=[[-7.5, 0.0, 0.0], [2.5, 0.0, 0.0]],
+        masses=masses,
+        cables=[(0, 1)],
+        EA=1e3,
+        N0=0.0,
+        damping=alpha * masses,
+        frame=Frame.hill(n),
+    )  # centre of mass at the origin
     A = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [3 * n**2, 0, -alpha, 2 * n], [0, 0, -2 * n, -alpha]])
     growth = np.linalg.eigvals(A).real.max()
     assert growth > 0
@@ -77,11 +84,13 @@ def hcw(n: float, x0: np.ndarray, v0: np.ndarray, t: float) -> np.ndarray:
     s, c = math.sin(n * t), math.cos(n * t)
     x, y, z = x0
     vx, vy, vz = v0
-    return np.array([
-        (4 - 3 * c) * x + s / n * vx + 2 / n * (1 - c) * vy,
-        6 * (s - n * t) * x + y - 2 / n * (1 - c) * vx + (4 * s - 3 * n * t) / n * vy,
-        c * z + s / n * vz,
-    ])
+    return np.array(
+        [
+            (4 - 3 * c) * x + s / n * vx + 2 / n * (1 - c) * vy,
+            6 * (s - n * t) * x + y - 2 / n * (1 - c) * vx + (4 * s - 3 * n * t) / n * vy,
+            c * z + s / n * vz,
+        ]
+    )
 
 
 def test_free_motion_in_the_hill_frame_follows_the_hcw_solution_at_second_order() -> None:
@@ -229,7 +238,9 @@ def test_a_breaking_cable_stays_broken_and_spares_the_rest_of_the_batch() -> Non
             if broke:
                 assert np.all(batch.tension[0][batch.broken[0]] == 0)
             broke = True
-            assert np.any(stats.peak_tension[0][batch.broken[0]] > 20.0) or np.all(batch.tension[0][batch.broken[0]] == 0)
+            assert np.any(stats.peak_tension[0][batch.broken[0]] > 20.0) or np.all(
+                batch.tension[0][batch.broken[0]] == 0
+            )
     assert broke and not batch.broken[1].any()
     broken_cables = batch.broken[0].copy()
     report = batch.energy()
@@ -257,12 +268,20 @@ def spinning_reference(cluster: Cluster, x0: np.ndarray, v0: np.ndarray, times: 
         force = np.zeros((n, 3))
         np.add.at(force, i, tension[:, None] * e)
         np.add.at(force, j, -tension[:, None] * e)
-        apparent = np.stack([spin**2 * x[:, 0] + 2 * spin * v[:, 1], spin**2 * x[:, 1] - 2 * spin * v[:, 0],
-                             np.zeros(n)], axis=1)
+        apparent = np.stack(
+            [spin**2 * x[:, 0] + 2 * spin * v[:, 1], spin**2 * x[:, 1] - 2 * spin * v[:, 0], np.zeros(n)], axis=1
+        )
         return np.concatenate([v.ravel(), (force / cluster.masses[:, None] + apparent).ravel()])
 
-    solution = solve_ivp(rhs, (0.0, times[-1]), np.concatenate([x0.ravel(), v0.ravel()]), method="DOP853",
-                         t_eval=times, rtol=1e-11, atol=1e-11)
+    solution = solve_ivp(
+        rhs,
+        (0.0, times[-1]),
+        np.concatenate([x0.ravel(), v0.ravel()]),
+        method="DOP853",
+        t_eval=times,
+        rtol=1e-11,
+        atol=1e-11,
+    )
     assert solution.success
     return solution.y[: 3 * n].T.reshape(-1, n, 3)
 

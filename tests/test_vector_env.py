@@ -22,20 +22,36 @@ def test_make_vec_returns_the_native_vector_env() -> None:
 
 #: Every disturbance and fault at once, in a spinning frame, with cables weak enough to break.
 FAULTY = dict(
-    max_episode_steps=40, impulse_magnitude=2.0, impulse_rate=0.5, periodic_amplitude=0.3, thrust_noise=0.2,
-    thrust_delay=2, thruster_failure_probability=0.7, thruster_failure_window=(0.5, 3.0), cable_failure="continue",
-    preset_kwargs={"breaking_load": 8.0}, randomize={"axial_damping": 0.3}, difficulty=0.8, max_deviation=1.0,
+    max_episode_steps=40,
+    impulse_magnitude=2.0,
+    impulse_rate=0.5,
+    periodic_amplitude=0.3,
+    thrust_noise=0.2,
+    thrust_delay=2,
+    thruster_failure_probability=0.7,
+    thruster_failure_window=(0.5, 3.0),
+    cable_failure="continue",
+    preset_kwargs={"breaking_load": 8.0},
+    randomize={"axial_damping": 0.3},
+    difficulty=0.8,
+    max_deviation=1.0,
 )
 
 
 @pytest.mark.parametrize(
     ("env_id", "num_envs", "kwargs"),
     [
-        ("TetherTetrahedron-v0", 3, dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1},
-                                         max_deviation=1.0)),
+        (
+            "TetherTetrahedron-v0",
+            3,
+            dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1}, max_deviation=1.0),
+        ),
         # 20 uses the multi-threaded kernels
-        ("TetherTetrahedron-v0", 20, dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1},
-                                          max_deviation=1.0)),
+        (
+            "TetherTetrahedron-v0",
+            20,
+            dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1}, max_deviation=1.0),
+        ),
         ("TetherSpinningTriangle-v0", 20, FAULTY),
     ],
 )

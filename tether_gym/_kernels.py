@@ -348,8 +348,12 @@ def _advance_clusters(
                 last = False
             if h_last == 0.0:
                 for i in range(n_nodes):
-                    ax = (pb[i, 0] - fb[i, 0] - cb[i] * vb[i, 0] + mb[i] * tb[0] * xb[i, 0]) / mb[i] + 2.0 * wb * vb[i, 1]
-                    ay = (pb[i, 1] - fb[i, 1] - cb[i] * vb[i, 1] + mb[i] * tb[1] * xb[i, 1]) / mb[i] - 2.0 * wb * vb[i, 0]
+                    ax = (pb[i, 0] - fb[i, 0] - cb[i] * vb[i, 0] + mb[i] * tb[0] * xb[i, 0]) / mb[i] + 2.0 * wb * vb[
+                        i, 1
+                    ]
+                    ay = (pb[i, 1] - fb[i, 1] - cb[i] * vb[i, 1] + mb[i] * tb[1] * xb[i, 1]) / mb[i] - 2.0 * wb * vb[
+                        i, 0
+                    ]
                     az = (pb[i, 2] - fb[i, 2] - cb[i] * vb[i, 2] + mb[i] * tb[2] * xb[i, 2]) / mb[i]
                     vb[i, 0] = vb[i, 0] + 0.5 * h * ax
                     vb[i, 1] = vb[i, 1] + 0.5 * h * ay
@@ -376,9 +380,24 @@ def _advance_clusters(
                         r0 = rhs_factor * vb[i, 0] + gyro * vb[i, 1]
                         r1 = rhs_factor * vb[i, 1] - gyro * vb[i, 0]
                         r2 = rhs_factor * vb[i, 2]
-                        r0 += pb[i, 0] + blend * (previous_force[b, i, 0] - pb[i, 0]) - fb[i, 0] + mb[i] * tb[0] * xb[i, 0]
-                        r1 += pb[i, 1] + blend * (previous_force[b, i, 1] - pb[i, 1]) - fb[i, 1] + mb[i] * tb[1] * xb[i, 1]
-                        r2 += pb[i, 2] + blend * (previous_force[b, i, 2] - pb[i, 2]) - fb[i, 2] + mb[i] * tb[2] * xb[i, 2]
+                        r0 += (
+                            pb[i, 0]
+                            + blend * (previous_force[b, i, 0] - pb[i, 0])
+                            - fb[i, 0]
+                            + mb[i] * tb[0] * xb[i, 0]
+                        )
+                        r1 += (
+                            pb[i, 1]
+                            + blend * (previous_force[b, i, 1] - pb[i, 1])
+                            - fb[i, 1]
+                            + mb[i] * tb[1] * xb[i, 1]
+                        )
+                        r2 += (
+                            pb[i, 2]
+                            + blend * (previous_force[b, i, 2] - pb[i, 2])
+                            - fb[i, 2]
+                            + mb[i] * tb[2] * xb[i, 2]
+                        )
                         vb[i, 0], vb[i, 1] = _solve_gyroscopic(lhs, gyro, r0, r1)
                         vb[i, 2] = r2 / lhs
             for i in range(n_nodes):
@@ -399,15 +418,43 @@ def _advance_clusters(
                 h_hi = h
             if viscous:
                 omega2_cables, finite, viscous_power, released = cable_forces(
-                    xb, vb, reference[b], cables, stiffness[b], L0[b], N0[b], axial_damping[b],
-                    inv_split_mass_sum[b], breaking_load[b], intact[b], linearised, False, True, fb,
-                    tension_b, peak,
+                    xb,
+                    vb,
+                    reference[b],
+                    cables,
+                    stiffness[b],
+                    L0[b],
+                    N0[b],
+                    axial_damping[b],
+                    inv_split_mass_sum[b],
+                    breaking_load[b],
+                    intact[b],
+                    linearised,
+                    False,
+                    True,
+                    fb,
+                    tension_b,
+                    peak,
                 )
             else:
                 omega2_cables, finite, viscous_power, released = _cable_forces_undamped(
-                    xb, vb, reference[b], cables, stiffness[b], L0[b], N0[b], axial_damping[b],
-                    inv_split_mass_sum[b], breaking_load[b], intact[b], linearised, False, True, fb,
-                    tension_b, peak,
+                    xb,
+                    vb,
+                    reference[b],
+                    cables,
+                    stiffness[b],
+                    L0[b],
+                    N0[b],
+                    axial_damping[b],
+                    inv_split_mass_sum[b],
+                    breaking_load[b],
+                    intact[b],
+                    linearised,
+                    False,
+                    True,
+                    fb,
+                    tension_b,
+                    peak,
                 )
             omega2[b] = omega2_cables + tidal_max
             dissipated_b += h * viscous_power + released
@@ -453,36 +500,174 @@ PARALLEL_CHUNKS = 64
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def advance_serial(
-    active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
-    masses, damping, cables, stiffness, L0, N0, axial_damping, inv_split_mass_sum, breaking_load, intact,
-    frame_rate, frame_tidal, reference, linearised, safety_factor, max_step, max_substeps, work, dissipated,
-    substeps, step_min, step_max, status, step_record, peak_tension, status_out,
+    active,
+    duration,
+    time,
+    x,
+    v_half,
+    v_sync,
+    f_int,
+    tension,
+    h_prev,
+    omega2,
+    force,
+    previous_force,
+    masses,
+    damping,
+    cables,
+    stiffness,
+    L0,
+    N0,
+    axial_damping,
+    inv_split_mass_sum,
+    breaking_load,
+    intact,
+    frame_rate,
+    frame_tidal,
+    reference,
+    linearised,
+    safety_factor,
+    max_step,
+    max_substeps,
+    work,
+    dissipated,
+    substeps,
+    step_min,
+    step_max,
+    status,
+    step_record,
+    peak_tension,
+    status_out,
 ):  # pragma: no cover - compiled
     _advance_clusters(
-        0, x.shape[0], active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force,
-        previous_force, masses, damping, cables, stiffness, L0, N0, axial_damping, inv_split_mass_sum,
-        breaking_load, intact, frame_rate, frame_tidal, reference, linearised, safety_factor, max_step,
-        max_substeps, work, dissipated, substeps, step_min, step_max, status, step_record, peak_tension,
+        0,
+        x.shape[0],
+        active,
+        duration,
+        time,
+        x,
+        v_half,
+        v_sync,
+        f_int,
+        tension,
+        h_prev,
+        omega2,
+        force,
+        previous_force,
+        masses,
+        damping,
+        cables,
+        stiffness,
+        L0,
+        N0,
+        axial_damping,
+        inv_split_mass_sum,
+        breaking_load,
+        intact,
+        frame_rate,
+        frame_tidal,
+        reference,
+        linearised,
+        safety_factor,
+        max_step,
+        max_substeps,
+        work,
+        dissipated,
+        substeps,
+        step_min,
+        step_max,
+        status,
+        step_record,
+        peak_tension,
         status_out,
     )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def advance_parallel(
-    active, duration, time, x, v_half, v_sync, f_int, tension, h_prev, omega2, force, previous_force,
-    masses, damping, cables, stiffness, L0, N0, axial_damping, inv_split_mass_sum, breaking_load, intact,
-    frame_rate, frame_tidal, reference, linearised, safety_factor, max_step, max_substeps, work, dissipated,
-    substeps, step_min, step_max, status, step_record, peak_tension, status_out,
+    active,
+    duration,
+    time,
+    x,
+    v_half,
+    v_sync,
+    f_int,
+    tension,
+    h_prev,
+    omega2,
+    force,
+    previous_force,
+    masses,
+    damping,
+    cables,
+    stiffness,
+    L0,
+    N0,
+    axial_damping,
+    inv_split_mass_sum,
+    breaking_load,
+    intact,
+    frame_rate,
+    frame_tidal,
+    reference,
+    linearised,
+    safety_factor,
+    max_step,
+    max_substeps,
+    work,
+    dissipated,
+    substeps,
+    step_min,
+    step_max,
+    status,
+    step_record,
+    peak_tension,
+    status_out,
 ):  # pragma: no cover - compiled
     batch = x.shape[0]
     chunks = min(batch, PARALLEL_CHUNKS)
     for k in prange(chunks):
         _advance_clusters(
-            k * batch // chunks, (k + 1) * batch // chunks, active, duration, time, x, v_half, v_sync, f_int,
-            tension, h_prev, omega2, force, previous_force, masses, damping, cables, stiffness, L0, N0,
-            axial_damping, inv_split_mass_sum, breaking_load, intact, frame_rate, frame_tidal, reference,
-            linearised, safety_factor, max_step, max_substeps, work, dissipated, substeps, step_min,
-            step_max, status, step_record, peak_tension, status_out,
+            k * batch // chunks,
+            (k + 1) * batch // chunks,
+            active,
+            duration,
+            time,
+            x,
+            v_half,
+            v_sync,
+            f_int,
+            tension,
+            h_prev,
+            omega2,
+            force,
+            previous_force,
+            masses,
+            damping,
+            cables,
+            stiffness,
+            L0,
+            N0,
+            axial_damping,
+            inv_split_mass_sum,
+            breaking_load,
+            intact,
+            frame_rate,
+            frame_tidal,
+            reference,
+            linearised,
+            safety_factor,
+            max_step,
+            max_substeps,
+            work,
+            dissipated,
+            substeps,
+            step_min,
+            step_max,
+            status,
+            step_record,
+            peak_tension,
+            status_out,
         )
 
 
@@ -513,8 +698,22 @@ def evaluate_batch(
     for b in range(x.shape[0]):
         # may_break=False: the breaking-load argument is never read, any (m,) array will do.
         omega2_cables, finite[b], _, _ = cable_forces(
-            x[b], v[b], reference[b], cables, stiffness[b], L0[b], N0[b], axial_damping[b],
-            inv_split_mass_sum[b], stiffness[b], intact[b], linearised, taut_branch, False, f_int[b],
-            tension[b], peak,
+            x[b],
+            v[b],
+            reference[b],
+            cables,
+            stiffness[b],
+            L0[b],
+            N0[b],
+            axial_damping[b],
+            inv_split_mass_sum[b],
+            stiffness[b],
+            intact[b],
+            linearised,
+            taut_branch,
+            False,
+            f_int[b],
+            tension[b],
+            peak,
         )
         omega2[b] = omega2_cables + _largest_tidal(frame_tidal[b])

@@ -45,8 +45,7 @@ def single_env_steps_per_second(env_id: str, steps: int, policy: str, seed: int 
     return steps / (time.perf_counter() - start)
 
 
-def vector_env_steps_per_second(env_id: str, num_envs: int, steps: int, sync: bool = False,
-                                **kwargs: object) -> float:
+def vector_env_steps_per_second(env_id: str, num_envs: int, steps: int, sync: bool = False, **kwargs: object) -> float:
     """Env steps/s (sub-env steps summed) of ``gym.make_vec`` with random actions."""
     mode = "sync" if sync else None
     envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **kwargs)
@@ -147,7 +146,10 @@ def ppo_env_share(env_id: str, num_envs: int, timesteps: int) -> tuple[float, fl
 
 #: Every disturbance and fault of the task switched on (for the cost of drawing them).
 ALL_FAULTS = {
-    "impulse_magnitude": 1.0, "periodic_amplitude": 0.2, "thrust_noise": 0.1, "thrust_delay": 1,
+    "impulse_magnitude": 1.0,
+    "periodic_amplitude": 0.2,
+    "thrust_noise": 0.1,
+    "thrust_delay": 1,
     "thruster_failure_probability": 0.5,
 }
 
@@ -158,8 +160,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="measurements per case (the best is shown)")
     parser.add_argument("--all-ids", action="store_true", help="every registered id, not only the default")
     args = parser.parse_args(argv)
-    print(f"tether-gym {tether_gym.__version__}, gymnasium {gym.__version__}, numpy {np.__version__}, "
-          f"python {platform.python_version()}, {os.cpu_count()} cores")
+    print(
+        f"tether-gym {tether_gym.__version__}, gymnasium {gym.__version__}, numpy {np.__version__}, "
+        f"python {platform.python_version()}, {os.cpu_count()} cores"
+    )
     print(f"single env through gym.make (default wrappers), {args.steps} steps, best of {args.repeats}")
     print(f"{'id':<24}{'actions':<10}{'steps/s':>12}")
     for env_id in ENV_IDS if args.all_ids else [DEFAULT_ENV_ID]:
@@ -190,10 +194,11 @@ def main(argv: list[str] | None = None) -> None:
         return
     num_envs, timesteps = 16, 16 * 128 * 4
     with_env, zero_cost, inside, share = ppo_env_share(DEFAULT_ENV_ID, num_envs, timesteps)
-    print(f"\nPPO (MlpPolicy, SB3 defaults but n_steps 128), {timesteps} steps on "
-          f"{num_envs} envs of {DEFAULT_ENV_ID}:")
-    print(f"  training with the env {with_env:.2f} s, with a zero-cost env {zero_cost:.2f} s "
-          f"(difference {with_env - zero_cost:+.2f} s)")
+    print(f"\nPPO (MlpPolicy, SB3 defaults but n_steps 128), {timesteps} steps on {num_envs} envs of {DEFAULT_ENV_ID}:")
+    print(
+        f"  training with the env {with_env:.2f} s, with a zero-cost env {zero_cost:.2f} s "
+        f"(difference {with_env - zero_cost:+.2f} s)"
+    )
     print(f"  time inside the env's reset/step {inside:.3f} s -> env share {100 * share:.1f} %")
 
 

@@ -47,18 +47,14 @@ class ClusterError(ValueError):
     """An invalid cluster description; the message names the problem and how to fix it."""
 
 
-def _float_array(
-    name: str, value: ArrayLike, shape: tuple[int, ...], what: str, allow_inf: bool = False
-) -> np.ndarray:
+def _float_array(name: str, value: ArrayLike, shape: tuple[int, ...], what: str, allow_inf: bool = False) -> np.ndarray:
     """Convert ``value`` to a read-only float64 array of ``shape``, broadcasting scalars; anything
     but real numbers (strings, booleans, NaN, and infinities unless ``allow_inf``) is refused."""
     array = real_array(name, value, ClusterError, allow_inf=allow_inf)
     if array.ndim == 0:
         array = np.full(shape, float(array))
     if array.shape != shape:
-        raise ClusterError(
-            f"{name} must have shape {shape} ({what}) or be a scalar; got shape {array.shape}"
-        )
+        raise ClusterError(f"{name} must have shape {shape} ({what}) or be a scalar; got shape {array.shape}")
     array.setflags(write=False)
     return array
 
@@ -125,13 +121,18 @@ class Cluster:
     def __post_init__(self) -> None:
         positions = real_array("positions", self.positions, ClusterError)
         if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 2:
-            raise ClusterError(
-                f"positions must have shape (n, 3) with n >= 2 satellites; got shape {positions.shape}"
-            )
+            raise ClusterError(f"positions must have shape (n, 3) with n >= 2 satellites; got shape {positions.shape}")
         n_nodes = positions.shape[0]
         positions = _float_array("positions", positions, (n_nodes, 3), "node positions in m")
-        check_range("positions", np.abs(positions), 0.0, MAX_COORDINATE, "m (absolute value)", error=ClusterError,
-                    where="satellite, axis")
+        check_range(
+            "positions",
+            np.abs(positions),
+            0.0,
+            MAX_COORDINATE,
+            "m (absolute value)",
+            error=ClusterError,
+            where="satellite, axis",
+        )
         masses = _float_array("masses", self.masses, (n_nodes,), "kg per satellite")
         check_range("masses", masses, MIN_MASS, MAX_MASS, "kg", error=ClusterError, where="satellite")
         damping = _float_array("damping", self.damping, (n_nodes,), "N*s/m per satellite")
@@ -140,8 +141,7 @@ class Cluster:
         cables = real_array("cables", self.cables, ClusterError)
         if cables.ndim != 2 or cables.shape[1] != 2 or cables.shape[0] < 1:
             raise ClusterError(
-                "cables must be a non-empty list of (i, j) node-index pairs, shape (m, 2); "
-                f"got shape {cables.shape}"
+                f"cables must be a non-empty list of (i, j) node-index pairs, shape (m, 2); got shape {cables.shape}"
             )
         if np.any(cables != np.round(cables)):
             raise ClusterError("cables must hold whole node indices (integers)")
@@ -188,20 +188,48 @@ class Cluster:
         N0 = _float_array("N0", self.N0, (n_cables,), "pretension in N per cable")
         check_range("N0 (pretension)", N0, 0.0, MAX_FORCE, "N", error=ClusterError, where="cable")
         if self.L0 is None:
-            check_range("the distance between a cable's satellites (its default L0)", lengths, MIN_LENGTH,
-                        MAX_LENGTH, "m", error=ClusterError, where="cable")
+            check_range(
+                "the distance between a cable's satellites (its default L0)",
+                lengths,
+                MIN_LENGTH,
+                MAX_LENGTH,
+                "m",
+                error=ClusterError,
+                where="cable",
+            )
             L0 = lengths.copy()
             L0.setflags(write=False)
         else:
             L0 = _float_array("L0", self.L0, (n_cables,), "reference length in m per cable")
             check_range("L0", L0, MIN_LENGTH, MAX_LENGTH, "m", error=ClusterError, where="cable")
-        breaking = _float_array("breaking_load", self.breaking_load, (n_cables,),
-                                "tension in N per cable, inf for unbreakable", allow_inf=True)
-        check_range("breaking_load", breaking, 0.0, math.inf, "N (inf: unbreakable)", low_inclusive=False,
-                    error=ClusterError, where="cable")
+        breaking = _float_array(
+            "breaking_load",
+            self.breaking_load,
+            (n_cables,),
+            "tension in N per cable, inf for unbreakable",
+            allow_inf=True,
+        )
+        check_range(
+            "breaking_load",
+            breaking,
+            0.0,
+            math.inf,
+            "N (inf: unbreakable)",
+            low_inclusive=False,
+            error=ClusterError,
+            where="cable",
+        )
         finite_breaking = np.where(np.isinf(breaking), MAX_FORCE, breaking)
-        check_range("breaking_load", finite_breaking, 0.0, MAX_FORCE, "N, or inf for unbreakable",
-                    low_inclusive=False, error=ClusterError, where="cable")
+        check_range(
+            "breaking_load",
+            finite_breaking,
+            0.0,
+            MAX_FORCE,
+            "N, or inf for unbreakable",
+            low_inclusive=False,
+            error=ClusterError,
+            where="cable",
+        )
         axial_damping = _float_array("axial_damping", self.axial_damping, (n_cables,), "N*s/m per cable")
         check_range("axial_damping", axial_damping, 0.0, MAX_DAMPING, "N*s/m", error=ClusterError, where="cable")
         try:
@@ -212,8 +240,15 @@ class Cluster:
             raise ClusterError(f"name must be a string; got {self.name!r}")
 
         for field, value in (
-            ("positions", positions), ("masses", masses), ("damping", damping), ("cables", cables), ("EA", EA),
-            ("N0", N0), ("L0", L0), ("breaking_load", breaking), ("axial_damping", axial_damping),
+            ("positions", positions),
+            ("masses", masses),
+            ("damping", damping),
+            ("cables", cables),
+            ("EA", EA),
+            ("N0", N0),
+            ("L0", L0),
+            ("breaking_load", breaking),
+            ("axial_damping", axial_damping),
             ("frame", frame),
         ):
             object.__setattr__(self, field, value)
@@ -254,8 +289,7 @@ class Cluster:
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
         if unknown:
             raise ClusterError(
-                f"unknown Cluster field(s) {sorted(unknown)}; fields are "
-                f"{[f.name for f in dataclasses.fields(self)]}"
+                f"unknown Cluster field(s) {sorted(unknown)}; fields are {[f.name for f in dataclasses.fields(self)]}"
             )
         return dataclasses.replace(self, **changes)
 
@@ -284,13 +318,13 @@ class Cluster:
     def from_dict(cls, data: Mapping[str, Any]) -> Cluster:
         """Build a cluster from :meth:`to_dict` output (unknown keys are an error)."""
         if not isinstance(data, Mapping):
-            raise ClusterError(f"a cluster description is a mapping of field names to values; got {type(data).__name__}")
+            raise ClusterError(
+                f"a cluster description is a mapping of field names to values; got {type(data).__name__}"
+            )
         fields = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - fields
         if unknown:
-            raise ClusterError(
-                f"unknown cluster key(s) {sorted(map(str, unknown))}; allowed keys are {sorted(fields)}"
-            )
+            raise ClusterError(f"unknown cluster key(s) {sorted(map(str, unknown))}; allowed keys are {sorted(fields)}")
         missing = {"positions", "masses", "cables", "EA"} - set(data)
         if missing:
             raise ClusterError(f"cluster description lacks required key(s) {sorted(missing)}")
@@ -299,9 +333,23 @@ class Cluster:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Cluster):
             return NotImplemented
-        return self.name == other.name and self.frame == other.frame and all(
-            np.array_equal(getattr(self, f), getattr(other, f))
-            for f in ("positions", "masses", "cables", "EA", "N0", "damping", "L0", "breaking_load", "axial_damping")
+        return (
+            self.name == other.name
+            and self.frame == other.frame
+            and all(
+                np.array_equal(getattr(self, f), getattr(other, f))
+                for f in (
+                    "positions",
+                    "masses",
+                    "cables",
+                    "EA",
+                    "N0",
+                    "damping",
+                    "L0",
+                    "breaking_load",
+                    "axial_damping",
+                )
+            )
         )
 
     __hash__ = None  # type: ignore[assignment]

@@ -78,7 +78,9 @@ class Frame:
             raise FrameError(f"frame rate must be a number of rad/s; got {self.rate!r}")
         rate = to_float(self.rate)
         if not (math.isfinite(rate) and abs(rate) <= MAX_FRAME_RATE):
-            raise FrameError(f"frame rate must be a finite number of rad/s within +-{MAX_FRAME_RATE:g}; got {self.rate!r}")
+            raise FrameError(
+                f"frame rate must be a finite number of rad/s within +-{MAX_FRAME_RATE:g}; got {self.rate!r}"
+            )
         if self.kind == "inertial" and rate != 0.0:
             raise FrameError("an inertial frame does not turn: use Frame.rotating(rate) or Frame.hill(rate)")
         if self.kind == "hill" and rate <= 0.0:
@@ -121,7 +123,9 @@ class Frame:
         velocities (m/s) of shape (..., 3), m/s^2."""
         r = np.asarray(positions, dtype=np.float64)
         v = np.asarray(velocities, dtype=np.float64)
-        coriolis = np.stack([2.0 * self.rate * v[..., 1], -2.0 * self.rate * v[..., 0], np.zeros_like(v[..., 2])], axis=-1)
+        coriolis = np.stack(
+            [2.0 * self.rate * v[..., 1], -2.0 * self.rate * v[..., 0], np.zeros_like(v[..., 2])], axis=-1
+        )
         return coriolis + self.tidal * r
 
     def potential(self, masses: ArrayLike, positions: ArrayLike) -> np.ndarray:

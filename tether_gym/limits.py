@@ -90,7 +90,9 @@ def real_array(name: str, value: Any, error: type[Exception] = ValueError, allow
         if raw.dtype.kind in "iuf" and isinstance(value, (list, tuple)) and _holds_bool(value):
             raise error(f"{name} must be made of real numbers, not booleans; got {short_repr(value)}")
         if raw.dtype.kind not in "iuf":
-            kind = {"b": "booleans", "U": "strings", "S": "bytes", "c": "complex numbers"}.get(raw.dtype.kind, "objects")
+            kind = {"b": "booleans", "U": "strings", "S": "bytes", "c": "complex numbers"}.get(
+                raw.dtype.kind, "objects"
+            )
             raise error(f"{name} must be made of real numbers, not {kind}; got {short_repr(value)}")
         array = raw.astype(np.float64)
     if np.isnan(array).any():
@@ -145,7 +147,9 @@ def check_range(
         at = f" ({where} {index[0] if len(index) == 1 else index})" if index else ""
         bracket = "[" if low_inclusive else "("
         unit = f" {unit}" if unit else ""
-        raise error(f"{name} must lie in {bracket}{low:g}, {high:g}]{unit}; got {values[index] if index else values}{at}")
+        raise error(
+            f"{name} must lie in {bracket}{low:g}, {high:g}]{unit}; got {values[index] if index else values}{at}"
+        )
 
 
 def to_float(value: Any) -> float:

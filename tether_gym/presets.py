@@ -54,7 +54,9 @@ def _check_preset_argument(preset: str, name: str, value: object, default: objec
         if not is_real_number(value):
             raise ClusterError(f"preset {preset!r}: {name} must be a real number; got {short_repr(value)}")
         if abs(to_float(value)) == math.inf and not (name == "breaking_load" and to_float(value) > 0):
-            raise ClusterError(f"preset {preset!r}: {name} must be finite (only breaking_load may be inf); got {short_repr(value)}")
+            raise ClusterError(
+                f"preset {preset!r}: {name} must be finite (only breaking_load may be inf); got {short_repr(value)}"
+            )
 
 
 def _preset(builder: PresetBuilder) -> PresetBuilder:
@@ -68,7 +70,9 @@ def _preset(builder: PresetBuilder) -> PresetBuilder:
         try:
             bound = signature.bind(*args, **kwargs)
         except TypeError as error:
-            raise ClusterError(f"preset {builder.__name__!r}: {error}; its parameters are {list(signature.parameters)}") from None
+            raise ClusterError(
+                f"preset {builder.__name__!r}: {error}; its parameters are {list(signature.parameters)}"
+            ) from None
         for name, value in bound.arguments.items():
             _check_preset_argument(builder.__name__, name, value, signature.parameters[name].default)
         try:
@@ -79,7 +83,6 @@ def _preset(builder: PresetBuilder) -> PresetBuilder:
             raise ClusterError(f"preset {builder.__name__}({given}): {error}") from None
 
     return checked  # type: ignore[return-value]
-
 
 
 @_preset
@@ -114,8 +117,14 @@ def tetrahedron(
     positions -= positions.mean(axis=0)
     cables = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
     return Cluster(
-        positions=positions, masses=mass, cables=cables, EA=EA, N0=N0, damping=damping_rate * mass,
-        breaking_load=breaking_load, name="tetrahedron",
+        positions=positions,
+        masses=mass,
+        cables=cables,
+        EA=EA,
+        N0=N0,
+        damping=damping_rate * mass,
+        breaking_load=breaking_load,
+        name="tetrahedron",
     )
 
 
@@ -146,8 +155,14 @@ def chain(
     positions[:, 0] = spacing * (np.arange(n) - (n - 1) / 2.0)
     cables = [(i, i + 1) for i in range(n - 1)]
     return Cluster(
-        positions=positions, masses=mass, cables=cables, EA=EA, N0=N0, damping=damping_rate * mass,
-        breaking_load=breaking_load, name="chain",
+        positions=positions,
+        masses=mass,
+        cables=cables,
+        EA=EA,
+        N0=N0,
+        damping=damping_rate * mass,
+        breaking_load=breaking_load,
+        name="chain",
     )
 
 
@@ -174,8 +189,14 @@ def triangle(
     angles = np.array([0.0, 2 * math.pi / 3, 4 * math.pi / 3])
     positions = np.stack([radius * np.cos(angles), radius * np.sin(angles), np.zeros(3)], axis=1)
     return Cluster(
-        positions=positions, masses=mass, cables=[(0, 1), (1, 2), (0, 2)], EA=EA, N0=N0,
-        damping=damping_rate * mass, breaking_load=breaking_load, name="triangle",
+        positions=positions,
+        masses=mass,
+        cables=[(0, 1), (1, 2), (0, 2)],
+        EA=EA,
+        N0=N0,
+        damping=damping_rate * mass,
+        breaking_load=breaking_load,
+        name="triangle",
     )
 
 
@@ -199,18 +220,17 @@ def octahedron(
         breaking_load: cable breaking tension, N.
     """
     half = edge / math.sqrt(2.0)
-    positions = half * np.array(
-        [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float
-    )
-    cables = [
-        (i, j)
-        for i in range(6)
-        for j in range(i + 1, 6)
-        if not np.allclose(positions[i], -positions[j])
-    ]
+    positions = half * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
+    cables = [(i, j) for i in range(6) for j in range(i + 1, 6) if not np.allclose(positions[i], -positions[j])]
     return Cluster(
-        positions=positions, masses=mass, cables=cables, EA=EA, N0=N0, damping=damping_rate * mass,
-        breaking_load=breaking_load, name="octahedron",
+        positions=positions,
+        masses=mass,
+        cables=cables,
+        EA=EA,
+        N0=N0,
+        damping=damping_rate * mass,
+        breaking_load=breaking_load,
+        name="octahedron",
     )
 
 
@@ -252,8 +272,14 @@ def hub(
         cables += [(k + 1, (k + 1) % spokes + 1) for k in range(spokes)]
     masses = np.concatenate([[hub_mass], np.full(spokes, mass)])
     return Cluster(
-        positions=positions, masses=masses, cables=cables, EA=EA, N0=N0,
-        damping=damping_rate * masses, breaking_load=breaking_load, name="hub",
+        positions=positions,
+        masses=masses,
+        cables=cables,
+        EA=EA,
+        N0=N0,
+        damping=damping_rate * masses,
+        breaking_load=breaking_load,
+        name="hub",
     )
 
 
@@ -313,13 +339,20 @@ def radial_chain(
     positions[:, 0] = spacing * (np.arange(n) - (n - 1) / 2.0)
     masses = np.full(n, mass)
     tidal_force = masses * frame.tidal[0] * positions[:, 0]  # (n,) N, outward above the centre
-    tension = np.array([tidal_force[k + 1:].sum() for k in range(n - 1)])
+    tension = np.array([tidal_force[k + 1 :].sum() for k in range(n - 1)])
     cables = np.array([(k, k + 1) for k in range(n - 1)])
     stiffness = _positive("EA", EA, "N") / spacing
     return Cluster(
-        positions=positions, masses=masses, cables=cables, EA=EA, N0=tension, damping=damping_rate * masses,
-        breaking_load=breaking_load, axial_damping=_axial_damping(cables, masses, np.full(n - 1, stiffness), axial_damping_ratio),
-        frame=frame, name="radial_chain",
+        positions=positions,
+        masses=masses,
+        cables=cables,
+        EA=EA,
+        N0=tension,
+        damping=damping_rate * masses,
+        breaking_load=breaking_load,
+        axial_damping=_axial_damping(cables, masses, np.full(n - 1, stiffness), axial_damping_ratio),
+        frame=frame,
+        name="radial_chain",
     )
 
 
@@ -358,9 +391,15 @@ def spinning_triangle(
     masses = np.full(3, mass)
     stiffness = np.full(3, _positive("EA", EA, "N") / edge)
     return Cluster(
-        positions=positions, masses=masses, cables=cables, EA=EA, N0=mass * frame.rate**2 * edge / 3.0,
-        damping=damping_rate * masses, breaking_load=breaking_load,
-        axial_damping=_axial_damping(cables, masses, stiffness, axial_damping_ratio), frame=frame,
+        positions=positions,
+        masses=masses,
+        cables=cables,
+        EA=EA,
+        N0=mass * frame.rate**2 * edge / 3.0,
+        damping=damping_rate * masses,
+        breaking_load=breaking_load,
+        axial_damping=_axial_damping(cables, masses, stiffness, axial_damping_ratio),
+        frame=frame,
         name="spinning_triangle",
     )
 
@@ -414,10 +453,16 @@ def spinning_hub(
     tension = np.concatenate([np.full(spokes, (1.0 - rim_share) * centripetal), np.full(spokes, rim_tension)])
     lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
     return Cluster(
-        positions=positions, masses=masses, cables=cables, EA=EA, N0=tension, damping=damping_rate * masses,
+        positions=positions,
+        masses=masses,
+        cables=cables,
+        EA=EA,
+        N0=tension,
+        damping=damping_rate * masses,
         breaking_load=breaking_load,
         axial_damping=_axial_damping(cables, masses, _positive("EA", EA, "N") / lengths, axial_damping_ratio),
-        frame=frame, name="spinning_hub",
+        frame=frame,
+        name="spinning_hub",
     )
 
 

@@ -13,7 +13,10 @@ import gymnasium as gym
 #: cold-gas thrusters of 0.1 N, gentler initial conditions, and 0.5 s control intervals over its
 #: ~4 s axial period (200 s episodes).
 ORBITAL_TASK: dict[str, Any] = {
-    "control_interval": 0.5, "max_thrust": 0.1, "initial_displacement": 0.02, "initial_velocity": 0.02,
+    "control_interval": 0.5,
+    "max_thrust": 0.1,
+    "initial_displacement": 0.02,
+    "initial_velocity": 0.02,
 }
 
 #: id -> (preset, max_episode_steps, task keyword arguments).  300 steps of 0.1 s = 30 s per episode

@@ -180,7 +180,9 @@ class SimulatorState:
         """The state of clusters ``rows`` of this state, in that order; rows may repeat (e.g.
         ``np.repeat(np.arange(k), n)`` makes n copies of each cluster for planning)."""
         rows = np.asarray(rows, dtype=np.int64)
-        return SimulatorState(tuple(self.clusters[int(r)] for r in rows), read_only_rows(self.arrays, rows), self.settings)
+        return SimulatorState(
+            tuple(self.clusters[int(r)] for r in rows), read_only_rows(self.arrays, rows), self.settings
+        )
 
     def __getattr__(self, name: str) -> np.ndarray:
         if name in STATE_FIELDS:
@@ -188,9 +190,7 @@ class SimulatorState:
         raise AttributeError(f"SimulatorState has no attribute {name!r}; its arrays are {list(STATE_FIELDS)}")
 
 
-def _check_array(
-    name: str, value: ArrayLike, shape: tuple[int, ...], unit: str, limit: float = math.inf
-) -> np.ndarray:
+def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str, limit: float = math.inf) -> np.ndarray:
     """A float64 C-contiguous copy of ``value`` with exactly ``shape`` and finite entries of
     magnitude at most ``limit`` (see :mod:`tether_gym.limits`)."""
     array = np.ascontiguousarray(real_array(name, value), dtype=np.float64)
@@ -200,7 +200,9 @@ def _check_array(
     return array
 
 
-def _check_number(name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = False) -> float:
+def _check_number(
+    name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = False
+) -> float:
     """``value`` as a float, or a ``ValueError`` naming ``name`` unless it is a real number in
     ``(low, high]`` (``[low, high]`` with ``low_inclusive``)."""
     if not is_real_number(value):
@@ -258,16 +260,18 @@ class BatchSimulator:
             if not cluster_list or not all(isinstance(c, Cluster) for c in cluster_list):
                 raise TypeError("clusters must be a Cluster or a non-empty sequence of Cluster objects")
             if num_clusters is not None and num_clusters != len(cluster_list):
-                raise ValueError(
-                    f"num_clusters={num_clusters} disagrees with the {len(cluster_list)} clusters given"
-                )
-        self.safety_factor = _check_number("safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, "")
+                raise ValueError(f"num_clusters={num_clusters} disagrees with the {len(cluster_list)} clusters given")
+        self.safety_factor = _check_number(
+            "safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, ""
+        )
         if not isinstance(elongation, str) or elongation not in ("exact", "linearised"):
             raise ValueError(f"elongation must be 'exact' or 'linearised'; got {elongation!r}")
         self.elongation: Elongation = elongation
         self.max_step = _check_number("max_step", max_step, 0.0, math.inf, "s")
         if not is_whole_number(max_substeps) or not 1 <= max_substeps <= MAX_SUBSTEPS_LIMIT:
-            raise ValueError(f"max_substeps must be a whole number in 1..{MAX_SUBSTEPS_LIMIT:.0e}; got {max_substeps!r}")
+            raise ValueError(
+                f"max_substeps must be a whole number in 1..{MAX_SUBSTEPS_LIMIT:.0e}; got {max_substeps!r}"
+            )
         self.max_substeps = int(max_substeps)
 
         template = cluster_list[0]
@@ -375,7 +379,9 @@ class BatchSimulator:
             raise ValueError(f"indices must be a 1-D sequence of cluster indices; got {indices!r}") from None
         if idx.dtype == np.bool_:
             if idx.shape != (self.num_clusters,):
-                raise ValueError(f"indices given as a boolean mask must have shape ({self.num_clusters},); got {indices!r}")
+                raise ValueError(
+                    f"indices given as a boolean mask must have shape ({self.num_clusters},); got {indices!r}"
+                )
             return np.flatnonzero(idx)
         if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer):
             raise ValueError(f"indices must be a 1-D sequence of cluster indices; got {indices!r}")
@@ -494,10 +500,23 @@ class BatchSimulator:
         v = np.zeros((k, self.num_nodes, 3)) if velocities is None else np.ascontiguousarray(velocities)
         with np.errstate(divide="ignore", invalid="ignore"):
             _kernels.evaluate_batch(
-                np.ascontiguousarray(x), v, self.reference[idx], self.cables, self.stiffness[idx],
-                self.L0[idx], self.N0[idx], self.axial_damping[idx], self.inv_split_mass_sum[idx],
-                self.intact[idx] if intact is None else np.ascontiguousarray(intact), self.frame_tidal[idx],
-                self.elongation == "linearised", taut_branch, f_int, tension, omega2, finite,
+                np.ascontiguousarray(x),
+                v,
+                self.reference[idx],
+                self.cables,
+                self.stiffness[idx],
+                self.L0[idx],
+                self.N0[idx],
+                self.axial_damping[idx],
+                self.inv_split_mass_sum[idx],
+                self.intact[idx] if intact is None else np.ascontiguousarray(intact),
+                self.frame_tidal[idx],
+                self.elongation == "linearised",
+                taut_branch,
+                f_int,
+                tension,
+                omega2,
+                finite,
             )
         return f_int, tension, omega2, finite
 
@@ -536,8 +555,11 @@ class BatchSimulator:
                 raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},); got {active!r}")
         B = self.num_clusters
         stats = AdvanceStats(
-            substeps=np.zeros(B, dtype=np.int64), step_min=np.full(B, np.inf), step_max=np.zeros(B),
-            status=np.zeros(B, dtype=np.int64), step_sizes=np.full((B, int(record_steps)), np.nan),
+            substeps=np.zeros(B, dtype=np.int64),
+            step_min=np.full(B, np.inf),
+            step_max=np.zeros(B),
+            status=np.zeros(B, dtype=np.int64),
+            step_sizes=np.full((B, int(record_steps)), np.nan),
             peak_tension=np.empty((B, self.num_cables)),
         )
         self.advance_unchecked(duration, p, mask, stats)
@@ -552,19 +574,48 @@ class BatchSimulator:
         """
         kernel = _kernels.advance_parallel if self.num_clusters >= PARALLEL_MIN_BATCH else _kernels.advance_serial
         kernel(
-            active, duration, self.time, self.positions_, self._v_half, self.velocities_, self._f_int,
-            self.tension, self._h_prev, self._omega2, force, self._previous_force, self.masses,
-            self.damping, self.cables, self.stiffness, self.L0, self.N0, self.axial_damping,
-            self.inv_split_mass_sum, self.breaking_load, self.intact, self.frame_rate, self.frame_tidal,
-            self.reference, self.elongation == "linearised", self.safety_factor, self.max_step, self.max_substeps,
-            self._work, self._dissipated, stats.substeps, stats.step_min, stats.step_max, self.status,
-            stats.step_sizes, stats.peak_tension, stats.status,
+            active,
+            duration,
+            self.time,
+            self.positions_,
+            self._v_half,
+            self.velocities_,
+            self._f_int,
+            self.tension,
+            self._h_prev,
+            self._omega2,
+            force,
+            self._previous_force,
+            self.masses,
+            self.damping,
+            self.cables,
+            self.stiffness,
+            self.L0,
+            self.N0,
+            self.axial_damping,
+            self.inv_split_mass_sum,
+            self.breaking_load,
+            self.intact,
+            self.frame_rate,
+            self.frame_tidal,
+            self.reference,
+            self.elongation == "linearised",
+            self.safety_factor,
+            self.max_step,
+            self.max_substeps,
+            self._work,
+            self._dissipated,
+            stats.substeps,
+            stats.step_min,
+            stats.step_max,
+            self.status,
+            stats.step_sizes,
+            stats.peak_tension,
+            stats.status,
         )
 
     # ------------------------------------------------------------------ queries
-    def internal_forces(
-        self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None
-    ) -> np.ndarray:
+    def internal_forces(self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """(k, n, 3) elastic restoring forces f_int, N, at ``positions`` (k, n, 3), m, of clusters
         ``indices`` (default all B, in order), with each cluster's own cable parameters and its
         broken cables left out.
@@ -587,9 +638,7 @@ class BatchSimulator:
             raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
         return idx, x, f_int
 
-    def equilibrium_force(
-        self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None
-    ) -> np.ndarray:
+    def equilibrium_force(self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """(k, n, 3) external force, N, that holds clusters ``indices`` at rest in their frame at
         ``positions`` (k, n, 3), m, with every cable intact: ``f_int(x) - M diag(T) x``.
 
@@ -640,8 +689,10 @@ class BatchSimulator:
         # 12 perturbed copies of each element: dof j = 0..5, sign +-.
         dof_shift = np.eye(6).reshape(6, 2, 3)
         perturbed = (
-            ends[:, :, None, None] + np.array([1.0, -1.0])[None, None, None, :, None, None]
-            * h[:, :, None, None, None, None] * dof_shift[None, None, :, None]
+            ends[:, :, None, None]
+            + np.array([1.0, -1.0])[None, None, None, :, None, None]
+            * h[:, :, None, None, None, None]
+            * dof_shift[None, None, :, None]
         )  # (B, m, 6, 2, 2, 3)
         E = B * m * 12
         ref = self.reference
@@ -649,20 +700,30 @@ class BatchSimulator:
         ref_elements = np.broadcast_to(ref_ends[:, :, None, None], perturbed.shape).reshape(E, 2, 3)
 
         def per_element(values: np.ndarray) -> np.ndarray:
-            return np.ascontiguousarray(
-                np.broadcast_to(values[:, :, None, None], (B, m, 6, 2)).reshape(E, 1)
-            )
+            return np.ascontiguousarray(np.broadcast_to(values[:, :, None, None], (B, m, 6, 2)).reshape(E, 1))
 
         all_clusters = np.arange(B)
         tension_taut_branch = self._evaluate(x, all_clusters, taut_branch=True)[1]
         just_taut_N0 = self.N0 - np.minimum(tension_taut_branch, 0.0)
         f_int = np.empty((E, 2, 3))
         _kernels.evaluate_batch(
-            np.ascontiguousarray(perturbed.reshape(E, 2, 3)), np.zeros((E, 2, 3)), np.ascontiguousarray(ref_elements),
-            np.array([[0, 1]], dtype=np.int64), per_element(self.stiffness), per_element(self.L0),
-            per_element(just_taut_N0), np.zeros((E, 1)), per_element(self.inv_split_mass_sum),
-            np.ones((E, 1), dtype=np.bool_), np.zeros((E, 3)), self.elongation == "linearised", True, f_int,
-            np.empty((E, 1)), np.empty(E), np.empty(E, dtype=np.bool_),
+            np.ascontiguousarray(perturbed.reshape(E, 2, 3)),
+            np.zeros((E, 2, 3)),
+            np.ascontiguousarray(ref_elements),
+            np.array([[0, 1]], dtype=np.int64),
+            per_element(self.stiffness),
+            per_element(self.L0),
+            per_element(just_taut_N0),
+            np.zeros((E, 1)),
+            per_element(self.inv_split_mass_sum),
+            np.ones((E, 1), dtype=np.bool_),
+            np.zeros((E, 3)),
+            self.elongation == "linearised",
+            True,
+            f_int,
+            np.empty((E, 1)),
+            np.empty(E),
+            np.empty(E, dtype=np.bool_),
         )
         f = f_int.reshape(B, m, 6, 2, 6)
         columns = (f[:, :, :, 0] - f[:, :, :, 1]) / (2.0 * h[:, :, None, None])  # (B, m, j, i)
@@ -676,7 +737,9 @@ class BatchSimulator:
         omega2 = scaled.sum(axis=3).max(axis=2)
         # Axial damping with lagged velocity shortens the stable step (see _kernels.cable_forces).
         with np.errstate(divide="ignore", invalid="ignore"):
-            xi = np.where(self.axial_damping > 0.0, 0.5 * self.axial_damping * self.inv_split_mass_sum / np.sqrt(omega2), 0.0)
+            xi = np.where(
+                self.axial_damping > 0.0, 0.5 * self.axial_damping * self.inv_split_mass_sum / np.sqrt(omega2), 0.0
+            )
         omega2 = omega2 * (np.sqrt(1.0 + xi * xi) + xi) ** 2
         omega2 = omega2 + np.abs(self.frame_tidal).max(axis=1)[:, None]
         return np.where(self.intact, omega2, 0.0)
@@ -685,7 +748,11 @@ class BatchSimulator:
         """Energy accounting of every cluster since its last reset (see :class:`EnergyReport`)."""
         kinetic = 0.5 * np.einsum("bn,bnd,bnd->b", self.masses, self.velocities_, self.velocities_)
         # With axial damping the tension holds a viscous part; the strain energy is elastic only.
-        elastic = self.tension if not self.axial_damping.any() else self._evaluate(self.positions_, np.arange(self.num_clusters))[1]
+        elastic = (
+            self.tension
+            if not self.axial_damping.any()
+            else self._evaluate(self.positions_, np.arange(self.num_clusters))[1]
+        )
         strain = (0.5 * elastic**2 / self.stiffness).sum(axis=1)
         frame_potential = -0.5 * np.einsum("bn,bnd,bd->b", self.masses, self.positions_**2, self.frame_tidal)
         residual = kinetic + strain + frame_potential - self._energy0 + self._dissipated - self._work
@@ -714,9 +781,7 @@ class Simulator:
 
     def __init__(self, cluster: Cluster, **options: object) -> None:
         if not isinstance(cluster, Cluster):
-            raise TypeError(
-                f"Simulator takes a Cluster (see tether_gym.make_cluster); got {type(cluster).__name__}"
-            )
+            raise TypeError(f"Simulator takes a Cluster (see tether_gym.make_cluster); got {type(cluster).__name__}")
         self.cluster = cluster
         self.batch = BatchSimulator(cluster, 1, **options)  # type: ignore[arg-type]
 
@@ -748,7 +813,11 @@ class Simulator:
     def reset(self, positions: ArrayLike | None = None, velocities: ArrayLike | None = None) -> None:
         """Set the state: positions (n, 3) in m (default nominal), velocities (n, 3) in m/s (default 0)."""
         n = self.cluster.num_nodes
-        x0 = self.cluster.positions if positions is None else _check_array("positions", positions, (n, 3), "m", MAX_COORDINATE)
+        x0 = (
+            self.cluster.positions
+            if positions is None
+            else _check_array("positions", positions, (n, 3), "m", MAX_COORDINATE)
+        )
         v0 = None if velocities is None else _check_array("velocities", velocities, (n, 3), "m/s", MAX_SPEED)[None]
         self.batch.reset(x0[None], v0)
 

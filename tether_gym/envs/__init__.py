@@ -5,6 +5,11 @@ from tether_gym.envs.task import END_REASONS, DampingTask, EnvArgumentError, Tas
 from tether_gym.envs.vector_env import TetherClusterVectorEnv
 
 __all__ = [
-    "END_REASONS", "DampingTask", "EnvArgumentError", "TaskConfig", "TaskState", "TetherClusterEnv",
+    "END_REASONS",
+    "DampingTask",
+    "EnvArgumentError",
+    "TaskConfig",
+    "TaskState",
+    "TetherClusterEnv",
     "TetherClusterVectorEnv",
 ]

@@ -227,11 +227,15 @@ def _evaluate_clusters(
                 nx = nominal[b, i, 0] - nominal_com[0]
                 ny = nominal[b, i, 1] - nominal_com[1]
                 nz = nominal[b, i, 2] - nominal_com[2]
-                shape_potential -= 0.5 * mb[i] * (
-                    tidal[0] * (rx * rx - nx * nx) + tidal[1] * (ry * ry - ny * ny) + tidal[2] * (rz * rz - nz * nz)
+                shape_potential -= (
+                    0.5
+                    * mb[i]
+                    * (tidal[0] * (rx * rx - nx * nx) + tidal[1] * (ry * ry - ny * ny) + tidal[2] * (rz * rz - nz * nz))
                 )
-                frame_potential -= 0.5 * mb[i] * (
-                    tidal[0] * xb[i, 0] * xb[i, 0] + tidal[1] * xb[i, 1] * xb[i, 1] + tidal[2] * xb[i, 2] * xb[i, 2]
+                frame_potential -= (
+                    0.5
+                    * mb[i]
+                    * (tidal[0] * xb[i, 0] * xb[i, 0] + tidal[1] * xb[i, 1] * xb[i, 1] + tidal[2] * xb[i, 2] * xb[i, 2])
                 )
             ux = vb[i, 0] - motion[1, 0] - (motion[2, 1] * rz - motion[2, 2] * ry)
             uy = vb[i, 1] - motion[1, 1] - (motion[2, 2] * rx - motion[2, 0] * rz)
@@ -287,8 +291,12 @@ def _evaluate_clusters(
         terms_propellant = -weights[1] * impulse[b]
         terms_slack = -weights[2] * slack_fraction
         running_reward = terms_vibration + terms_propellant + terms_slack
-        if not (abs(running_reward) <= REWARD_LIMIT and math.isfinite(kinetic) and math.isfinite(strain)
-                and math.isfinite(frame_potential)):
+        if not (
+            abs(running_reward) <= REWARD_LIMIT
+            and math.isfinite(kinetic)
+            and math.isfinite(strain)
+            and math.isfinite(frame_potential)
+        ):
             # A state beyond the reward's arithmetic (an energy or a weighted term that overflows
             # or passes REWARD_LIMIT; NaN fails the comparison too) is a divergence: the episode
             # ends there with a finite reward, the vibration term dropped as for a frozen
@@ -315,34 +323,132 @@ def _evaluate_clusters(
         scalars[b, 10] = frame_potential
 
 
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def evaluate_serial(
-    x, v, masses, tension, stiffness, L0, N0, intact, frame_tidal, breaking_load, bias, nominal,
-    nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension,
-    impulse, deviation_limit, terminate_on_break, weights, observation, scalars, end_reason,
+    x,
+    v,
+    masses,
+    tension,
+    stiffness,
+    L0,
+    N0,
+    intact,
+    frame_tidal,
+    breaking_load,
+    bias,
+    nominal,
+    nominal_strain_energy,
+    cables,
+    observed,
+    length_scale,
+    speed_scale,
+    observe_tensions,
+    status,
+    peak_tension,
+    impulse,
+    deviation_limit,
+    terminate_on_break,
+    weights,
+    observation,
+    scalars,
+    end_reason,
 ):  # pragma: no cover - compiled
     """:func:`_evaluate_clusters` for every cluster of the batch, one thread."""
     _evaluate_clusters(
-        0, x.shape[0], x, v, masses, tension, stiffness, L0, N0, intact, frame_tidal, breaking_load, bias, nominal,
-        nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension,
-        impulse, deviation_limit, terminate_on_break, weights, observation, scalars, end_reason,
+        0,
+        x.shape[0],
+        x,
+        v,
+        masses,
+        tension,
+        stiffness,
+        L0,
+        N0,
+        intact,
+        frame_tidal,
+        breaking_load,
+        bias,
+        nominal,
+        nominal_strain_energy,
+        cables,
+        observed,
+        length_scale,
+        speed_scale,
+        observe_tensions,
+        status,
+        peak_tension,
+        impulse,
+        deviation_limit,
+        terminate_on_break,
+        weights,
+        observation,
+        scalars,
+        end_reason,
     )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def evaluate_parallel(
-    x, v, masses, tension, stiffness, L0, N0, intact, frame_tidal, breaking_load, bias, nominal,
-    nominal_strain_energy, cables, observed, length_scale, speed_scale, observe_tensions, status, peak_tension,
-    impulse, deviation_limit, terminate_on_break, weights, observation, scalars, end_reason,
+    x,
+    v,
+    masses,
+    tension,
+    stiffness,
+    L0,
+    N0,
+    intact,
+    frame_tidal,
+    breaking_load,
+    bias,
+    nominal,
+    nominal_strain_energy,
+    cables,
+    observed,
+    length_scale,
+    speed_scale,
+    observe_tensions,
+    status,
+    peak_tension,
+    impulse,
+    deviation_limit,
+    terminate_on_break,
+    weights,
+    observation,
+    scalars,
+    end_reason,
 ):  # pragma: no cover - compiled
     """:func:`_evaluate_clusters` for every cluster of the batch, on all threads (same bits)."""
     batch = x.shape[0]
     chunks = min(batch, PARALLEL_CHUNKS)
     for k in prange(chunks):
         _evaluate_clusters(
-            k * batch // chunks, (k + 1) * batch // chunks, x, v, masses, tension, stiffness, L0, N0, intact,
-            frame_tidal, breaking_load, bias, nominal, nominal_strain_energy, cables, observed, length_scale,
-            speed_scale, observe_tensions, status, peak_tension, impulse, deviation_limit, terminate_on_break,
-            weights, observation, scalars, end_reason,
+            k * batch // chunks,
+            (k + 1) * batch // chunks,
+            x,
+            v,
+            masses,
+            tension,
+            stiffness,
+            L0,
+            N0,
+            intact,
+            frame_tidal,
+            breaking_load,
+            bias,
+            nominal,
+            nominal_strain_energy,
+            cables,
+            observed,
+            length_scale,
+            speed_scale,
+            observe_tensions,
+            status,
+            peak_tension,
+            impulse,
+            deviation_limit,
+            terminate_on_break,
+            weights,
+            observation,
+            scalars,
+            end_reason,
         )

@@ -187,8 +187,14 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
             raise EnvArgumentError(
                 f"render_mode must be one of {self.metadata['render_modes']} or None; got {render_mode!r}"
             )
-        exaggeration = check_number("render_exaggeration", render_exaggeration, 0.0, MAX_RENDER_EXAGGERATION,
-                                    low_open=True, fix="displacements are drawn this many times larger")
+        exaggeration = check_number(
+            "render_exaggeration",
+            render_exaggeration,
+            0.0,
+            MAX_RENDER_EXAGGERATION,
+            low_open=True,
+            fix="displacements are drawn this many times larger",
+        )
         self.task = task_from_arguments(1, preset, preset_kwargs, cluster, **task)
         self.config = self.task.config
         cluster = self.task.cluster
@@ -244,7 +250,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
         if self._viewer is None:
             self._viewer = ClusterRenderer(
-                self.cluster, self.task.max_thrust.max(), human=self.render_mode == "human",
+                self.cluster,
+                self.task.max_thrust.max(),
+                human=self.render_mode == "human",
                 exaggeration=self.render_exaggeration,
             )
         return self._viewer.draw(

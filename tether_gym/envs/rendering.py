@@ -52,8 +52,12 @@ class ClusterRenderer:
                 ax.plot(*segment.T, color="tab:orange", linestyle="--", linewidth=1.0)
             else:
                 ax.plot(*segment.T, color="tab:blue", linewidth=1.8)
-        ax.scatter(*positions.T, s=40 * self.cluster.masses / self.cluster.masses.min() ** 1.0 / 2 + 20,
-                   color="black", depthshade=False)
+        ax.scatter(
+            *positions.T,
+            s=40 * self.cluster.masses / self.cluster.masses.min() ** 1.0 / 2 + 20,
+            color="black",
+            depthshade=False,
+        )
         arrow_length = 0.25 * self.half_width / max(self.max_thrust, 1e-12)
         if np.any(thrust):
             ax.quiver(*positions.T, *(thrust * arrow_length).T, color="tab:red", linewidth=1.5)
@@ -65,7 +69,8 @@ class ClusterRenderer:
         ax.set_title(
             f"{self.cluster.name}  t = {time:6.2f} s   slack {int(slack.sum())}/{slack.size}"
             f"   displacements x{self.exaggeration:g}\n"
-            "blue: taut, orange dashed: slack, red: thrust", fontsize=9,
+            "blue: taut, orange dashed: slack, red: thrust",
+            fontsize=9,
         )
         self.figure.canvas.draw()
         if self.human:

@@ -44,7 +44,13 @@ from tether_gym.simulator import (
 __all__ = [
     "TASK_STATE_FIELDS",
     "TaskState",
-    "END_REASONS", "OBSERVATION_LIMIT", "SCALARS", "ClusterScales", "DampingTask", "EnvArgumentError", "TaskConfig",
+    "END_REASONS",
+    "OBSERVATION_LIMIT",
+    "SCALARS",
+    "ClusterScales",
+    "DampingTask",
+    "EnvArgumentError",
+    "TaskConfig",
     "task_from_arguments",
 ]
 
@@ -60,9 +66,19 @@ RANDOMISABLE = ("masses", "EA", "damping", "N0", "axial_damping")
 RESET_OPTION_KEYS = ("positions", "velocities")
 
 #: Per-cluster quantities the task kernel writes after each step, in this column order.
-SCALARS = ("reward", "reward_vibration", "reward_propellant", "reward_slack", "reward_failure",
-           "vibration_energy", "max_deviation", "slack_fraction", "kinetic_energy", "strain_energy",
-           "frame_potential")
+SCALARS = (
+    "reward",
+    "reward_vibration",
+    "reward_propellant",
+    "reward_slack",
+    "reward_failure",
+    "vibration_energy",
+    "max_deviation",
+    "slack_fraction",
+    "kinetic_energy",
+    "strain_energy",
+    "frame_potential",
+)
 _COLUMN = {name: k for k, name in enumerate(SCALARS)}
 
 OBSERVATION_LIMIT = _task_kernels.OBSERVATION_LIMIT
@@ -168,6 +184,7 @@ class EnvArgumentError(ValueError):
 # ---------------------------------------------------------------------------------------------
 # One check per kind of value.  Each returns the value normalised (Python float, int, bool, str
 # or tuple) or raises EnvArgumentError naming ``name``.
+
 
 def _real(value: Any) -> float | None:
     """``value`` as a float if it is a real number (not a bool, not a string), else None; an int
@@ -275,8 +292,9 @@ def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
 
 def check_difficulty(difficulty: Any) -> float:
     """``difficulty`` as a float in [0, 1], or an :class:`EnvArgumentError`."""
-    return check_number("difficulty", difficulty, 0.0, 1.0,
-                        fix="1 is the configured task, 0 the nominal cluster at rest")
+    return check_number(
+        "difficulty", difficulty, 0.0, 1.0, fix="1 is the configured task, 0 the nominal cluster at rest"
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -307,8 +325,10 @@ class ClusterScales:
         if damped.any():
             damping_step = float((2.0 * cluster.masses[damped] / cluster.damping[damped]).min())
         return cls(
-            shortest_cable=float(cluster.L0.min()), longest_cable=float(cluster.L0.max()),
-            critical_step=float(probe.critical_time_step()[0]), damping_step=damping_step,
+            shortest_cable=float(cluster.L0.min()),
+            longest_cable=float(cluster.L0.max()),
+            critical_step=float(probe.critical_time_step()[0]),
+            damping_step=damping_step,
             max_substeps=probe.max_substeps,
         )
 
@@ -434,15 +454,18 @@ class TaskConfig:
             "observation_noise": number("observation_noise", self.observation_noise, 0.0, MAX_OBSERVATION_NOISE),
             "observed_satellites": check_satellites("observed_satellites", self.observed_satellites),
             "randomize": self._checked_randomize(),
-            "safety_factor": number("safety_factor", self.safety_factor, 0.0, 1.0, low_open=True,
-                                    fix="a fraction of the critical step"),
+            "safety_factor": number(
+                "safety_factor", self.safety_factor, 0.0, 1.0, low_open=True, fix="a fraction of the critical step"
+            ),
             "impulse_magnitude": number("impulse_magnitude", self.impulse_magnitude, 0.0, MAX_IMPULSE, "N*s"),
             "impulse_rate": number("impulse_rate", self.impulse_rate, 0.0, MAX_IMPULSE_RATE, "1/s"),
-            "periodic_amplitude": number("periodic_amplitude", self.periodic_amplitude, 0.0,
-                                         MAX_PERIODIC_AMPLITUDE, "N"),
+            "periodic_amplitude": number(
+                "periodic_amplitude", self.periodic_amplitude, 0.0, MAX_PERIODIC_AMPLITUDE, "N"
+            ),
             "periodic_period": number("periodic_period", self.periodic_period, 0.0, MAX_TIME, "s", low_open=True),
-            "thrust_noise": number("thrust_noise", self.thrust_noise, 0.0, MAX_THRUST_NOISE,
-                                   fix="a multiple of max_thrust"),
+            "thrust_noise": number(
+                "thrust_noise", self.thrust_noise, 0.0, MAX_THRUST_NOISE, fix="a multiple of max_thrust"
+            ),
             "thrust_delay": check_whole("thrust_delay", self.thrust_delay, 0, MAX_THRUST_DELAY, "control intervals"),
             "thruster_failure_probability": number(
                 "thruster_failure_probability", self.thruster_failure_probability, 0.0, 1.0, fix="a probability"
@@ -454,8 +477,15 @@ class TaskConfig:
         for name in ("vibration_weight", "propellant_weight", "slack_weight", "failure_penalty"):
             fields[name] = number(name, getattr(self, name), 0.0, MAX_WEIGHT)
         if self.max_deviation is not None and _real(self.max_deviation) != math.inf:
-            fields["max_deviation"] = number("max_deviation", self.max_deviation, 0.0, math.inf, "m", low_open=True,
-                                             fix="inf never ends an episode on it, None is 30 % of the shortest cable")
+            fields["max_deviation"] = number(
+                "max_deviation",
+                self.max_deviation,
+                0.0,
+                math.inf,
+                "m",
+                low_open=True,
+                fix="inf never ends an episode on it, None is 30 % of the shortest cable",
+            )
         elif self.max_deviation is not None:
             fields["max_deviation"] = math.inf
         if fields["periodic_amplitude"] and fields["periodic_period"] < 2.0 * fields["control_interval"]:
@@ -631,9 +661,27 @@ def task_from_arguments(
 #: books, observation, reward terms, end reason, sub-step statistics).  ``stats.*`` name the
 #: arrays of the task's :class:`~tether_gym.simulator.AdvanceStats`.
 TASK_STATE_FIELDS = (
-    "bias", "nominal", "nominal_strain_energy", "force", "thrust", "impulse", "propellant", "disturbance",
-    "thruster_ok", "failure_time", "failing_thruster", "periodic_direction", "periodic_phase", "action_queue",
-    "observation", "scalars", "end_reason", "stats.substeps", "stats.step_min", "stats.step_max", "stats.status",
+    "bias",
+    "nominal",
+    "nominal_strain_energy",
+    "force",
+    "thrust",
+    "impulse",
+    "propellant",
+    "disturbance",
+    "thruster_ok",
+    "failure_time",
+    "failing_thruster",
+    "periodic_direction",
+    "periodic_phase",
+    "action_queue",
+    "observation",
+    "scalars",
+    "end_reason",
+    "stats.substeps",
+    "stats.step_min",
+    "stats.step_max",
+    "stats.status",
     "stats.peak_tension",
 )
 
@@ -667,8 +715,9 @@ class TaskState:
         """The state of clusters ``rows`` of this state, in that order; rows may repeat (one
         restore then fills a planning batch with n copies of each cluster)."""
         rows = np.asarray(rows, dtype=np.int64)
-        return TaskState(self.simulator.select(rows), read_only_rows(self.arrays, rows), self.config, self.cluster,
-                         self.difficulty)
+        return TaskState(
+            self.simulator.select(rows), read_only_rows(self.arrays, rows), self.config, self.cluster, self.difficulty
+        )
 
 
 class DampingTask:
@@ -732,11 +781,19 @@ class DampingTask:
         self.nominal_strain_energy = np.zeros(B)
         for b in range(B):
             self._set_nominal(b, cluster)
-        self.full_impulse = float(self.max_thrust.sum()) * config.control_interval * (
-            math.sqrt(3.0) if config.thrust_limit == "per_axis" else 1.0
+        self.full_impulse = (
+            float(self.max_thrust.sum())
+            * config.control_interval
+            * (math.sqrt(3.0) if config.thrust_limit == "per_axis" else 1.0)
         )
-        self.weights = np.array([config.vibration_weight, config.propellant_weight / self.full_impulse,
-                                 config.slack_weight, config.failure_penalty])
+        self.weights = np.array(
+            [
+                config.vibration_weight,
+                config.propellant_weight / self.full_impulse,
+                config.slack_weight,
+                config.failure_penalty,
+            ]
+        )
         self.energy_scale = self._energy_scale()
         self.weights[0] = config.vibration_weight / self.energy_scale
         self.difficulty = config.difficulty
@@ -753,12 +810,18 @@ class DampingTask:
         self.periodic_phase = np.zeros((B, n))
         self.action_queue = np.zeros((B, config.thrust_delay, self.action_size))
         self._perturbed = bool(
-            config.impulse_magnitude or config.periodic_amplitude or config.thrust_noise
+            config.impulse_magnitude
+            or config.periodic_amplitude
+            or config.thrust_noise
             or config.thruster_failure_probability
         )
         self.stats = AdvanceStats(
-            substeps=np.zeros(B, dtype=np.int64), step_min=np.full(B, np.inf), step_max=np.zeros(B),
-            status=np.zeros(B, dtype=np.int64), step_sizes=np.zeros((B, 0)), peak_tension=np.zeros((B, m)),
+            substeps=np.zeros(B, dtype=np.int64),
+            step_min=np.full(B, np.inf),
+            step_max=np.zeros(B),
+            status=np.zeros(B, dtype=np.int64),
+            step_sizes=np.zeros((B, 0)),
+            peak_tension=np.zeros((B, m)),
         )
         self.observation = np.zeros((B, self.observation_size))
         self.scalars = np.zeros((B, len(SCALARS)))
@@ -785,32 +848,78 @@ class DampingTask:
         shape = (count,) + self.cluster.positions.shape
         scalars = np.zeros((count, len(SCALARS)))
         self._evaluate_batch(
-            probe, np.ascontiguousarray(np.broadcast_to(self.bias[0], shape)),
+            probe,
+            np.ascontiguousarray(np.broadcast_to(self.bias[0], shape)),
             np.ascontiguousarray(np.broadcast_to(self.cluster.positions, shape)),
-            np.full(count, self.nominal_strain_energy[0]), np.zeros(count, dtype=np.int64), probe.tension,
-            np.zeros(count), np.zeros((count, self.observation_size)), scalars, np.zeros(count, dtype=np.int64),
+            np.full(count, self.nominal_strain_energy[0]),
+            np.zeros(count, dtype=np.int64),
+            probe.tension,
+            np.zeros(count),
+            np.zeros((count, self.observation_size)),
+            scalars,
+            np.zeros(count, dtype=np.int64),
         )
         scale = float(np.mean(scalars[:, _COLUMN["vibration_energy"]]))
         return scale if scale > 0 else 1.0
 
     def _evaluate_batch(
-        self, sim: BatchSimulator, bias: np.ndarray, nominal: np.ndarray, nominal_strain_energy: np.ndarray,
-        status: np.ndarray, peak_tension: np.ndarray, impulse: np.ndarray, observation: np.ndarray,
-        scalars: np.ndarray, end_reason: np.ndarray,
+        self,
+        sim: BatchSimulator,
+        bias: np.ndarray,
+        nominal: np.ndarray,
+        nominal_strain_energy: np.ndarray,
+        status: np.ndarray,
+        peak_tension: np.ndarray,
+        impulse: np.ndarray,
+        observation: np.ndarray,
+        scalars: np.ndarray,
+        end_reason: np.ndarray,
     ) -> None:
-        kernel = _task_kernels.evaluate_parallel if sim.num_clusters >= PARALLEL_MIN_BATCH else _task_kernels.evaluate_serial
+        kernel = (
+            _task_kernels.evaluate_parallel if sim.num_clusters >= PARALLEL_MIN_BATCH else _task_kernels.evaluate_serial
+        )
         kernel(
-            sim.positions_, sim.velocities_, sim.masses, sim.tension, sim.stiffness, sim.L0, sim.N0, sim.intact,
-            sim.frame_tidal, sim.breaking_load, bias, nominal, nominal_strain_energy, sim.cables, self.observed,
-            self.length_scale, self.speed_scale, self.config.observe_tensions, status, peak_tension, impulse,
-            self.max_deviation, self.config.cable_failure == "terminate", self.weights, observation, scalars,
+            sim.positions_,
+            sim.velocities_,
+            sim.masses,
+            sim.tension,
+            sim.stiffness,
+            sim.L0,
+            sim.N0,
+            sim.intact,
+            sim.frame_tidal,
+            sim.breaking_load,
+            bias,
+            nominal,
+            nominal_strain_energy,
+            sim.cables,
+            self.observed,
+            self.length_scale,
+            self.speed_scale,
+            self.config.observe_tensions,
+            status,
+            peak_tension,
+            impulse,
+            self.max_deviation,
+            self.config.cable_failure == "terminate",
+            self.weights,
+            observation,
+            scalars,
             end_reason,
         )
 
     def _evaluate(self) -> None:
         self._evaluate_batch(
-            self.sim, self.bias, self.nominal, self.nominal_strain_energy, self.stats.status,
-            self.stats.peak_tension, self.impulse, self.observation, self.scalars, self.end_reason,
+            self.sim,
+            self.bias,
+            self.nominal,
+            self.nominal_strain_energy,
+            self.stats.status,
+            self.stats.peak_tension,
+            self.impulse,
+            self.observation,
+            self.scalars,
+            self.end_reason,
         )
 
     # ------------------------------------------------------------------ snapshots
@@ -866,12 +975,12 @@ class DampingTask:
         masses = self.cluster.masses[None, :, None]
         displacement -= (masses * displacement).sum(axis=1, keepdims=True) / masses.sum(axis=1, keepdims=True)
         x0 = self.cluster.positions[None] + displacement
-        _task_kernels.remove_rigid_velocity(x0, velocity, np.ascontiguousarray(np.broadcast_to(self.cluster.masses, (count, n))))
+        _task_kernels.remove_rigid_velocity(
+            x0, velocity, np.ascontiguousarray(np.broadcast_to(self.cluster.masses, (count, n)))
+        )
         return x0, velocity
 
-    def check_reset_state(
-        self, options: Any, shape: tuple[int, ...]
-    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    def check_reset_state(self, options: Any, shape: tuple[int, ...]) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The exact initial state given as reset options, checked, without touching any state.
 
         Args:
@@ -912,8 +1021,10 @@ class DampingTask:
             arrays[key] = array.reshape(-1, n, 3)
         positions, velocities = arrays["positions"], arrays["velocities"]
         scales = self.scales
-        for key, array, limit, unit in (("positions", positions, MAX_COORDINATE, "m"),
-                                        ("velocities", velocities, MAX_SPEED, "m/s")):
+        for key, array, limit, unit in (
+            ("positions", positions, MAX_COORDINATE, "m"),
+            ("velocities", velocities, MAX_SPEED, "m/s"),
+        ):
             if array is not None and not np.abs(array).max() <= limit:
                 raise EnvArgumentError(
                     f"reset option {key!r} must have every entry within +-{limit:g} {unit} (the simulator's range); "
@@ -1045,10 +1156,20 @@ class DampingTask:
             failing = np.flatnonzero(mask & (self.sim.time >= self.failure_time))
             self.thruster_ok[failing, self.failing_thruster[failing]] = False
             if not self.thruster_ok.all():
-                actions = (actions.reshape(self.num_clusters, -1, 3) * self.thruster_ok[:, :, None]).reshape(actions.shape)
+                actions = (actions.reshape(self.num_clusters, -1, 3) * self.thruster_ok[:, :, None]).reshape(
+                    actions.shape
+                )
         _task_kernels.command_forces(
-            np.ascontiguousarray(actions), self.thrusters, self.max_thrust, config.thrust_limit == "magnitude",
-            self.bias, interval, mask, self.force, self.thrust, self.impulse,
+            np.ascontiguousarray(actions),
+            self.thrusters,
+            self.max_thrust,
+            config.thrust_limit == "magnitude",
+            self.bias,
+            interval,
+            mask,
+            self.force,
+            self.thrust,
+            self.impulse,
         )
         if self._perturbed:
             if rngs is None:
@@ -1118,7 +1239,11 @@ class DampingTask:
             "dissipated_energy": sim._dissipated,
             "external_work": sim._work,
             "frame_potential": column[_COLUMN["frame_potential"]],
-            "energy_residual": kinetic + strain + column[_COLUMN["frame_potential"]] - sim._energy0 + sim._dissipated
+            "energy_residual": kinetic
+            + strain
+            + column[_COLUMN["frame_potential"]]
+            - sim._energy0
+            + sim._dissipated
             - sim._work,
             "tensions": sim.tension,
             "slack_count": np.rint(column[_COLUMN["slack_fraction"]] * self.cluster.num_cables).astype(np.int64),
@@ -1131,10 +1256,14 @@ class DampingTask:
         }
         if stepped:
             arrays.update(
-                substeps=self.stats.substeps, step_min=self.stats.step_min, step_max=self.stats.step_max,
+                substeps=self.stats.substeps,
+                step_min=self.stats.step_min,
+                step_max=self.stats.step_max,
                 peak_tension=self.stats.peak_tension,
-                **{key: column[_COLUMN[key]] for key in ("reward_vibration", "reward_propellant", "reward_slack",
-                                                          "reward_failure")},
+                **{
+                    key: column[_COLUMN[key]]
+                    for key in ("reward_vibration", "reward_propellant", "reward_slack", "reward_failure")
+                },
                 end_reason=self.end_reason,
             )
         return arrays

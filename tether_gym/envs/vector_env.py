@@ -27,8 +27,17 @@ from tether_gym.limits import is_whole_number
 __all__ = ["TetherClusterVectorEnv"]
 
 #: Info keys that exist only after a step (a reset's info lacks them, as in the single env).
-STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", "reward_vibration", "reward_propellant",
-             "reward_slack", "reward_failure", "end_reason")
+STEP_KEYS = (
+    "substeps",
+    "step_min",
+    "step_max",
+    "peak_tension",
+    "reward_vibration",
+    "reward_propellant",
+    "reward_slack",
+    "reward_failure",
+    "end_reason",
+)
 
 
 class TetherClusterVectorEnv(VectorEnv):
