@@ -1,10 +1,16 @@
 """Environment ids for ``gymnasium.make``: one per preset, all version 0.
 
 ``gym.make("tether_gym:TetherTetrahedron-v0")`` works without importing tether_gym first.
+
+:data:`ENV_IDS` says what each id builds, and :data:`ENV_DOCS` what its documentation page says
+beyond the env class's docstring. The site's build (``docs/hooks/env_pages.py``) makes each id's
+page from these, the class docstring of :class:`~tether_gym.envs.TetherClusterEnv`, the preset's
+docstring and the registered spec, so a page and the code cannot disagree.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -34,6 +40,123 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
 
 #: The paper's case, and the default task.
 DEFAULT_ENV_ID = "TetherTetrahedron-v0"
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvDoc:
+    """What one id's documentation page says beyond the env class's docstring.
+
+    Numbers the code knows (the spaces' sizes, the episode length, the control interval, the
+    thrust, the cluster's masses and lengths) are not written here: the page renders them from
+    the registered spec, a freshly made env and the preset's signature.
+
+    Attributes:
+        summary: one line, for tables of ids.
+        description: Markdown paragraphs: what the cluster is, what holds it in shape and what
+            makes this id's task different from the others.
+        version_history: one Markdown line per version of the id, oldest first.
+    """
+
+    summary: str
+    description: str
+    version_history: tuple[str, ...]
+
+
+_FREE_SPACE_V0 = ("v0: initial release, with the single-cluster environments (issue 3, commit `f1e1c8d`).",)
+_TURNING_FRAME_V0 = ("v0: initial release, with the turning frames (issue 6, commit `4490cf3`).",)
+
+#: id -> its documentation beyond the class docstring (see :class:`EnvDoc`); one entry per id of
+#: :data:`ENV_IDS`.
+ENV_DOCS: dict[str, EnvDoc] = {
+    "TetherTetrahedron-v0": EnvDoc(
+        summary="The paper's case: four satellites at the corners of a regular tetrahedron. The default id.",
+        description=(
+            "The example of the source paper: four satellites at the corners of a regular tetrahedron, "
+            "joined by its six edges, in free space. Pretension pulls every satellite toward the centroid, "
+            "so a constant bias thrust holds the nominal shape, and the agent's thrust is added to it.\n\n"
+            "The pretension strain is tiny next to the random initial displacements, so at the start most "
+            "cables are slack and the cluster vibrates by cables snapping taut and going slack again. This "
+            "is the id of the main job (`bash scripts/main.sh`) and of the shipped default model."
+        ),
+        version_history=_FREE_SPACE_V0,
+    ),
+    "TetherChain-v0": EnvDoc(
+        summary="Satellites in a straight line, each tethered to the next, in free space.",
+        description=(
+            "Satellites in a straight line along x, each tethered to its neighbours, in free space and held "
+            "by a bias thrust. Only the cables along the line resist stretching; sideways, a satellite is "
+            "held only by the pretension of its two cables, so the lateral modes are far softer and slower "
+            "than the axial ones. A controller has to damp both."
+        ),
+        version_history=_FREE_SPACE_V0,
+    ),
+    "TetherTriangle-v0": EnvDoc(
+        summary="Three satellites in an equilateral triangle in the x-y plane, in free space.",
+        description=(
+            "Three satellites at the corners of an equilateral triangle in the x-y plane, in free space and "
+            "held by a bias thrust. In the plane the triangle is a stiff frame; out of the plane the cables "
+            "resist motion only through their pretension, so the out-of-plane modes are soft."
+        ),
+        version_history=_FREE_SPACE_V0,
+    ),
+    "TetherOctahedron-v0": EnvDoc(
+        summary="Six satellites at the vertices of a regular octahedron, twelve cables.",
+        description=(
+            "Six satellites at the vertices of a regular octahedron, joined along its twelve edges, in free "
+            "space and held by a bias thrust. Each satellite meets four cables, so a controller coordinates "
+            "more thrusters over more coupled modes than on the tetrahedron."
+        ),
+        version_history=_FREE_SPACE_V0,
+    ),
+    "TetherHub-v0": EnvDoc(
+        summary="A heavy hub satellite with lighter satellites on spokes around it, closed by a rim.",
+        description=(
+            "A heavy hub satellite with lighter satellites around it in the x-y plane, each tethered to the "
+            "hub and, through the rim, to its neighbours; free space, held by a bias thrust. The unequal "
+            "masses exercise the mass-aware critical-step estimate, and the light outer satellites move "
+            "much more than the hub for the same cable force."
+        ),
+        version_history=_FREE_SPACE_V0,
+    ),
+    "TetherRadialChain-v0": EnvDoc(
+        summary="Satellites on the local vertical of a circular orbit (Hill frame), held taut by the gravity gradient.",
+        description=(
+            "Satellites in a line along the local vertical of a circular low Earth orbit, simulated in the "
+            "Hill (Clohessy-Wiltshire) frame. The gravity gradient, not thrust, holds the cables taut: their "
+            "pretension is the tidal pull of everything outboard, so the bias thrust is zero to round-off. "
+            "That pull is weak, so the cables are barely taut and slack easily.\n\n"
+            "The id registers its own task settings (`tether_gym.registration.ORBITAL_TASK`, listed below): "
+            "weaker thrusters, gentler initial conditions and a longer control interval, matched to the "
+            "weak cables and the slow axial period. The cables damp only the axial modes (Kelvin-Voigt "
+            "damping; diagonal damping would destabilise motion in the Hill frame); the lateral modes, "
+            "far slower, are left to the controller."
+        ),
+        version_history=_TURNING_FRAME_V0,
+    ),
+    "TetherSpinningTriangle-v0": EnvDoc(
+        summary="An equilateral triangle spinning about its normal, seen in the rotating frame; spin holds it taut.",
+        description=(
+            "Three satellites in an equilateral triangle spinning about its normal (z), simulated in the "
+            "frame that spins with it. The centripetal load of the spin, not thrust, holds the cables taut: "
+            "their pretension is that load, so the bias thrust is zero to round-off, and the cables stay "
+            "taut more of the time than in free space.\n\n"
+            "The cables carry Kelvin-Voigt damping instead of the paper's diagonal damping, which would act "
+            "on velocities relative to the spinning frame. Coriolis and centrifugal forces couple the "
+            "in-plane modes."
+        ),
+        version_history=_TURNING_FRAME_V0,
+    ),
+    "TetherSpinningHub-v0": EnvDoc(
+        summary="A hub with satellites on a wheel around it, spinning about z, seen in the rotating frame.",
+        description=(
+            "A hub satellite with lighter satellites on a wheel around it, spinning about z and simulated in "
+            "the frame that spins with it. Spokes and rim share the centripetal load of the spin "
+            "(`rim_share`), which sets their pretensions, so the bias thrust is zero to round-off. The "
+            "cables carry Kelvin-Voigt damping, as in the other turning-frame ids."
+        ),
+        version_history=_TURNING_FRAME_V0,
+    ),
+}
 
 
 def register_envs() -> None:
