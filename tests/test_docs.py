@@ -1,0 +1,164 @@
+"""The README stays short and its links hold; the generated env pages and the README's table of
+ids agree with the registry. (The site's strict build, ``scripts/docs.sh``, checks every page's
+links and anchors; these tests need no MkDocs.)"""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from tether_gym.registration import ENV_DOCS, ENV_IDS
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+#: The README is the pitch, the set-up, three snippets, the ids, the headline results and links;
+#: everything else belongs on a page under docs/ (issue 13).
+MAX_README_LINES = 200
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
+
+
+def load_hook() -> ModuleType:
+    """docs/hooks/env_pages.py, the site's page generator, imported as a module."""
+    name = "tether_docs_env_pages"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, ROOT / "docs" / "hooks" / "env_pages.py")
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+def slug(heading: str) -> str:
+    """The anchor MkDocs (and GitHub) give a heading: lower case, punctuation dropped, spaces to '-'."""
+    text = re.sub(r"[`*]", "", heading).strip().lower()
+    text = re.sub(r"[^\w\s-]", "", text)
+    return re.sub(r"[\s]+", "-", text)
+
+
+def anchors(markdown: Path) -> set[str]:
+    return {slug(match) for match in re.findall(r"^#+ +(.+?)\s*$", markdown.read_text(encoding="utf-8"), re.MULTILINE)}
+
+
+def test_readme_is_short() -> None:
+    lines = README.read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= MAX_README_LINES, (
+        f"README.md has {len(lines)} lines (at most {MAX_README_LINES}): move the detail to a page under docs/ "
+        f"and link it"
+    )
+
+
+def test_readme_links_point_at_existing_files_and_headings() -> None:
+    text = README.read_text(encoding="utf-8")
+    links = [target for target in LINK.findall(text) if "://" not in target]
+    assert any(target.startswith("docs/") for target in links), "the README links no docs page"
+    for target in links:
+        path, _, anchor = target.partition("#")
+        file = ROOT / path if path else README
+        assert file.is_file(), f"README.md links {target!r}, but {path} does not exist"
+        # The site's home page is the README with docs/ stripped, so every link must stay inside docs/.
+        assert path.startswith("docs/"), f"README.md links {target!r} outside docs/: the site cannot follow it"
+        if anchor and file.suffix == ".md":
+            assert anchor in anchors(file), f"README.md links {target!r}, but {path} has no heading with that anchor"
+
+
+def test_readme_keeps_the_two_set_up_commands_and_ci_runs_them() -> None:
+    text = README.read_text(encoding="utf-8")
+    assert re.search(r"^bash scripts/main\.sh +# main job", text, re.MULTILINE)
+    assert re.search(r"^bash scripts/test\.sh +# the test suite", text, re.MULTILINE)
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
+    assert "bash scripts/test.sh" in ci and "bash scripts/docs.sh" in ci
+    assert ci.index("bash scripts/docs.sh") > ci.index("bash scripts/test.sh"), "CI builds the docs after the tests"
+
+
+def test_slug_matches_the_headings_linked_from_the_docs() -> None:
+    assert slug("The paper's traps") == "the-papers-traps"
+    assert slug("The model-predictive reference (`mpc`)") == "the-model-predictive-reference-mpc"
+    assert slug("Disturbances, faults and difficulty") == "disturbances-faults-and-difficulty"
+
+
+def test_readme_table_of_ids_matches_the_registry() -> None:
+    id_row = re.compile(
+        r"\| `(Tether\w+-v\d+)`[^|]*\| `(\w+)`[^|]*\| (\d+) \| (\d+) \| (\d+) (?:steps of|×) ([\d.]+) s \|"
+    )
+    table = {}
+    for line in README.read_text(encoding="utf-8").splitlines():
+        row = id_row.match(line)
+        if row:
+            env_id, preset, action, observation, steps, interval = row.groups()
+            table[env_id] = (preset, int(action), int(observation), int(steps), float(interval))
+    assert list(table) == list(ENV_IDS), "the README's table of ids must list every registered id, in order"
+    for env_id, preset, action, observation, steps, interval in load_hook().ids_table_rows():
+        assert table[env_id] == (preset, action, observation, steps, pytest.approx(interval)), env_id
+
+
+def test_every_id_has_documentation() -> None:
+    assert set(ENV_DOCS) == set(ENV_IDS)
+    for env_id, doc in ENV_DOCS.items():
+        assert doc.summary and doc.description and doc.version_history, env_id
+        # Numbers the code knows are rendered from it; a typed one could go stale.
+        assert not re.search(r"\d", doc.summary + doc.description), f"{env_id}: a number typed into its EnvDoc"
+
+
+@pytest.mark.parametrize("env_id", list(ENV_IDS))
+def test_generated_env_page_has_the_sections_of_a_gymnasium_env_page(env_id: str) -> None:
+    page = load_hook().env_page(env_id)
+    sections = re.findall(r"^## (.+)$", page, re.MULTILINE)
+    for section in (
+        "Description",
+        "Action Space",
+        "Observation Space",
+        "Rewards",
+        "Starting State",
+        "Episode End",
+        "Arguments",
+        "Version History",
+    ):
+        assert section in sections, f"{env_id}: no {section!r} section"
+    preset, steps, _ = ENV_IDS[env_id]
+    assert f"preset `{preset}`" in page and f"{steps} steps" in page
+
+
+def test_page_generator_refuses_a_docstring_without_its_sections() -> None:
+    hook = load_hook()
+
+    class Undocumented:
+        """## Description
+
+        Something.
+        """
+
+    with pytest.raises(hook.DocsBuildError, match="no section"):
+        hook.docstring_sections(Undocumented)
+
+
+def test_docstring_lists_and_roles_become_markdown() -> None:
+    hook = load_hook()
+    text = "Terms:\n- a :class:`~tether_gym.envs.EnvArgumentError` (N*s)\n  - nested"
+    assert hook.markdown_from_docstring(text) == "Terms:\n\n- a ``EnvArgumentError`` (N\\*s)\n    - nested\n"
+
+
+def test_pages_write_lists_as_the_site_renders_them() -> None:
+    """Python-Markdown (the site) needs a blank line before a list and nests by 4 spaces, where
+    GitHub also accepts none and 2: a page written for GitHub alone renders as run-on text."""
+    for page in [README, *sorted((ROOT / "docs").glob("*.md"))]:
+        lines = page.read_text(encoding="utf-8").splitlines()
+        fenced = False
+        for number, line in enumerate(lines, 1):
+            if line.lstrip().startswith("```"):
+                fenced = not fenced
+            item = re.match(r"^( *)[-*] ", line)
+            if fenced or not item:
+                continue
+            previous = lines[number - 2] if number > 1 else ""
+            indent = len(item.group(1))
+            assert indent % 4 == 0, f"{page.name}:{number}: a list nested by {indent} spaces (use 4)"
+            if indent == 0 and previous.strip():
+                assert re.match(r"^ *[-*] ", previous) or previous.startswith(" "), (
+                    f"{page.name}:{number}: a list right after a paragraph (leave a blank line before it)"
+                )
