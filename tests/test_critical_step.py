@@ -57,7 +57,7 @@ def test_estimate_never_exceeds_the_true_critical_step(seed: int, n: int, extra:
 
 
 def test_estimate_is_not_wastefully_small() -> None:
-    """Median estimate / truth over random clusters; the README quotes these ratios."""
+    """Median estimate / truth over random clusters; docs/verification.md quotes these ratios."""
     ratios_cf, ratios_fd = [], []
     for seed in range(200):
         cluster, x = random_cluster(seed, 2 + seed % 7, 0.4)
