@@ -11,9 +11,9 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import assert_unchanged, env_state
 
 import tether_gym as tg
+from helpers import assert_unchanged, env_state
 from tether_gym.envs import EnvArgumentError, TaskConfig, TetherClusterEnv, TetherClusterVectorEnv
 from tether_gym.envs.task import (
     CONTROL_INTERVAL_RANGE,

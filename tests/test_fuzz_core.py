@@ -336,7 +336,7 @@ def test_reset_accepts_or_names_the_argument_and_changes_nothing(positions: Any,
     except (ValueError, TypeError) as error:
         assert_names(error, "positions", "velocities", "indices", "zero-length cable")
         after = (batch.positions, batch.velocities, batch.intact, batch.time)
-        assert all(np.array_equal(a, b) for a, b in zip(before, after))
+        assert all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
         return
     assume(True)
     assert np.all(np.isfinite(batch.positions)) and np.all(np.isfinite(batch.tension))

@@ -55,7 +55,7 @@ def worst_error(problem: dict, **step_options: float) -> tuple[float, int]:
     sim = tg.Simulator(problem["cluster"], **step_options)
     sim.reset(problem["x0"], problem["v0"])
     worst, slack_changes, was_slack = 0.0, 0, sim.slack.copy()
-    for k, x_ref in enumerate(problem["reference"]):
+    for x_ref in problem["reference"]:
         sim.advance(INTERVAL, problem["bias"])
         worst = max(worst, float(np.abs(sim.positions - x_ref).max()))
         slack_changes += int((sim.slack != was_slack).sum())

@@ -64,7 +64,7 @@ def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_p
     assert sorted(entry["seed"] for entry in table["runs"]) == [0, 1, 2]
     bar = records[0]["bar"]
     assert bar == max(records[0]["baselines"], key=records[0]["baselines"].get)
-    for record, run in zip(records, runs):
+    for record, run in zip(records, runs, strict=True):
         assert record["difference"] == pytest.approx(record["mean_return"] - record["bar_mean_return"], abs=1e-9)
         assert (
             record["wall_time_s"] > 0 and record["timesteps"] == TrainedPolicy(run / "best").metadata["num_timesteps"]
