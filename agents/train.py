@@ -387,7 +387,7 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
             checked[key] = _check_run_key(algo, key, value, where)
         elif key == "policy_kwargs":
             checked[key] = _check_policy_kwargs(value, cls.policy_aliases[policy], where)
-        elif key in SCHEDULE_KEYS or key in parameters:
+        elif key in parameters:
             checked[key] = _check_algorithm_key(algo, key, value, parameters, where)
         else:
             raise _unknown_key(key, accepted, where, f"{algo} (with agents.train)")

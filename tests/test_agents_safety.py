@@ -604,6 +604,15 @@ def test_hyperparameter_errors_name_the_key(tmp_path: Path, text: str, message: 
     assert not (tmp_path / "runs").exists()  # refused before anything was written
 
 
+def test_ppo_schedules_are_unknown_keys_for_sac_and_td3() -> None:
+    """SAC and TD3 take no clip_range: accepting it would fail later, inside SB3's constructor."""
+    for algo in ("sac", "td3"):
+        for key in ("clip_range", "clip_range_vf"):
+            with pytest.raises(HyperparameterError, match=f"unknown key '{key}'; {algo}"):
+                agents.train.validate_hyperparameters(algo, {"n_timesteps": 100, key: 0.2})
+    assert agents.train.validate_hyperparameters("ppo", {"n_timesteps": 100, "clip_range": 0.2})["clip_range"] == 0.2
+
+
 def test_hyperparameter_file_that_is_not_utf8(tmp_path: Path) -> None:
     file = tmp_path / "ppo.yml"
     file.write_bytes(b"default: {n_timesteps: \xff}")
