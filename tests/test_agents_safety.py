@@ -509,6 +509,7 @@ TINY = dict(
 )
 
 
+@pytest.mark.slow
 def test_train_refuses_to_overwrite_a_run_without_force(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     run = train("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=128, **TINY)
     assert sorted(p.name for p in (run / "checkpoints").iterdir()) == ["ppo_128_steps", "ppo_256_steps"]
@@ -530,6 +531,7 @@ def test_train_refuses_to_overwrite_a_run_without_force(tmp_path: Path, monkeypa
         train("ppo", ENV, seed=3, out=tmp_path, force=True, **TINY)
 
 
+@pytest.mark.slow
 def test_train_resumes_from_its_own_directory_with_force(tmp_path: Path) -> None:
     run = train("ppo", ENV, seed=0, out=tmp_path, checkpoint_freq=128, **TINY)
     checkpoint = run / "checkpoints" / "ppo_128_steps"
@@ -540,6 +542,7 @@ def test_train_resumes_from_its_own_directory_with_force(tmp_path: Path) -> None
     assert checkpoint.is_dir() and not (run / "checkpoints" / "ppo_256_steps").exists()
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_checkpoint_that_does_not_fit(tmp_path: Path) -> None:
     run = train("ppo", ENV, seed=0, out=tmp_path / "a", checkpoint_freq=10_000, **TINY)
     overrides = {**TINY["overrides"], "policy_kwargs": {"net_arch": [16], "activation_fn": "relu"}}

@@ -26,6 +26,9 @@ from hypothesis import strategies as st
 import tether_gym as tg
 from tether_gym import Cluster, ClusterError, SimulationDiverged
 
+#: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
+pytestmark = pytest.mark.slow
+
 FUZZ = settings(
     max_examples=150,
     deadline=None,

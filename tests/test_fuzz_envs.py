@@ -35,6 +35,9 @@ from tether_gym.envs import END_REASONS, TaskConfig, TetherClusterEnv
 from tether_gym.envs.task import RANDOMISABLE
 from tether_gym.sb3 import make_sb3_vec_env
 
+#: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
+pytestmark = pytest.mark.slow
+
 
 def fuzz(examples: int) -> settings:
     """Settings of one property: ``examples`` examples (times ``TETHER_GYM_FUZZ_SCALE``, 1 in CI;

@@ -8,6 +8,9 @@ from pathlib import Path
 
 import pytest
 
+#: Each runs a whole script in a fresh interpreter (figures, videos, benchmarks): minutes in all.
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
