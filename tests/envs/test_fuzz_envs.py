@@ -30,7 +30,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import tether_gym as tg
-from helpers import assert_unchanged, env_state
+from tests.helpers import assert_unchanged, env_state
 from tether_gym.envs import END_REASONS, TaskConfig, TetherClusterEnv
 from tether_gym.envs.task import RANDOMISABLE
 from tether_gym.sb3 import make_sb3_vec_env

@@ -10,7 +10,7 @@ import pytest
 from agents.evaluate import rollout
 from agents.mpc import MPCController, MPCSettings, load_mpc_settings
 from agents.policies import make_controller
-from helpers import assert_unchanged, env_state
+from tests.helpers import assert_unchanged, env_state
 from tether_gym.registration import ENV_IDS
 
 #: Small enough for CI: 8 candidates over 5 steps, around velocity feedback.

@@ -11,7 +11,7 @@ import pytest
 #: Each runs a whole script in a fresh interpreter (figures, videos, benchmarks): minutes in all.
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run(script: str, *args: str) -> str:

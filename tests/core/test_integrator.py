@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tether_gym as tg
-from helpers import pair, reference_internal_forces, separation
+from tests.helpers import pair, reference_internal_forces, separation
 
 
 def tetrahedron_ics(cluster: tg.Cluster, rng: np.random.Generator, amplitude: float, speed: float):

@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import tether_gym as tg
-from helpers import reference_internal_forces
+from tests.helpers import reference_internal_forces
 
 DURATION = 5.0
 INTERVAL = 0.02  # fine enough to see the short taut phases of a bouncing cluster
