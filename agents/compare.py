@@ -126,7 +126,7 @@ def compare(
     seeds = list(range(seed, seed + episodes))
     print(f"{env_id}: {len(names)} controllers x {episodes} episodes (seeds {seed}..{seed + episodes - 1})")
     records = []
-    for name, policy in zip(names, policies):
+    for name, policy in zip(names, policies, strict=True):
         label = getattr(policy, "name", name) if name in BASELINES else name
         records.append(
             rollout(
@@ -163,7 +163,7 @@ def markdown_table(records: list[EpisodeRecord], summaries: list[dict[str, Any]]
     """The comparison as a Markdown table, one row per controller."""
     headers = ["controller"] + [f"{title} ({unit})" if unit else title for _, title, unit in METRICS]
     lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    for record, summary in zip(records, summaries):
+    for record, summary in zip(records, summaries, strict=True):
         lines.append("| " + " | ".join([record.name] + [summary["cells"][key] for key, _, _ in METRICS]) + " |")
     return "\n".join(lines)
 
@@ -174,7 +174,7 @@ def write_csv(path: Path, records: list[EpisodeRecord], summaries: list[dict[str
     stream = io.StringIO(newline="")
     writer = csv.writer(stream)
     writer.writerow(["controller"] + keys)
-    for record, summary in zip(records, summaries):
+    for record, summary in zip(records, summaries, strict=True):
         writer.writerow([record.name] + [summary["values"][key] for key in keys])
     atomic_write_text(path, stream.getvalue())
 

@@ -112,29 +112,21 @@ def rollout(
         # the observation, which same-step autoreset replaces: read that from final_obs.
         observation, reward, term, trunc, infos = envs.step(actions)
         done = term | trunc
-        final_info = infos.get("final_info", {})
-
-        def stepped(key: str) -> np.ndarray:
-            """The info ``key`` of the state each sub-env stepped into (from final_info where it
-            ended and was reset)."""
-            new, old = np.asarray(infos.get(key, 0.0)), np.asarray(final_info.get(key, 0.0))
-            return np.where(done.reshape((-1,) + (1,) * (max(new.ndim, old.ndim) - 1)), old, new)
-
-        state_energy = stepped("vibration_energy")
+        state_energy = stepped_info(infos, done, "vibration_energy")
         rows = np.flatnonzero(alive)
         energy[rows, k + 1] = state_energy[rows]
         deviation = task_deviation(infos, observation, dev_index, task.length_scale)
         displacement[rows, k + 1] = deviation[rows]
         rewards[rows, k] = reward[rows]
-        slack_count = stepped("slack_count")
+        slack_count = stepped_info(infos, done, "slack_count")
         slack[rows, k] = slack_count[rows] > 0
-        tension = stepped("peak_tension")
+        tension = stepped_info(infos, done, "peak_tension")
         peak[rows] = np.maximum(peak[rows], tension[rows].max(axis=1))
-        used = stepped("propellant_used")
+        used = stepped_info(infos, done, "propellant_used")
         propellant[rows] = used[rows]
         ended = alive & done
         if ended.any():
-            reasons = final_info["end_reason"]
+            reasons = infos["final_info"]["end_reason"]
             for e in np.flatnonzero(ended):
                 terminated[e] = bool(term[e])
                 end_step[e] = k + 1
@@ -160,6 +152,14 @@ def rollout(
         saturation=float(getattr(controller, "saturation_fraction", 0.0)),
         seeds=seeds,
     )
+
+
+def stepped_info(infos: dict[str, Any], done: np.ndarray, key: str) -> np.ndarray:
+    """The info ``key`` of the state each sub-env stepped into: from ``infos["final_info"]`` where
+    the sub-env ended (``done``, (E,) bool) and was reset in the same step, else from ``infos``."""
+    final_info = infos.get("final_info", {})
+    new, old = np.asarray(infos.get(key, 0.0)), np.asarray(final_info.get(key, 0.0))
+    return np.where(done.reshape((-1,) + (1,) * (max(new.ndim, old.ndim) - 1)), old, new)
 
 
 def task_deviation(infos: dict[str, Any], observation: np.ndarray, index: slice, length_scale: float) -> np.ndarray:

@@ -950,8 +950,13 @@ def _restore_optimizer(
     if not isinstance(saved, dict) or not isinstance(saved.get("param_groups"), list):
         raise PolicyFormatError(f"{where}: optimizer {name!r} must have param_groups")
     current_groups = optimizer.state_dict()["param_groups"]
+    if len(saved["param_groups"]) != len(current_groups):
+        raise PolicyFormatError(
+            f"{where}: optimizer {name!r} has {len(saved['param_groups'])} param groups; "
+            f"this model's optimizer has {len(current_groups)}"
+        )
     groups = []
-    for group, current in zip(saved["param_groups"], current_groups):
+    for group, current in zip(saved["param_groups"], current_groups, strict=True):
         if not isinstance(group, dict):
             raise PolicyFormatError(f"{where}: optimizer {name!r} has a malformed param group")
         # JSON has no tuples; give back tuples where the optimizer uses them (Adam's betas).

@@ -177,9 +177,10 @@ def _markdown(entries: list[dict[str, Any]]) -> str:
             "mean return beat that baseline's (— never). Made by `python -m agents.ship`."
         ),
         "",
-        "| id | algo | seed | steps | wall time | mean return | best baseline | Δ vs best baseline | beat velocity feedback | beat best baseline | shipped |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    columns = ["id", "algo", "seed", "steps", "wall time", "mean return", "best baseline", "Δ vs best baseline"]
+    columns += ["beat velocity feedback", "beat best baseline", "shipped"]
+    lines += ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
 
     def beat(entry: dict[str, Any], name: str) -> str:
         found = (entry.get("first_beat") or {}).get(name)
@@ -187,12 +188,14 @@ def _markdown(entries: list[dict[str, Any]]) -> str:
 
     for entry in sorted(entries, key=lambda e: (e["env_id"], e["algo"], str(e["seed"]))):
         wall = "?" if entry["wall_time_s"] is None else f"{entry['wall_time_s'] / 60:.1f} min"
+        algo = entry["algo"] + (f" (residual on {entry['residual_on']})" if entry["residual_on"] else "")
+        shipped = "**yes**" if entry["shipped"] else ""
         lines.append(
-            f"| {entry['env_id']} | {entry['algo']}{' (residual on ' + entry['residual_on'] + ')' if entry['residual_on'] else ''} "
+            f"| {entry['env_id']} | {algo} "
             f"| {entry['seed']} | {entry['timesteps'] / 1e6:.2f} M | {wall} | {entry['mean_return']:.2f} "
             f"| {entry['bar']} {entry['bar_mean_return']:.2f} "
             f"| {entry['difference']:+.2f} [{entry['difference_low']:+.2f}, {entry['difference_high']:+.2f}] "
-            f"| {beat(entry, 'velocity_feedback')} | {beat(entry, entry['bar'])} | {'**yes**' if entry['shipped'] else ''} |"
+            f"| {beat(entry, 'velocity_feedback')} | {beat(entry, entry['bar'])} | {shipped} |"
         )
     lines += [
         "",
@@ -231,11 +234,7 @@ def ship(
     shipped_at = str(out)
     out = prepare_output_dir(out, argument="--out")
     candidates = evaluate_candidates(runs, episodes)
-    chosen: dict[tuple[str, str], dict[str, Any]] = {}
-    for candidate in candidates:
-        key = (candidate["env_id"], candidate["algo"])
-        if key not in chosen or candidate["mean_return"] > chosen[key]["mean_return"]:
-            chosen[key] = candidate
+    chosen = _best_per_id_and_algo(candidates)
     for (env_id, algo), candidate in chosen.items():
         target = out / env_id / algo
         if (target / METADATA_FILE).exists() and not force and Path(candidate["policy"]).resolve() != target.resolve():
@@ -245,35 +244,8 @@ def ship(
         if candidate["shipped"]:
             candidate["reproduce"] = reproduce_command(candidate, shipped_at)
     for (env_id, algo), candidate in chosen.items():
-        target, source = out / env_id / algo, Path(candidate["policy"])
-        if source.resolve() == target.resolve():
-            continue
-        staging = out / env_id / f".{algo}.staging"
-        shutil.rmtree(staging, ignore_errors=True)
-        staging.mkdir(parents=True)
-        for name in SHIPPED_FILES:
-            if (source / name).is_file():
-                shutil.copy2(source / name, staging / name)
-        run = Path(candidate["run"])
-        for name, origin in (("config.yml", run / "config.yml"), (EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE)):
-            if origin.is_file():
-                shutil.copy2(origin, staging / name)
-        try:
-            write_manifest(staging, [p.name for p in staging.iterdir()])  # loading inside agents/models needs it
-            _write_reference_actions(staging, env_id)
-            write_manifest(staging, [p.name for p in staging.iterdir()])
-        except BaseException:
-            shutil.rmtree(staging, ignore_errors=True)
-            raise
-        if target.exists():
-            shutil.rmtree(target)
-        staging.rename(target)
-    table = out / f"{RUNS_TABLE}.json"
-    earlier = json.loads(table.read_text(encoding="utf-8"))["runs"] if table.is_file() else []
-    replaced = {(c["env_id"], c["algo"]) for c in candidates}
-    entries = [e for e in earlier if (e["env_id"], e["algo"]) not in replaced] + candidates
-    atomic_write_text(table, json.dumps({"command": command, "runs": entries}, indent=1) + "\n")
-    atomic_write_text(out / f"{RUNS_TABLE}.md", _markdown(entries))
+        _install(candidate, out / env_id / algo, env_id)
+    _write_runs_table(out, candidates, command)
     for candidate in candidates:
         print(
             f"{candidate['env_id']} {candidate['algo']} seed {candidate['seed']}: {candidate['mean_return']:.2f} "
@@ -281,6 +253,56 @@ def ship(
             f"{candidate['difference_high']:+.2f}]){'  <- shipped' if candidate['shipped'] else ''}"
         )
     return candidates
+
+
+def _best_per_id_and_algo(candidates: Sequence[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
+    """The candidate with the highest mean return for each (env id, algorithm); the first on ties."""
+    chosen: dict[tuple[str, str], dict[str, Any]] = {}
+    for candidate in candidates:
+        key = (candidate["env_id"], candidate["algo"])
+        if key not in chosen or candidate["mean_return"] > chosen[key]["mean_return"]:
+            chosen[key] = candidate
+    return chosen
+
+
+def _install(candidate: Mapping[str, Any], target: Path, env_id: str) -> None:
+    """Copy ``candidate``'s policy, its run's ``config.yml`` and evaluations, reference actions of
+    ``env_id`` and a checksum manifest into ``target``. Staged beside it and renamed at the end, so a
+    failure leaves the earlier shipped model in place; nothing happens when the candidate is ``target``."""
+    source = Path(candidate["policy"])
+    if source.resolve() == target.resolve():
+        return
+    staging = target.parent / f".{target.name}.staging"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir(parents=True)
+    for name in SHIPPED_FILES:
+        if (source / name).is_file():
+            shutil.copy2(source / name, staging / name)
+    run = Path(candidate["run"])
+    for name, origin in (("config.yml", run / "config.yml"), (EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE)):
+        if origin.is_file():
+            shutil.copy2(origin, staging / name)
+    try:
+        write_manifest(staging, [p.name for p in staging.iterdir()])  # loading inside agents/models needs it
+        _write_reference_actions(staging, env_id)
+        write_manifest(staging, [p.name for p in staging.iterdir()])
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    if target.exists():
+        shutil.rmtree(target)
+    staging.rename(target)
+
+
+def _write_runs_table(out: Path, candidates: Sequence[dict[str, Any]], command: str | None) -> None:
+    """Merge ``candidates`` into the runs table in ``out`` (JSON and Markdown): they replace the
+    earlier entries of every (env id, algorithm) they cover."""
+    table = out / f"{RUNS_TABLE}.json"
+    earlier = json.loads(table.read_text(encoding="utf-8"))["runs"] if table.is_file() else []
+    replaced = {(c["env_id"], c["algo"]) for c in candidates}
+    entries = [e for e in earlier if (e["env_id"], e["algo"]) not in replaced] + list(candidates)
+    atomic_write_text(table, json.dumps({"command": command, "runs": entries}, indent=1) + "\n")
+    atomic_write_text(out / f"{RUNS_TABLE}.md", _markdown(entries))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -230,47 +230,69 @@ def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
         raise HyperparameterError(f"{label} is empty; give it a value or remove the key")
     if not kinds - {type(None)}:
         raise HyperparameterError(f"{label} cannot be set from a YAML file (it takes a Python object)")
+    if isinstance(value, (bool, int, float, str)):
+        return _check_scalar(label, value, kinds)
+    if isinstance(value, list) and tuple in kinds:
+        return _check_frequency(label, value)
+    if isinstance(value, dict) and dict in kinds:
+        return _check_mapping(key, value, where)
+    raise _mismatch(label, value, kinds)
+
+
+def _mismatch(label: str, value: Any, kinds: set[Any]) -> HyperparameterError:
+    return HyperparameterError(f"{label} must be {_describe(kinds)}; got {value!r} ({type(value).__name__})")
+
+
+def _check_scalar(label: str, value: bool | int | float | str, kinds: set[Any]) -> Any:
+    """A YAML scalar checked against the annotation's alternatives ``kinds`` (see :func:`_plain`):
+    ints become floats where only a float is expected, integral floats ints where only an int is."""
     if isinstance(value, bool):
         if bool in kinds:
             return value
         raise HyperparameterError(f"{label} must be {_describe(kinds)}, not {str(value).lower()}")
+    if isinstance(value, str):
+        if str in kinds:
+            return value
+        raise HyperparameterError(
+            f"{label} must be {_describe(kinds)}; got the text {value!r}{_number_text_hint(value)}"
+        )
     if isinstance(value, int):
         if int in kinds:
             return value
         if float in kinds:
             return float(value)
-    elif isinstance(value, float):
+    else:
         if float in kinds:
             return value
         if int in kinds:
             if value.is_integer():
                 return int(value)
             raise HyperparameterError(f"{label} must be an integer; got {value!r}")
-    elif isinstance(value, str):
-        if str in kinds:
-            return value
-        raise HyperparameterError(
-            f"{label} must be {_describe(kinds)}; got the text {value!r}{_number_text_hint(value)}"
-        )
-    elif isinstance(value, list) and tuple in kinds:
-        if (
-            len(value) == 2
-            and isinstance(value[0], int)
-            and not isinstance(value[0], bool)
-            and value[1] in ("step", "episode")
-        ):
-            return (value[0], value[1])
-        raise HyperparameterError(f"{label} must be an integer or [integer, 'step' or 'episode']; got {value!r}")
-    elif isinstance(value, dict) and dict in kinds:
-        if not all(isinstance(name, str) for name in value):
-            raise HyperparameterError(f"{label} must have string keys; got {list(value)}")
-        for name, entry in value.items():
-            if isinstance(entry, str) and _number_text_hint(entry):
-                raise HyperparameterError(
-                    f"{where}: '{key}.{name}' is the text {entry!r}, not a number{_number_text_hint(entry)}"
-                )
-        return value
-    raise HyperparameterError(f"{label} must be {_describe(kinds)}; got {value!r} ({type(value).__name__})")
+    raise _mismatch(label, value, kinds)
+
+
+def _check_frequency(label: str, value: list[Any]) -> tuple[int, str]:
+    """A YAML list given for a ``tuple[int, str]`` (SB3's ``train_freq``): [integer, 'step' or 'episode']."""
+    if (
+        len(value) == 2
+        and isinstance(value[0], int)
+        and not isinstance(value[0], bool)
+        and value[1] in ("step", "episode")
+    ):
+        return (value[0], value[1])
+    raise HyperparameterError(f"{label} must be an integer or [integer, 'step' or 'episode']; got {value!r}")
+
+
+def _check_mapping(key: str, value: dict[Any, Any], where: str) -> dict[Any, Any]:
+    """A YAML mapping given for a dict: text keys, and no number written as text among its values."""
+    if not all(isinstance(name, str) for name in value):
+        raise HyperparameterError(f"{where}: {key!r} must have string keys; got {list(value)}")
+    for name, entry in value.items():
+        if isinstance(entry, str) and _number_text_hint(entry):
+            raise HyperparameterError(
+                f"{where}: '{key}.{name}' is the text {entry!r}, not a number{_number_text_hint(entry)}"
+            )
+    return value
 
 
 def _describe(kinds: set[Any]) -> str:
@@ -361,52 +383,63 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
             raise HyperparameterError(
                 f"{where}: {key!r} cannot be set in a hyperparameter file: {CONTROLLED_KEYS[key]}"
             )
-        if key == "n_timesteps":
-            checked[key] = _check_value(key, value, int, where)
-        elif key == "n_envs":
-            checked[key] = _check_value(key, value, int, where)
-        elif key == "policy":
-            checked[key] = value
-        elif key == "normalize":
-            checked[key] = _check_normalize(value, where)
-        elif key == "env_kwargs":
-            checked[key] = _check_value(key, value, dict | None, where)
-        elif key == "curriculum":
-            checked[key] = _check_curriculum(value, where)
-        elif key == "action_noise_std":
-            if algo == "ppo":
-                raise HyperparameterError(
-                    f"{where}: 'action_noise_std' is for sac and td3; PPO explores with "
-                    "its own policy noise (policy_kwargs.log_std_init)"
-                )
-            checked[key] = _check_value(key, value, float, where)
-        elif key == "residual_on":
-            try:
-                checked[key] = check_residual_on(value, f"{where}: 'residual_on'")
-            except ValueError as error:
-                raise HyperparameterError(str(error)) from None
+        if key in RUN_KEYS:
+            checked[key] = _check_run_key(algo, key, value, where)
         elif key == "policy_kwargs":
             checked[key] = _check_policy_kwargs(value, cls.policy_aliases[policy], where)
-        elif key in SCHEDULE_KEYS:
-            if value is None and key == "clip_range_vf":
-                checked[key] = None
-            else:
-                _schedule(value, key, where)
-                checked[key] = value
         elif key in parameters:
-            if key in ("ent_coef", "target_entropy") and isinstance(value, str) and algo == "sac":
-                if not (value == "auto" or key == "ent_coef" and value.startswith("auto_") and _is_number(value[5:])):
-                    raise HyperparameterError(
-                        f"{where}: {key!r} must be a number or 'auto'"
-                        f"{' or auto_<number>' if key == 'ent_coef' else ''}; got {value!r}"
-                    )
-                checked[key] = value
-            else:
-                checked[key] = _check_value(key, value, parameters[key].annotation, where)
+            checked[key] = _check_algorithm_key(algo, key, value, parameters, where)
         else:
             raise _unknown_key(key, accepted, where, f"{algo} (with agents.train)")
         _check_range(key, checked[key], where)
     return checked
+
+
+def _check_run_key(algo: str, key: str, value: Any, where: str) -> Any:
+    """One of :data:`RUN_KEYS` (what agents.train itself reads, not the algorithm) checked and converted."""
+    if key in ("n_timesteps", "n_envs"):
+        return _check_value(key, value, int, where)
+    if key == "policy":
+        return value  # validate_hyperparameters checked it against the algorithm's policies
+    if key == "normalize":
+        return _check_normalize(value, where)
+    if key == "env_kwargs":
+        return _check_value(key, value, dict | None, where)
+    if key == "curriculum":
+        return _check_curriculum(value, where)
+    if key == "action_noise_std":
+        if algo == "ppo":
+            raise HyperparameterError(
+                f"{where}: 'action_noise_std' is for sac and td3; PPO explores with "
+                "its own policy noise (policy_kwargs.log_std_init)"
+            )
+        return _check_value(key, value, float, where)
+    if key == "residual_on":
+        try:
+            return check_residual_on(value, f"{where}: 'residual_on'")
+        except ValueError as error:
+            raise HyperparameterError(str(error)) from None
+    raise AssertionError(f"RUN_KEYS has {key!r}, which _check_run_key does not handle")
+
+
+def _check_algorithm_key(
+    algo: str, key: str, value: Any, parameters: Mapping[str, inspect.Parameter], where: str
+) -> Any:
+    """A constructor argument of ``algo`` (``parameters``: its keyword parameters) checked against
+    its annotation, or a learning-rate style schedule (see :func:`_schedule`)."""
+    if key in SCHEDULE_KEYS:
+        if value is None and key == "clip_range_vf":
+            return None
+        _schedule(value, key, where)
+        return value
+    if key in ("ent_coef", "target_entropy") and isinstance(value, str) and algo == "sac":
+        if not (value == "auto" or key == "ent_coef" and value.startswith("auto_") and _is_number(value[5:])):
+            raise HyperparameterError(
+                f"{where}: {key!r} must be a number or 'auto'"
+                f"{' or auto_<number>' if key == 'ent_coef' else ''}; got {value!r}"
+            )
+        return value
+    return _check_value(key, value, parameters[key].annotation, where)
 
 
 def _is_number(text: str) -> bool:

@@ -139,7 +139,6 @@ def measure_throughput(
     sim.reset(x0)
     calls = max(1, round(duration / CONTROL_INTERVAL))
     counted: dict[str, int] = {}
-    slack: dict[str, list[float]] = {"long": [], "control": []}
 
     def reset() -> None:
         sim.reset(x0)

@@ -274,7 +274,8 @@ def save_plot(results: list[DriftResult], tolerance: float, short_horizon: float
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
-    for colour, preset in zip(("C0", "C1", "C2", "C3", "C4"), dict.fromkeys(r.preset for r in results)):
+    for index, preset in enumerate(dict.fromkeys(r.preset for r in results)):
+        colour = f"C{index}"  # matplotlib's default colour cycle
         rows = [r for r in results if r.preset == preset]
         factors = [r.factor for r in rows]
         cap = 1e9  # diverged (infinite) runs are drawn at this height

@@ -116,14 +116,16 @@ def evaluate(clusters: list[tg.Cluster], positions: np.ndarray) -> dict[str, np.
     batch = tg.BatchSimulator(clusters)
     batch.reset(positions)
     result: dict[str, np.ndarray] = {
-        "true": np.array([2.0 / max_frequency(c, x, taut_branch=True) for c, x in zip(clusters, positions)]),
+        "true": np.array(
+            [2.0 / max_frequency(c, x, taut_branch=True) for c, x in zip(clusters, positions, strict=True)]
+        ),
         "closed-form": batch.critical_time_step("closed-form"),
         "finite-difference": batch.critical_time_step("finite-difference"),
         "slack": batch.slack.sum(axis=1),
         "all_slack": batch.slack.all(axis=1),
         "mass_ratio": np.array([c.masses.max() / c.masses.min() for c in clusters]),
     }
-    unsafe = [unsafe_steps(c, x) for c, x in zip(clusters, positions)]
+    unsafe = [unsafe_steps(c, x) for c, x in zip(clusters, positions, strict=True)]
     for name in UNSAFE_METHODS:
         result[name] = np.array([u[name] for u in unsafe])
     return result
@@ -214,11 +216,11 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: Path, cases: int) -> N
     ratios = [merged[name] / true for name in names]
     right.axhspan(1.0, 100.0, color="tab:red", alpha=0.07, linewidth=0)
     boxes = right.boxplot(ratios, whis=(0, 100), widths=0.55, patch_artist=True, medianprops=dict(color="black"))
-    for patch, name in zip(boxes["boxes"], names):
+    for patch, name in zip(boxes["boxes"], names, strict=True):
         patch.set_facecolor(STYLE[name]["color"])
         patch.set_alpha(0.55)
     jitter = np.random.default_rng(0)
-    for position, (name, ratio) in enumerate(zip(names, ratios), start=1):
+    for position, (name, ratio) in enumerate(zip(names, ratios, strict=True), start=1):
         right.scatter(
             position + jitter.uniform(-0.18, 0.18, ratio.size),
             ratio,
@@ -292,7 +294,8 @@ def main(argv: list[str] | None = None) -> None:
     print(f"{'preset':<12} {'cables':>7} {'ratio':>9}" + " | min    median max    unsafe" * len(SHORT))
     for name, r in results.items():
         slack = r["slack"]
-        line = f"{name:<12} {f'{slack.min()}-{slack.max()}':>7} {'1:%.0f' % r['mass_ratio'].max():>9}"
+        cables, ratio = f"{slack.min()}-{slack.max()}", f"1:{r['mass_ratio'].max():.0f}"
+        line = f"{name:<12} {cables:>7} {ratio:>9}"
         line += "".join(f" | {ratio_stats(r[key] / r['true'])}" for key in SHORT)
         print(line)
 

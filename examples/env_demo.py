@@ -195,7 +195,7 @@ def plot_energy(results: dict[str, list[Episode]], dt: float, path: Path) -> Non
         label, colour = CONTROLLERS[name]
         energy = np.array([e.energy for e in episodes])
         t = dt * np.arange(energy.shape[1])
-        for ax, values in zip(axes, (energy, energy / energy[:, :1])):
+        for ax, values in zip(axes, (energy, energy / energy[:, :1]), strict=True):
             # Episodes that failed are NaN after their end: the band covers the ones still running.
             with np.errstate(all="ignore"):
                 median = np.nanmedian(values, axis=0)
@@ -274,12 +274,12 @@ def render_frames(seed: int, steps: int, names: tuple[str, ...] = ("zero", "feed
     else:
         episodes = [render_episode(name, seed, steps) for name in names]
     panels = []
-    for name, (pictures, captions) in zip(names, episodes):
+    for name, (pictures, captions) in zip(names, episodes, strict=True):
         cropped = crop_margins([Image.fromarray(picture) for picture in pictures])
         title = CONTROLLERS[name][0]
-        panels.append([_labelled(picture, title, caption) for picture, caption in zip(cropped, captions)])
+        panels.append([_labelled(picture, title, caption) for picture, caption in zip(cropped, captions, strict=True)])
     frames = []
-    for row in zip(*panels):
+    for row in zip(*panels, strict=True):
         frame = Image.new("RGB", (sum(p.width for p in row), max(p.height for p in row)), "white")
         x = 0
         for panel in row:

@@ -110,7 +110,7 @@ def rigid_free_initial_conditions(
     centre = np.average(x0, axis=0, weights=masses)
     r = x0 - centre
     angular_momentum = np.sum(masses[:, None] * np.cross(r, v), axis=0)
-    inertia = sum(m * (r_i @ r_i * np.eye(3) - np.outer(r_i, r_i)) for m, r_i in zip(masses, r))
+    inertia = sum(m * (r_i @ r_i * np.eye(3) - np.outer(r_i, r_i)) for m, r_i in zip(masses, r, strict=True))
     spin = np.linalg.solve(inertia, angular_momentum)
     v -= np.cross(spin, r)
     return x0, v
@@ -351,8 +351,8 @@ def vibration_energy(run: Run) -> np.ndarray:
     """(K+1,) energy above the held equilibrium, J: kinetic + strain + bias potential - nominal strain.
 
     The bias potential is ``-p . (x - x_nominal)``: minus the work done by the bias force since the
-    start, minus ``p . u0`` for the initial displacement ``u0``; the strain energy of the pretensioned nominal shape is subtracted so that rest at the nominal
-    shape has zero vibration energy.
+    start, minus ``p . u0`` for the initial displacement ``u0``; the strain energy of the pretensioned
+    nominal shape is subtracted so that rest at the nominal shape has zero vibration energy.
     """
     bias_potential = -np.sum(run.bias * run.displacement[0]) - run.work
     return run.kinetic + run.strain + bias_potential - run.nominal_strain

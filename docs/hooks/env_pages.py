@@ -10,7 +10,7 @@
 * The home page: ``README.md``, with its ``docs/`` links made relative to the site, in place of
   the placeholder ``docs/index.md``.
 
-``tests/test_docs.py`` imports this file too (``ids_table_rows``). Anything the hook expects
+``tests/docs/test_docs.py`` imports this file too (``ids_table_rows``). Anything the hook expects
 from the code and does not find (a docstring section, a setting, an id without its ``EnvDoc``)
 raises an error that says what to update, so the strict build fails instead of printing a
 wrong page.

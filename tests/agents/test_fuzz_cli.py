@@ -18,6 +18,9 @@ from hypothesis import strategies as st
 
 from agents import benchmark, compare, convert, train
 
+#: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
+pytestmark = pytest.mark.slow
+
 PARSERS = {
     "compare": compare.build_parser,
     "train": train.build_parser,

@@ -1,7 +1,7 @@
 """Bad arguments at the environment layer: every class of them gets a clear error naming the
 argument, a refused update changes nothing, and a runaway step ends with a finite reward.
 
-The property-based counterpart, over random inputs, is tests/test_fuzz_envs.py.
+The property-based counterpart, over random inputs, is tests/envs/test_fuzz_envs.py.
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import assert_unchanged, env_state
 
 import tether_gym as tg
+from tests.helpers import assert_unchanged, env_state
 from tether_gym.envs import EnvArgumentError, TaskConfig, TetherClusterEnv, TetherClusterVectorEnv
 from tether_gym.envs.task import (
     CONTROL_INTERVAL_RANGE,

@@ -25,15 +25,18 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import assert_unchanged, env_state
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import tether_gym as tg
+from tests.helpers import assert_unchanged, env_state
 from tether_gym.envs import END_REASONS, TaskConfig, TetherClusterEnv
 from tether_gym.envs.task import RANDOMISABLE
 from tether_gym.sb3 import make_sb3_vec_env
+
+#: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
+pytestmark = pytest.mark.slow
 
 
 def fuzz(examples: int) -> settings:
@@ -270,10 +273,13 @@ def make_and_roll_out(env_id: str, kwargs: dict, data: st.DataObject) -> None:
 )
 def test_make_with_any_preset_arguments(env_id: str, preset_kwargs: Any, extra: dict, data: st.DataObject) -> None:
     kwargs = dict(extra, preset_kwargs=preset_kwargs)
-    if kwargs.get("render_mode") in (None, "rgb_array"):
-        make = lambda: gym.make(env_id, **kwargs)
-    else:  # gym.make itself warns about, or trips over, a render mode the env does not list
-        make = lambda: TetherClusterEnv(**{**gym.spec(env_id).kwargs, **kwargs})
+
+    def make() -> gym.Env:
+        if kwargs.get("render_mode") in (None, "rgb_array"):
+            return gym.make(env_id, **kwargs)
+        # gym.make itself warns about, or trips over, a render mode the env does not list
+        return TetherClusterEnv(**{**gym.spec(env_id).kwargs, **kwargs})
+
     try:
         env = quietly(make)
     except Exception as error:  # noqa: BLE001

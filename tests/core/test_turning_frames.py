@@ -131,7 +131,7 @@ def test_spinning_pair_equilibrium_and_radial_frequency(spin: float) -> None:
     stretched = cluster.positions * (1 + 1e-4)
     sim.reset(stretched)
     times, offsets = [], []
-    for step in range(6000):
+    for _ in range(6000):
         sim.advance(0.002)
         times.append(sim.time)
         offsets.append(float(np.linalg.norm(sim.positions[1] - sim.positions[0])) - length)

@@ -195,6 +195,7 @@ def _without_mpc(monkeypatch: pytest.MonkeyPatch) -> None:
 SMOKE_IDS = ["TetherTetrahedron-v0", "TetherTriangle-v0"]
 
 
+@pytest.mark.slow
 def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _without_mpc(monkeypatch)
     out = tmp_path / "bench"

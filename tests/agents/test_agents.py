@@ -96,6 +96,7 @@ def test_velocity_feedback_gain_rule_minimises_the_expected_vibration_energy(env
         assert cost(factor * controller.gain) > best
 
 
+@pytest.mark.slow
 def test_expected_vibration_energy_matches_a_monte_carlo_average() -> None:
     """The Lyapunov formula against brute force: sampled initial states run through the sampled
     closed loop, the energy summed over 3000 intervals."""
@@ -215,6 +216,7 @@ def _check_evaluations(run: Path) -> None:
     }
 
 
+@pytest.mark.slow
 def test_training_smoke_writes_everything(trained_run: Path) -> None:
     safe = (
         "policy.json",
@@ -240,6 +242,7 @@ def test_training_smoke_writes_everything(trained_run: Path) -> None:
     assert TrainedPolicy(trained_run, best=True).metadata["num_timesteps"] in (256, 512)
 
 
+@pytest.mark.slow
 def test_training_resumes_from_a_checkpoint(trained_run: Path, tmp_path: Path) -> None:
     run = train(
         "ppo",
@@ -274,6 +277,7 @@ def test_curriculum_raises_the_training_difficulty_on_schedule(tmp_path: Path) -
         DifficultyCurriculum(1.5, 0.5, 1000)
 
 
+@pytest.mark.slow
 def test_sac_training_smoke(tmp_path: Path) -> None:
     run = train(
         "sac",
@@ -291,6 +295,7 @@ def test_sac_training_smoke(tmp_path: Path) -> None:
     assert TrainedPolicy(run).algo == "sac"
 
 
+@pytest.mark.slow
 def test_comparison_loads_a_trained_model_and_is_reproducible(trained_run: Path, tmp_path: Path) -> None:
     controllers = ["passive", "velocity_feedback", "lqr", "tension_aware", str(trained_run)]
     kwargs = dict(

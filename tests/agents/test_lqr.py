@@ -75,6 +75,7 @@ def cable_blocks(cluster: tether_gym.Cluster) -> tuple[np.ndarray, np.ndarray]:
     return stiffness, damping
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("env_id", tether_gym.ENV_IDS)
 def test_closed_loop_is_stable_for_every_pattern_of_taut_and_slack_cables(env_id: str) -> None:
     controller = LQRController(gym.make(env_id))

@@ -40,6 +40,7 @@ def _mean_on_evaluation_seeds(policy_dir: Path, episodes: int) -> float:
     return float(rollout(policy, ENV, evaluation_seeds(episodes)).rewards.sum(axis=1).mean())
 
 
+@pytest.mark.slow
 def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_path: Path) -> None:
     records = ship(runs, tmp_path / "models", episodes=4)
     means = [_mean_on_evaluation_seeds(run / "best", 4) for run in runs]
@@ -64,7 +65,7 @@ def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_p
     assert sorted(entry["seed"] for entry in table["runs"]) == [0, 1, 2]
     bar = records[0]["bar"]
     assert bar == max(records[0]["baselines"], key=records[0]["baselines"].get)
-    for record, run in zip(records, runs):
+    for record, run in zip(records, runs, strict=True):
         assert record["difference"] == pytest.approx(record["mean_return"] - record["bar_mean_return"], abs=1e-9)
         assert (
             record["wall_time_s"] > 0 and record["timesteps"] == TrainedPolicy(run / "best").metadata["num_timesteps"]
@@ -76,6 +77,7 @@ def test_ship_picks_the_best_run_on_the_evaluation_seeds(runs: list[Path], tmp_p
     assert len(again) == 3 and [r["shipped"] for r in again] == [i == best for i in range(3)]
 
 
+@pytest.mark.slow
 def test_the_shipped_reproduce_command_retrains_the_same_weights(runs: list[Path], tmp_path: Path) -> None:
     out = tmp_path / "models"
     (record,) = ship(runs[:1], out, episodes=2)
@@ -99,6 +101,7 @@ def test_the_shipped_reproduce_command_retrains_the_same_weights(runs: list[Path
         load_hyperparameters("sac", ENV, config)
 
 
+@pytest.mark.slow
 def test_ship_refuses_to_replace_a_shipped_model_without_force(runs: list[Path], tmp_path: Path) -> None:
     out = tmp_path / "models"
     ship(runs[:1], out, episodes=2)
@@ -118,6 +121,7 @@ def test_ship_command_errors_are_clear(tmp_path: Path) -> None:
         main([str(tmp_path), "--episodes", "1"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("env_id", list(ENV_IDS))
 def test_every_id_ships_a_learned_model_that_beats_passive(env_id: str) -> None:
     models = shipped_models(env_id)

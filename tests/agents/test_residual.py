@@ -49,6 +49,7 @@ def test_the_env_adds_the_correction_to_the_baseline_action() -> None:
         assert np.array_equal(obs, plain_obs) and np.array_equal(rewards, plain_rewards)
 
 
+@pytest.mark.slow
 def test_a_residual_policy_records_and_applies_its_baseline(residual_run: Path) -> None:
     assert read_metadata(residual_run)["residual_on"] == "lqr"
     envs = gym.make_vec("TetherTriangle-v0", num_envs=2)

@@ -10,7 +10,7 @@ import pytest
 from agents.evaluate import rollout
 from agents.mpc import MPCController, MPCSettings, load_mpc_settings
 from agents.policies import make_controller
-from helpers import assert_unchanged, env_state
+from tests.helpers import assert_unchanged, env_state
 from tether_gym.registration import ENV_IDS
 
 #: Small enough for CI: 8 candidates over 5 steps, around velocity feedback.
@@ -19,6 +19,7 @@ SMALL = MPCSettings(samples=8, horizon=5, knots=2, noise=0.3, terminal_weight=10
 OPEN_LOOP = MPCSettings(samples=16, horizon=8, knots=3, noise=0.4, terminal_weight=10.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("env_id", list(ENV_IDS))
 def test_mpc_beats_passive_on_every_id(env_id: str) -> None:
     seeds = [3000, 3001, 3002]  # not the comparison's held-out seeds

@@ -299,7 +299,7 @@ def test_get_attr_set_attr_env_method_env_is_wrapped() -> None:
     env.set_attr("max_episode_steps", 3)  # shared by all sub-envs
     assert venv.max_episode_steps == 3
     env.reset()
-    for step in range(3):
+    for _ in range(3):
         _, _, dones, _ = env.step(np.zeros((4, ACT_SIZE), np.float32))
     assert dones.all()
     env.set_attr("max_episode_steps", 4, indices=[0, 1, 2, 3])

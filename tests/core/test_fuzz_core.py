@@ -26,6 +26,9 @@ from hypothesis import strategies as st
 import tether_gym as tg
 from tether_gym import Cluster, ClusterError, SimulationDiverged
 
+#: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
+pytestmark = pytest.mark.slow
+
 FUZZ = settings(
     max_examples=150,
     deadline=None,
@@ -336,7 +339,7 @@ def test_reset_accepts_or_names_the_argument_and_changes_nothing(positions: Any,
     except (ValueError, TypeError) as error:
         assert_names(error, "positions", "velocities", "indices", "zero-length cable")
         after = (batch.positions, batch.velocities, batch.intact, batch.time)
-        assert all(np.array_equal(a, b) for a, b in zip(before, after))
+        assert all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
         return
     assume(True)
     assert np.all(np.isfinite(batch.positions)) and np.all(np.isfinite(batch.tension))

@@ -8,7 +8,10 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+#: Each runs a whole script in a fresh interpreter (figures, videos, benchmarks): minutes in all.
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run(script: str, *args: str) -> str:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tether_gym as tg
-from helpers import pair, reference_internal_forces, separation
+from tests.helpers import pair, reference_internal_forces, separation
 
 
 def tetrahedron_ics(cluster: tg.Cluster, rng: np.random.Generator, amplitude: float, speed: float):
@@ -298,7 +298,9 @@ def test_sub_step_limit_flags_the_cluster_before_it_steps() -> None:
     before = (batch.positions.copy(), batch.velocities.copy(), batch.time.copy())
     stats = batch.advance(6.0)  # needs about 215 sub-steps
     assert stats.status.tolist() == [2, 2] and stats.substeps.tolist() == [0, 0]
-    assert all(np.array_equal(a, b) for a, b in zip(before, (batch.positions, batch.velocities, batch.time)))
+    assert all(
+        np.array_equal(a, b) for a, b in zip(before, (batch.positions, batch.velocities, batch.time), strict=True)
+    )
     assert batch.advance(0.1).substeps.tolist() == [0, 0]  # frozen until reset
 
 

@@ -331,6 +331,21 @@ def test_sac_round_trip_and_resume_state(tmp_path: Path) -> None:
     np.testing.assert_array_equal(fresh_venv.obs_rms.mean, venv.obs_rms.mean)
 
 
+def test_a_saved_optimizer_with_another_number_of_param_groups_is_refused(tmp_path: Path) -> None:
+    """Extra saved param groups must not be dropped quietly: the optimizer would resume with
+    settings that are not the ones it was saved with."""
+    from agents.safe_format import _restore_optimizer
+
+    optimizer = torch.optim.Adam(torch.nn.Linear(2, 1).parameters())
+    group = {
+        key: list(v) if isinstance(v, tuple) else v for key, v in optimizer.state_dict()["param_groups"][0].items()
+    }
+    _restore_optimizer(optimizer, {"param_groups": [group]}, {}, "actor.optimizer", tmp_path)  # the fitting case loads
+    for groups in ([group, dict(group)], []):
+        with pytest.raises(PolicyFormatError, match=f"has {len(groups)} param groups; this model's optimizer has 1"):
+            _restore_optimizer(optimizer, {"param_groups": groups}, {}, "actor.optimizer", tmp_path)
+
+
 def test_converter_output_matches_sb3_load(sb3_run: Path, tmp_path: Path) -> None:
     target = tmp_path / "converted"
     with pytest.warns(PickleTrustWarning):
@@ -494,6 +509,7 @@ TINY = dict(
 )
 
 
+@pytest.mark.slow
 def test_train_refuses_to_overwrite_a_run_without_force(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     run = train("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=128, **TINY)
     assert sorted(p.name for p in (run / "checkpoints").iterdir()) == ["ppo_128_steps", "ppo_256_steps"]
@@ -515,6 +531,7 @@ def test_train_refuses_to_overwrite_a_run_without_force(tmp_path: Path, monkeypa
         train("ppo", ENV, seed=3, out=tmp_path, force=True, **TINY)
 
 
+@pytest.mark.slow
 def test_train_resumes_from_its_own_directory_with_force(tmp_path: Path) -> None:
     run = train("ppo", ENV, seed=0, out=tmp_path, checkpoint_freq=128, **TINY)
     checkpoint = run / "checkpoints" / "ppo_128_steps"
@@ -525,6 +542,7 @@ def test_train_resumes_from_its_own_directory_with_force(tmp_path: Path) -> None
     assert checkpoint.is_dir() and not (run / "checkpoints" / "ppo_256_steps").exists()
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_checkpoint_that_does_not_fit(tmp_path: Path) -> None:
     run = train("ppo", ENV, seed=0, out=tmp_path / "a", checkpoint_freq=10_000, **TINY)
     overrides = {**TINY["overrides"], "policy_kwargs": {"net_arch": [16], "activation_fn": "relu"}}
@@ -587,6 +605,15 @@ def test_hyperparameter_errors_name_the_key(tmp_path: Path, text: str, message: 
     with pytest.raises(HyperparameterError, match=message):
         train("ppo", ENV, out=tmp_path / "runs", hyperparams_file=file)
     assert not (tmp_path / "runs").exists()  # refused before anything was written
+
+
+def test_ppo_schedules_are_unknown_keys_for_sac_and_td3() -> None:
+    """SAC and TD3 take no clip_range: accepting it would fail later, inside SB3's constructor."""
+    for algo in ("sac", "td3"):
+        for key in ("clip_range", "clip_range_vf"):
+            with pytest.raises(HyperparameterError, match=f"unknown key '{key}'; {algo}"):
+                agents.train.validate_hyperparameters(algo, {"n_timesteps": 100, key: 0.2})
+    assert agents.train.validate_hyperparameters("ppo", {"n_timesteps": 100, "clip_range": 0.2})["clip_range"] == 0.2
 
 
 def test_hyperparameter_file_that_is_not_utf8(tmp_path: Path) -> None:

@@ -40,7 +40,7 @@ def assert_same(a: object, b: object) -> None:
             assert_same(a[key], b[key])  # type: ignore[index]
     elif isinstance(a, (tuple, list)):
         assert len(a) == len(b)  # type: ignore[arg-type]
-        for x, y in zip(a, b):  # type: ignore[call-overload]
+        for x, y in zip(a, b, strict=True):  # type: ignore[call-overload]
             assert_same(x, y)
     elif isinstance(a, np.ndarray):
         assert np.array_equal(a, b, equal_nan=True) and a.dtype == b.dtype  # type: ignore[union-attr]

@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import tether_gym as tg
-from helpers import reference_internal_forces
+from tests.helpers import reference_internal_forces
 
 DURATION = 5.0
 INTERVAL = 0.02  # fine enough to see the short taut phases of a bouncing cluster
@@ -55,7 +55,7 @@ def worst_error(problem: dict, **step_options: float) -> tuple[float, int]:
     sim = tg.Simulator(problem["cluster"], **step_options)
     sim.reset(problem["x0"], problem["v0"])
     worst, slack_changes, was_slack = 0.0, 0, sim.slack.copy()
-    for k, x_ref in enumerate(problem["reference"]):
+    for x_ref in problem["reference"]:
         sim.advance(INTERVAL, problem["bias"])
         worst = max(worst, float(np.abs(sim.positions - x_ref).max()))
         slack_changes += int((sim.slack != was_slack).sum())

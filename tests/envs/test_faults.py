@@ -153,7 +153,7 @@ def test_faulty_episodes_are_bit_identical_for_the_same_seed() -> None:
     actions = np.random.default_rng(2).uniform(-1, 1, (50, 9))
     first = run(gym.make("TetherSpinningTriangle-v0", **FAULTS), actions, seed=7)
     second = run(gym.make("TetherSpinningTriangle-v0", **FAULTS), actions, seed=7)
-    for a, b in zip(first, second):
+    for a, b in zip(first, second, strict=True):
         for key in a:
             assert np.array_equal(a[key], b[key]), key
     other = run(gym.make("TetherSpinningTriangle-v0", **FAULTS), actions, seed=8)

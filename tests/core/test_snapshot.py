@@ -21,7 +21,7 @@ def state_of(batch: tg.BatchSimulator, index: int) -> list[np.ndarray]:
 
 
 def identical(a: list[np.ndarray], b: list[np.ndarray]) -> bool:
-    return all(x.tobytes() == y.tobytes() for x, y in zip(a, b))
+    return all(x.tobytes() == y.tobytes() for x, y in zip(a, b, strict=True))
 
 
 def busy_batch(count: int) -> tg.BatchSimulator:
@@ -147,11 +147,11 @@ def test_a_restored_task_continues_bit_identically_with_every_fault_on() -> None
     other.reset([np.random.default_rng(99)] * 4, np.arange(4))
     other.restore(saved, indices=[3, 0, 2])
     other_rngs = [saved_rngs[1], np.random.default_rng(0), saved_rngs[2], saved_rngs[0]]
-    for a, expected in zip(actions[8:], reference):
+    for a, expected in zip(actions[8:], reference, strict=True):
         moved = np.zeros((4, task.action_size))
         moved[3], moved[0], moved[2] = a[0], a[1], a[2]
         got = step_task(other, moved, other_rngs)
-        for g, e in zip(got, expected):
+        for g, e in zip(got, expected, strict=True):
             assert g[[3, 0, 2]].tobytes() == e.tobytes()
     assert set(saved.arrays) == set(TASK_STATE_FIELDS)
 

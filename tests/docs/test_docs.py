@@ -14,7 +14,7 @@ import pytest
 
 from tether_gym.registration import ENV_DOCS, ENV_IDS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 #: The README is the pitch, the set-up, three snippets, the ids, the headline results and links;
 #: everything else belongs on a page under docs/ (issue 13).

@@ -1,0 +1,1 @@
+"""Tests of the agents: baselines, training, shipping, comparison and the benchmark."""

@@ -1,0 +1,1 @@
+"""Tests of the task, the single and vector envs and the SB3 adapter."""

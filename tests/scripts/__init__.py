@@ -1,0 +1,1 @@
+"""The examples and benchmarks, run end to end."""
