@@ -214,13 +214,24 @@ def _markdown(entries: list[dict[str, Any]]) -> str:
 
 
 def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
-    """The training command that reproduces a shipped model: its own ``config.yml`` holds the
-    hyperparameters it was trained with, so the command stays true when the YAML files are retuned."""
+    """The training command that reproduces a shipped model: the run's own command (its evaluation
+    and checkpoint settings choose ``best/``), with the hyperparameters read from the shipped
+    ``config.yml``, so that the command stays true when the YAML files are retuned."""
     env_id, algo = candidate["env_id"], candidate["algo"]
-    return (
-        f"python -m agents.train --algo {algo} --env {env_id} --seed {candidate['seed']} "
-        f"--hyperparams {Path(shipped_at) / env_id / algo / 'config.yml'}"
-    )
+    tokens = shlex.split(candidate.get("command") or "python -m agents.train")
+    kept: list[str] = []
+    skip_value = False
+    for token in tokens:
+        if skip_value:
+            skip_value = False
+        elif token == "--hyperparams":
+            skip_value = True
+        elif not token.startswith("--hyperparams="):
+            kept.append(token)
+    for flag, value in (("--algo", algo), ("--env", env_id), ("--seed", candidate["seed"])):
+        if flag not in kept:
+            kept += [flag, str(value)]
+    return shlex.join([*kept, "--hyperparams", str(Path(shipped_at) / env_id / algo / "config.yml")])
 
 
 def ship(
