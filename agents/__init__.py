@@ -1,5 +1,9 @@
 """Controllers for the tether-gym damping task: scripted baselines, RL training and comparison.
 
+The package is ``agents`` in a checkout (``python -m agents.train``) and ``tether_gym_agents``
+when installed from a wheel (``python -m tether_gym_agents.train``, or the console script
+``tether-gym-train``); see :mod:`agents.commands`. Its modules import each other relatively.
+
 * :mod:`agents.baselines`: passive, velocity feedback, LQR and a tension-aware energy law, each
   a policy with Stable-Baselines3's ``predict`` interface.
 * :mod:`agents.policies`: load a trained SB3 policy (with its ``VecNormalize`` statistics) as a
@@ -14,6 +18,7 @@
 * :mod:`agents.mpc`: the privileged model-predictive reference controller ``mpc``.
 * :mod:`agents.residual`: policies trained as corrections to a scripted baseline.
 * :mod:`agents.benchmark`: ``python -m agents.benchmark``, every id, controller and statistic.
+* :mod:`agents.commands`: the commands' names and console scripts under either package name.
 """
 
 # tether_gym sets the OpenMP spin policy (tether_gym._kernels) when it is imported. Importing it

@@ -75,7 +75,6 @@ import dataclasses
 import io
 import json
 import math
-import shlex
 import sys
 import time
 import warnings
@@ -86,21 +85,23 @@ from typing import Any
 import numpy as np
 import scipy.stats
 
-from agents.baselines import BASELINES
-from agents.cli import int_at_least
-from agents.compare import HELD_OUT_SEED
-from agents.evaluate import EpisodeRecord, rollout, summarise
-from agents.files import (
+from tether_gym.limits import is_whole_number
+from tether_gym.registration import ENV_IDS
+
+from .baselines import BASELINES
+from .cli import int_at_least
+from .commands import command_line, program
+from .compare import HELD_OUT_SEED
+from .evaluate import EpisodeRecord, rollout, summarise
+from .files import (
     OutputError,
     atomic_write,
     atomic_write_text,
     prepare_table_outputs,
 )
-from agents.pickled import PickleNotTrustedError
-from agents.policies import make_controller, shipped_models
-from agents.safe_format import PolicyFormatError
-from tether_gym.limits import is_whole_number
-from tether_gym.registration import ENV_IDS
+from .pickled import PickleNotTrustedError
+from .policies import make_controller, shipped_models
+from .safe_format import PolicyFormatError
 
 __all__ = [
     "REFERENCE",
@@ -610,7 +611,7 @@ def benchmark(
     results = _analyse(ids, records, wall, missing, reference, shipped, bootstrap_reps, seed)
     results["settings"] = {
         "command": command
-        or f"agents.benchmark.benchmark(env_ids={ids!r}, controllers={names!r}, "
+        or f"{__package__}.benchmark.benchmark(env_ids={ids!r}, controllers={names!r}, "
         f"episodes={episodes}, seed={seed}, reference={reference!r})",
         "env_ids": ids,
         "episodes": episodes,
@@ -1228,7 +1229,7 @@ def plot_aggregate(results: dict[str, Any], path: Path) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.benchmark",
+        prog=program("benchmark"),
         description="Every id, every scripted baseline, the mpc reference and every shipped model on "
         "held-out seeds: mean returns, paired differences against the best scripted baseline, "
         "normalised scores (0 = passive, 100 = mpc), and rliable's aggregate over ids.",
@@ -1296,7 +1297,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         trust_pickle=args.trust_pickle,
         reference=args.reference,
         bootstrap_reps=args.bootstrap_reps,
-        command=shlex.join(["python", "-m", "agents.benchmark", *arguments]),
+        command=command_line("benchmark", arguments),
     )
 
 
@@ -1304,4 +1305,4 @@ if __name__ == "__main__":
     try:
         main()
     except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError, ImportError) as error:
-        sys.exit(f"agents.benchmark: error: {error}")
+        sys.exit(f"{program('benchmark')}: error: {error}")

@@ -32,20 +32,22 @@ from typing import Any
 
 import numpy as np
 
-from agents.baselines import BASELINES
-from agents.cli import int_at_least
-from agents.evaluate import METRICS, EpisodeRecord, rollout, summarise
-from agents.files import (
+from tether_gym.limits import is_whole_number
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
+
+from .baselines import BASELINES
+from .cli import int_at_least
+from .commands import description, program
+from .evaluate import METRICS, EpisodeRecord, rollout, summarise
+from .files import (
     OutputError,
     atomic_write,
     atomic_write_text,
     prepare_table_outputs,
 )
-from agents.pickled import PickleNotTrustedError
-from agents.policies import make_controller, shipped_models
-from agents.safe_format import PolicyFormatError
-from tether_gym.limits import is_whole_number
-from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
+from .pickled import PickleNotTrustedError
+from .policies import make_controller, shipped_models
+from .safe_format import PolicyFormatError
 
 __all__ = ["compare", "main"]
 
@@ -232,11 +234,11 @@ def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, sat
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.compare",
-        description=__doc__.split("\n\n")[0].replace("``", ""),
+        prog=program("compare"),
+        description=description(__doc__),
         epilog="Trust: shipped and agents.train models are JSON + safetensors and load without running code. "
         "A pickle-based SB3 model (.zip + vecnormalize.pkl) runs any code a crafted file contains when "
-        "loaded: it is refused unless --trust-pickle is given (python -m agents.convert makes a safe copy).",
+        f"loaded: it is refused unless --trust-pickle is given ({program('convert')} makes a safe copy).",
     )
     parser.add_argument(
         "--env",
@@ -284,4 +286,4 @@ if __name__ == "__main__":
     try:
         main()
     except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError, ImportError) as error:
-        sys.exit(f"agents.compare: error: {error}")
+        sys.exit(f"{program('compare')}: error: {error}")

@@ -30,16 +30,17 @@ from typing import Any
 import numpy as np
 import torch
 
-from agents.cli import int_at_least
-from agents.files import OutputError, atomic_write_bytes, check_output_files, prepare_output_dir
-from agents.pickled import (
+from .cli import int_at_least
+from .commands import description, program
+from .files import OutputError, atomic_write_bytes, check_output_files, prepare_output_dir
+from .pickled import (
     PickleNotTrustedError,
     is_pickle_model,
     load_pickled_model,
     refuse_untrusted,
     sb3_model_file,
 )
-from agents.safe_format import (
+from .safe_format import (
     MANIFEST_FILE,
     POLICY_FILES,
     PolicyFormatError,
@@ -212,8 +213,8 @@ def _sha256(path: Path) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.convert",
-        description=__doc__.split("\n\n")[0].replace("``", ""),
+        prog=program("convert"),
+        description=description(__doc__),
         epilog="Converting unpickles SRC: a crafted SRC runs arbitrary code. Convert only files you trust.",
     )
     parser.add_argument("source", metavar="SRC", help="SB3 run directory or model .zip")
@@ -258,4 +259,4 @@ if __name__ == "__main__":
     try:
         main()
     except (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError) as error:
-        sys.exit(f"agents.convert: error: {error}")
+        sys.exit(f"{program('convert')}: error: {error}")

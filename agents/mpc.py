@@ -105,7 +105,7 @@ class MPCSettings:
             value = getattr(self, name)
             if not is_whole_number(value) or not low <= value <= high:
                 raise ValueError(f"mpc setting {name} must be a whole number in {low}..{high}; got {value!r}")
-        from agents.baselines import BASELINES
+        from .baselines import BASELINES
 
         if self.prior != "none" and self.prior not in BASELINES:
             raise ValueError(f"mpc setting prior must be 'none' or one of {sorted(BASELINES)}; got {self.prior!r}")
@@ -166,7 +166,7 @@ class MPCController:
         self.task = task
         self.prior = None
         if s.prior != "none":
-            from agents.baselines import make_baseline
+            from .baselines import make_baseline
 
             self.prior = make_baseline(s.prior, env)
         self.batch = task.num_clusters

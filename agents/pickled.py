@@ -19,7 +19,8 @@ import yaml
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from agents.safe_format import ALGORITHMS, METADATA_FILE
+from .commands import program
+from .safe_format import ALGORITHMS, METADATA_FILE
 
 __all__ = [
     "PickleNotTrustedError",
@@ -62,7 +63,7 @@ def refuse_untrusted(path: str | Path, opt_in: str = "--trust-pickle (trust_pick
         f"{path} is a pickle-based Stable-Baselines3 model (model .zip / vecnormalize.pkl). Loading it unpickles "
         f"data, and a crafted file runs arbitrary code the moment it is loaded, so tether-gym loads pickle files "
         f"only if you opt in. If you trust where it came from, either convert it once to the safe format: "
-        f"python -m agents.convert {path} NEW_DIR --trust-pickle, and use NEW_DIR; or pass {opt_in} to load it "
+        f"{program('convert')} {path} NEW_DIR --trust-pickle, and use NEW_DIR; or pass {opt_in} to load it "
         f"as it is."
     )
 
@@ -71,7 +72,7 @@ def _warn(files: list[Path]) -> None:
     warnings.warn(
         f"loading pickle-based files {[str(f) for f in files]} because you passed --trust-pickle: unpickling runs "
         f"any code a crafted file contains. Do this only for files you made yourself or fully trust, and prefer "
-        f"the safe format (python -m agents.convert).",
+        f"the safe format ({program('convert')}).",
         PickleTrustWarning,
         stacklevel=3,
     )

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.baselines import BASELINES, make_baseline
-from agents.pickled import is_pickle_model, load_pickled_model, refuse_untrusted
-from agents.safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
+from .baselines import BASELINES, make_baseline
+from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted
+from .safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
 
 __all__ = ["MODELS_DIR", "TrainedPolicy", "is_shipped", "make_controller", "shipped_models"]
 
@@ -124,7 +124,7 @@ class TrainedPolicy:
         """Build the baseline a residual policy adds its corrections to, from ``env`` (a
         tether-gym env of the policy's id); nothing to do for a plain policy."""
         if self.residual_on is not None:
-            from agents.baselines import make_baseline
+            from .baselines import make_baseline
 
             self.baseline = make_baseline(self.residual_on, env)
 
@@ -166,7 +166,7 @@ class TrainedPolicy:
                 f"{self.path} is a residual policy on {self.residual_on!r}: attach(env) it to a tether-gym env "
                 "first (make_controller does)"
             )
-        from agents.residual import residual_actions
+        from .residual import residual_actions
 
         return residual_actions(self.baseline, raw, actions), state
 
@@ -197,7 +197,7 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
     if spec in BASELINES:
         return make_baseline(spec, env)
     if spec == "mpc":
-        from agents.mpc import MPCController
+        from .mpc import MPCController
 
         return MPCController(env)
     env_id = getattr(getattr(env, "spec", None), "id", None)

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
-from agents.baselines import BASELINES, make_baseline
+from .baselines import BASELINES, make_baseline
 
 __all__ = ["ResidualVecEnv", "check_residual_on", "residual_actions"]
 

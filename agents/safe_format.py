@@ -49,7 +49,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.files import atomic_write_bytes, atomic_write_text
+from .files import atomic_write_bytes, atomic_write_text
 
 __all__ = [
     "ACTIVATIONS",
@@ -797,7 +797,7 @@ def read_metadata(directory: Path, reader: _VerifiedReader | None = None) -> dic
     _require(metadata, "training_state", bool, where)
     # Optional (policies written before residual training have none): the baseline the
     # policy's actions are corrections to.
-    from agents.residual import check_residual_on
+    from .residual import check_residual_on
 
     try:
         metadata["residual_on"] = check_residual_on(metadata.get("residual_on"), f"{where}: residual_on")

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from agents.files import atomic_write_text
+from .files import atomic_write_text
 
 __all__ = [
     "EVALUATIONS_FILE",
@@ -61,7 +61,7 @@ def episode_returns(
     controller: Any, env_id: str, seeds: list[int], env_kwargs: dict[str, Any] | None = None
 ) -> np.ndarray:
     """(E,) undiscounted return of ``controller`` in one episode per seed (``agents.evaluate.rollout``)."""
-    from agents.evaluate import rollout
+    from .evaluate import rollout
 
     return rollout(controller, env_id, seeds, env_kwargs=env_kwargs).rewards.sum(axis=1)
 
@@ -73,8 +73,8 @@ def baseline_returns(
     (:func:`agents.benchmark.best_eligible_baseline`)."""
     import gymnasium as gym
 
-    from agents.baselines import BASELINES, make_baseline
-    from agents.benchmark import best_eligible_baseline
+    from .baselines import BASELINES, make_baseline
+    from .benchmark import best_eligible_baseline
 
     env = gym.make(env_id, **dict(env_kwargs or {}))
     returns = {name: episode_returns(make_baseline(name, env), env_id, seeds, env_kwargs) for name in BASELINES}
@@ -139,7 +139,7 @@ class SeededEvaluation(BaseCallback):
         """The model's policy as a controller, built once: it holds the model's own policy and
         normaliser objects, so it acts with their weights and statistics of the moment (and a
         residual policy's baseline is designed once, not at every evaluation)."""
-        from agents.policies import TrainedPolicy
+        from .policies import TrainedPolicy
 
         policy = TrainedPolicy.from_parts(
             self.model.policy,
@@ -163,7 +163,7 @@ class SeededEvaluation(BaseCallback):
 
     def evaluate(self) -> dict[str, Any]:
         """Run the evaluation now; returns (and logs) its entry."""
-        from agents.benchmark import paired_difference
+        from .benchmark import paired_difference
 
         returns = episode_returns(self.policy, self.env_id, self.seeds, self.env_kwargs)
         bar_returns = self.baseline_returns[self.bar]

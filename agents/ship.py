@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import shlex
 import shutil
 import sys
 from collections.abc import Mapping, Sequence
@@ -31,9 +30,10 @@ from typing import Any
 import numpy as np
 import yaml
 
-from agents.cli import int_at_least
-from agents.files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
-from agents.safe_format import (
+from .cli import int_at_least
+from .commands import command_line, description, program
+from .files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
+from .safe_format import (
     METADATA_FILE,
     NORMALIZATION_FILE,
     WEIGHTS_FILE,
@@ -42,7 +42,7 @@ from agents.safe_format import (
     read_metadata,
     write_manifest,
 )
-from agents.selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
+from .selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
 
 __all__ = ["evaluate_candidates", "main", "reproduce_command", "ship"]
 
@@ -76,8 +76,8 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
     evaluation seeds; returns one record (plain JSON data) per run."""
     import gymnasium as gym
 
-    from agents.benchmark import paired_difference
-    from agents.policies import TrainedPolicy
+    from .benchmark import paired_difference
+    from .policies import TrainedPolicy
 
     seeds = evaluation_seeds(episodes)
     baselines: dict[str, tuple[dict[str, np.ndarray], str]] = {}
@@ -137,9 +137,9 @@ def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) ->
     import gymnasium as gym
     import torch
 
-    from agents.convert import REFERENCE_FILE, _safe_actions, trajectory_observations
-    from agents.policies import TrainedPolicy
-    from agents.safe_format import reference_observations, tensor_bytes
+    from .convert import REFERENCE_FILE, _safe_actions, trajectory_observations
+    from .policies import TrainedPolicy
+    from .safe_format import reference_observations, tensor_bytes
 
     policy = TrainedPolicy(directory)
     env = gym.make(env_id)
@@ -174,7 +174,7 @@ def _markdown(entries: list[dict[str, Any]]) -> str:
             f"({entries[0]['seeds'][0]}..{entries[0]['seeds'][1]}, never the benchmark's held-out seeds). "
             "Δ: paired difference of the mean return from the id's best scripted baseline on those seeds (95 % t "
             "interval). Beat: wall time from the start of the training command to the first evaluation whose "
-            "mean return beat that baseline's (— never). Made by `python -m agents.ship`."
+            f"mean return beat that baseline's (— never). Made by `{program('ship')}`."
         ),
         "",
     ]
@@ -218,7 +218,7 @@ def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
     and checkpoint settings choose ``best/``), with the hyperparameters read from the shipped
     ``config.yml``, so that the command stays true when the YAML files are retuned."""
     env_id, algo = candidate["env_id"], candidate["algo"]
-    tokens = shlex.split(candidate.get("command") or "python -m agents.train")
+    tokens = shlex.split(candidate.get("command") or program("train"))
     kept: list[str] = []
     skip_value = False
     for token in tokens:
@@ -317,7 +317,7 @@ def _write_runs_table(out: Path, candidates: Sequence[dict[str, Any]], command: 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m agents.ship", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog=program("ship"), description=description(__doc__))
     parser.add_argument("runs", nargs="+", metavar="RUN", help="run directories of agents.train, or policy directories")
     parser.add_argument("--out", default="agents/models", help="where shipped models go (default agents/models)")
     parser.add_argument("--episodes", type=int_at_least(2), default=64, help="evaluation episodes (default 64)")
@@ -333,7 +333,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         args.out,
         episodes=args.episodes,
         force=args.force,
-        command=shlex.join(["python", "-m", "agents.ship", *arguments]),
+        command=command_line("ship", arguments),
     )
 
 
@@ -341,4 +341,4 @@ if __name__ == "__main__":
     try:
         main()
     except (OutputError, PolicyFormatError, FileNotFoundError, ValueError) as error:
-        sys.exit(f"agents.ship: error: {error}")
+        sys.exit(f"{program('ship')}: error: {error}")

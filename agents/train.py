@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import difflib
 import inspect
-import shlex
 import shutil
 import sys
 import time
@@ -55,15 +54,19 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 import tether_gym
-from agents.cli import int_at_least
-from agents.files import (
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
+from tether_gym.sb3 import make_sb3_vec_env
+
+from .cli import int_at_least
+from .commands import command_line, description, program
+from .files import (
     OutputError,
     OutputExistsError,
     atomic_write_text,
     check_no_symlinks_inside,
     prepare_output_dir,
 )
-from agents.pickled import (
+from .pickled import (
     PickleNotTrustedError,
     is_pickle_model,
     load_pickled_model,
@@ -71,8 +74,8 @@ from agents.pickled import (
     refuse_untrusted,
     sb3_model_file,
 )
-from agents.residual import ResidualVecEnv, check_residual_on
-from agents.safe_format import (
+from .residual import ResidualVecEnv, check_residual_on
+from .safe_format import (
     ACTIVATIONS,
     ALGORITHMS,
     CLASS_KWARGS,
@@ -84,9 +87,7 @@ from agents.safe_format import (
     read_metadata,
     save_policy,
 )
-from agents.selection import EVALUATIONS_FILE, SeededEvaluation
-from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
-from tether_gym.sb3 import make_sb3_vec_env
+from .selection import EVALUATIONS_FILE, SeededEvaluation
 
 __all__ = [
     "ACTIVATIONS",
@@ -999,8 +1000,8 @@ def _algo_of(cls: type[BaseAlgorithm]) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.train",
-        description=__doc__.split("\n\n")[0].replace("``", ""),
+        prog=program("train"),
+        description=description(__doc__),
         epilog="Trust: runs are written as JSON + safetensors, which load without running code. "
         "--resume from an SB3 .zip/.pkl unpickles it, which runs any code a crafted file contains: "
         "it needs --trust-pickle.",
@@ -1074,7 +1075,7 @@ def main(argv: list[str] | None = None) -> Path:
         verbose=args.verbose,
         force=args.force,
         trust_pickle=args.trust_pickle,
-        command=shlex.join(["python", "-m", "agents.train", *(sys.argv[1:] if argv is None else argv)]),
+        command=command_line("train", sys.argv[1:] if argv is None else argv),
     )
 
 
@@ -1082,4 +1083,4 @@ if __name__ == "__main__":
     try:
         main()
     except (PickleNotTrustedError, OutputError, PolicyFormatError, HyperparameterError, ValueError, OSError) as error:
-        sys.exit(f"agents.train: error: {error}")
+        sys.exit(f"{program('train')}: error: {error}")

@@ -1,0 +1,103 @@
+"""The agents' commands and their names: ``python -m <package>.<command>`` and the console scripts.
+
+This folder is the package ``agents`` in a checkout and ``tether_gym_agents`` when installed from
+a wheel (``pyproject.toml`` maps the installed name onto the folder, so that a generic top-level
+``agents`` never lands in site-packages). The modules import each other relatively, and every
+command line they print or record is built here from ``__package__``, so it is one the user can
+run under either name.
+
+The console scripts of ``pyproject.toml`` (``tether-gym-train``, ``tether-gym-compare``,
+``tether-gym-benchmark``, ``tether-gym-ship``, ``tether-gym-convert``) run their module exactly as
+``python -m`` does, ``__main__`` block and its error handling included, so the two ways to run a
+command cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import runpy
+import shlex
+from collections.abc import Sequence
+
+__all__ = [
+    "SCRIPTS",
+    "benchmark",
+    "command_line",
+    "compare",
+    "convert",
+    "description",
+    "program",
+    "ship",
+    "train",
+]
+
+#: The command modules of this package and the console script that runs each.
+SCRIPTS: dict[str, str] = {
+    "train": "tether-gym-train",
+    "compare": "tether-gym-compare",
+    "benchmark": "tether-gym-benchmark",
+    "ship": "tether-gym-ship",
+    "convert": "tether-gym-convert",
+}
+
+# The console script running now (set by its entry point before the module runs), or None under
+# ``python -m`` and when a command's ``main`` is called from Python.
+_running_script: str | None = None
+
+
+def program(command: str) -> str:
+    """How the user runs ``command`` (a key of :data:`SCRIPTS`): its console script's name when
+    that is what runs now, else ``python -m <package>.<command>``. It is the argparse ``prog``
+    (usage lines and error prefixes) and the head of the command lines a run records."""
+    if command not in SCRIPTS:
+        raise ValueError(f"unknown command {command!r}: expected one of {', '.join(SCRIPTS)}")
+    if _running_script == SCRIPTS[command]:
+        return _running_script
+    return f"python -m {__package__}.{command}"
+
+
+def command_line(command: str, arguments: Sequence[str]) -> str:
+    """The shell command that runs ``command`` with ``arguments`` the way it runs now (see
+    :func:`program`), quoted so that it can be pasted back into a shell."""
+    return shlex.join([*shlex.split(program(command)), *arguments])
+
+
+def description(docstring: str | None) -> str:
+    """The argparse description of a command module with docstring ``docstring``: its first
+    paragraph, without reST markup, with its ``python -m agents.<command>`` (how the checkout runs
+    it) naming the package it is imported as."""
+    if not docstring:
+        raise ValueError("a command module needs a docstring: its first paragraph is the --help description")
+    first_paragraph = docstring.split("\n\n")[0].replace("``", "")
+    return first_paragraph.replace("python -m agents.", f"python -m {__package__}.")
+
+
+def _run(command: str) -> None:
+    """Run ``<package>.<command>`` as ``python -m`` does, as its console script."""
+    global _running_script
+    _running_script = SCRIPTS[command]
+    runpy.run_module(f"{__package__}.{command}", run_name="__main__", alter_sys=True)
+
+
+def train() -> None:
+    """``tether-gym-train``: ``python -m tether_gym_agents.train``."""
+    _run("train")
+
+
+def compare() -> None:
+    """``tether-gym-compare``: ``python -m tether_gym_agents.compare``."""
+    _run("compare")
+
+
+def benchmark() -> None:
+    """``tether-gym-benchmark``: ``python -m tether_gym_agents.benchmark``."""
+    _run("benchmark")
+
+
+def ship() -> None:
+    """``tether-gym-ship``: ``python -m tether_gym_agents.ship``."""
+    _run("ship")
+
+
+def convert() -> None:
+    """``tether-gym-convert``: ``python -m tether_gym_agents.convert``."""
+    _run("convert")

@@ -1,0 +1,1 @@
+"""The installed package: the wheel's contents, the import names and the console scripts."""
