@@ -21,6 +21,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from tether_gym import _kernels
 from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
 from tether_gym.limits import (
@@ -38,6 +39,7 @@ from tether_gym.simulator import (
     AdvanceStats,
     BatchSimulator,
     SimulatorState,
+    TableColumns,
     read_only_rows,
 )
 
@@ -741,7 +743,50 @@ class DampingTask:
 
     Attributes:
         scales: the cluster's :class:`ClusterScales`, which bound the settings and reset states.
+
+    What the task kernels read and write lives in two tables and a settings vector (their columns
+    are named in :mod:`tether_gym.envs._task_kernels`): ``task_node_table`` (B, n, ...),
+    ``task_cluster_table`` (B, ...) and ``task_settings``.  The named attributes below are views
+    of their columns.
     """
+
+    bias = TableColumns("task_node_table", _task_kernels.BIAS, 3, "(B, n, 3) bias thrust holding the nominal shape, N.")
+    nominal = TableColumns("task_node_table", _task_kernels.NOMINAL, 3, "(B, n, 3) nominal positions, m.")
+    thrust = TableColumns("task_node_table", _task_kernels.THRUST, 3, "(B, n, 3) the agent's thrust of the step, N.")
+    nominal_strain_energy = TableColumns(
+        "task_cluster_table", _task_kernels.NOMINAL_STRAIN_ENERGY, 1, "(B,) strain energy at the nominal shape, J."
+    )
+    impulse = TableColumns("task_cluster_table", _task_kernels.IMPULSE, 1, "(B,) thrust impulse of the step, N*s.")
+    scalars = TableColumns(
+        "task_cluster_table",
+        _task_kernels.SCALAR_COLUMNS,
+        _task_kernels.NUM_SCALARS,
+        "(B, len(SCALARS)) the scalar results of the last step: reward, its terms, energies (see SCALARS).",
+    )
+    observation = TableColumns(
+        "task_cluster_table",
+        _task_kernels.OBSERVATION_COLUMNS,
+        None,
+        "(B, observation_size) float64 observation of the last step, before noise.",
+    )
+    weights = TableColumns(
+        "task_settings",
+        _task_kernels.VIBRATION_WEIGHT,
+        4,
+        "(4,) the reward's weights as the kernel applies them: vibration per J, propellant per N*s, slack, "
+        "failure penalty (writable).",
+    )
+
+    @property
+    def force(self) -> np.ndarray:
+        """(B, n, 3) external force of the step (bias, thrust, disturbances), N: the simulator's
+        applied force."""
+        return self.sim.applied_force
+
+    @property
+    def stats(self) -> AdvanceStats:
+        """What the simulator's last advance did (views; see :attr:`BatchSimulator.last_advance`)."""
+        return self.sim.last_advance
 
     def __init__(self, cluster: Cluster, num_clusters: int, config: TaskConfig) -> None:
         if not isinstance(cluster, Cluster):
@@ -776,9 +821,10 @@ class DampingTask:
         self.length_scale = config.initial_displacement or 1e-3 * float(cluster.L0.min())
         self.speed_scale = config.initial_velocity or 1e-3
         self.observation_size = 6 * self.observed.size + m + (m if config.observe_tensions else 0)
-        self.nominal = np.broadcast_to(cluster.positions, (B, n, 3)).copy()
-        self.bias = np.zeros((B, n, 3))
-        self.nominal_strain_energy = np.zeros(B)
+        tk = _task_kernels
+        self.task_node_table = np.zeros((B, n, tk.TASK_NODE_COLUMNS))
+        self.task_node_table[:, :, tk.NOMINAL : tk.NOMINAL + 3] = cluster.positions
+        self.task_cluster_table = np.zeros((B, tk.TASK_CLUSTER_COLUMNS + self.observation_size))
         for b in range(B):
             self._set_nominal(b, cluster)
         self.full_impulse = (
@@ -786,20 +832,28 @@ class DampingTask:
             * config.control_interval
             * (math.sqrt(3.0) if config.thrust_limit == "per_axis" else 1.0)
         )
-        self.weights = np.array(
-            [
-                config.vibration_weight,
-                config.propellant_weight / self.full_impulse,
-                config.slack_weight,
-                config.failure_penalty,
-            ]
-        )
+        s = 6 * self.observed.size
+        self.task_settings = np.zeros(tk.TASK_SETTINGS)
+        for column, value in (
+            (tk.CONTROL_INTERVAL, config.control_interval),
+            (tk.MAGNITUDE_LIMIT, config.thrust_limit == "magnitude"),
+            (tk.LENGTH_SCALE, self.length_scale),
+            (tk.SPEED_SCALE, self.speed_scale),
+            (tk.DEVIATION_LIMIT, self.max_deviation),
+            (tk.TERMINATE_ON_BREAK, config.cable_failure == "terminate"),
+            (tk.VIBRATION_WEIGHT, config.vibration_weight),
+            (tk.PROPELLANT_WEIGHT, config.propellant_weight / self.full_impulse),
+            (tk.SLACK_WEIGHT, config.slack_weight),
+            (tk.FAILURE_PENALTY, config.failure_penalty),
+            (tk.DISPLACEMENT_AT, 0),
+            (tk.VELOCITY_AT, s // 2),
+            (tk.ELONGATION_AT, s),
+            (tk.TENSION_RATIO_AT, s + m if config.observe_tensions else -1),
+        ):
+            self.task_settings[column] = value
         self.energy_scale = self._energy_scale()
-        self.weights[0] = config.vibration_weight / self.energy_scale
+        self.task_settings[tk.VIBRATION_WEIGHT] = config.vibration_weight / self.energy_scale
         self.difficulty = config.difficulty
-        self.force = np.zeros((B, n, 3))
-        self.thrust = np.zeros((B, n, 3))
-        self.impulse = np.zeros(B)
         self.propellant = np.zeros(B)
         # Disturbances and faults: what each cluster's episode holds, drawn at its reset.
         self.disturbance = np.zeros((B, n, 3))
@@ -815,16 +869,6 @@ class DampingTask:
             or config.thrust_noise
             or config.thruster_failure_probability
         )
-        self.stats = AdvanceStats(
-            substeps=np.zeros(B, dtype=np.int64),
-            step_min=np.full(B, np.inf),
-            step_max=np.zeros(B),
-            status=np.zeros(B, dtype=np.int64),
-            step_sizes=np.zeros((B, 0)),
-            peak_tension=np.zeros((B, m)),
-        )
-        self.observation = np.zeros((B, self.observation_size))
-        self.scalars = np.zeros((B, len(SCALARS)))
         self.end_reason = np.zeros(B, dtype=np.int64)
         self._all = np.ones(B, dtype=np.bool_)
         self._evaluate()
@@ -845,81 +889,48 @@ class DampingTask:
         x0, v0 = self.sample_initial_state(np.random.default_rng(0), count, difficulty=1.0)
         probe = BatchSimulator(self.cluster, count, safety_factor=self.config.safety_factor)
         probe.reset(x0, v0)
-        shape = (count,) + self.cluster.positions.shape
-        scalars = np.zeros((count, len(SCALARS)))
-        self._evaluate_batch(
-            probe,
-            np.ascontiguousarray(np.broadcast_to(self.bias[0], shape)),
-            np.ascontiguousarray(np.broadcast_to(self.cluster.positions, shape)),
-            np.full(count, self.nominal_strain_energy[0]),
-            np.zeros(count, dtype=np.int64),
-            probe.tension,
-            np.zeros(count),
-            np.zeros((count, self.observation_size)),
-            scalars,
-            np.zeros(count, dtype=np.int64),
+        tk = _task_kernels
+        task_nodes = np.ascontiguousarray(
+            np.broadcast_to(self.task_node_table[0], (count,) + self.task_node_table.shape[1:])
         )
-        scale = float(np.mean(scalars[:, _COLUMN["vibration_energy"]]))
+        task_clusters = np.zeros((count, self.task_cluster_table.shape[1]))
+        task_clusters[:, tk.NOMINAL_STRAIN_ENERGY] = self.task_cluster_table[0, tk.NOMINAL_STRAIN_ENERGY]
+        # The serial kernel even for 64 clusters (the same bits): a single env then never compiles
+        # the parallel one.
+        self._evaluate_tables(probe, task_nodes, task_clusters, np.zeros(count, dtype=np.int64), parallel=False)
+        scale = float(np.mean(task_clusters[:, tk.SCALAR_COLUMNS + tk.VIBRATION_ENERGY]))
         return scale if scale > 0 else 1.0
 
-    def _evaluate_batch(
+    def _evaluate_tables(
         self,
         sim: BatchSimulator,
-        bias: np.ndarray,
-        nominal: np.ndarray,
-        nominal_strain_energy: np.ndarray,
-        status: np.ndarray,
-        peak_tension: np.ndarray,
-        impulse: np.ndarray,
-        observation: np.ndarray,
-        scalars: np.ndarray,
+        task_nodes: np.ndarray,
+        task_clusters: np.ndarray,
         end_reason: np.ndarray,
+        parallel: bool,
     ) -> None:
-        kernel = (
-            _task_kernels.evaluate_parallel if sim.num_clusters >= PARALLEL_MIN_BATCH else _task_kernels.evaluate_serial
-        )
+        kernel = _task_kernels.evaluate_parallel if parallel else _task_kernels.evaluate_serial
         kernel(
-            sim.positions_,
-            sim.velocities_,
-            sim.masses,
-            sim.tension,
-            sim.stiffness,
-            sim.L0,
-            sim.N0,
-            sim.intact,
-            sim.frame_tidal,
-            sim.breaking_load,
-            bias,
-            nominal,
-            nominal_strain_energy,
+            self.task_settings,
             sim.cables,
             self.observed,
-            self.length_scale,
-            self.speed_scale,
-            self.config.observe_tensions,
-            status,
-            peak_tension,
-            impulse,
-            self.max_deviation,
-            self.config.cable_failure == "terminate",
-            self.weights,
-            observation,
-            scalars,
+            sim.node_table,
+            sim.cable_table,
+            sim.cluster_table,
+            sim.counter_table,
+            task_nodes,
+            task_clusters,
             end_reason,
         )
 
     def _evaluate(self) -> None:
-        self._evaluate_batch(
+        """Observation, scalar results and end reason of every cluster, from the current state."""
+        self._evaluate_tables(
             self.sim,
-            self.bias,
-            self.nominal,
-            self.nominal_strain_energy,
-            self.stats.status,
-            self.stats.peak_tension,
-            self.impulse,
-            self.observation,
-            self.scalars,
+            self.task_node_table,
+            self.task_cluster_table,
             self.end_reason,
+            parallel=self.num_clusters >= PARALLEL_MIN_BATCH,
         )
 
     # ------------------------------------------------------------------ snapshots
@@ -932,7 +943,7 @@ class DampingTask:
         simulator state and every task array of :data:`TASK_STATE_FIELDS`.  For planning and
         search: snapshot, step candidate actions, restore (see :class:`TaskState`)."""
         simulator = self.sim.snapshot(indices)
-        idx = self.sim._indices(indices)
+        idx = self.sim.cluster_indices(indices)
         arrays = read_only_rows({name: self._state_array(name) for name in TASK_STATE_FIELDS}, idx)
         return TaskState(simulator, arrays, self.config, self.cluster, self.difficulty)
 
@@ -953,7 +964,7 @@ class DampingTask:
                 f"state was taken at difficulty {state.difficulty}, this task is at {self.difficulty}; call "
                 f"set_difficulty({state.difficulty}) first"
             )
-        idx = np.arange(state.num_clusters) if indices is None else self.sim._indices(indices)
+        idx = np.arange(state.num_clusters) if indices is None else self.sim.cluster_indices(indices)
         self.sim.restore(state.simulator, idx)  # validates the indices and the cluster count first
         source = np.zeros(idx.size, dtype=np.int64) if state.num_clusters == 1 else np.arange(idx.size)
         for name in TASK_STATE_FIELDS:
@@ -1095,9 +1106,6 @@ class DampingTask:
         if self._perturbed:
             for rng, b in zip(rngs, indices):
                 self._draw_episode_faults(rng, int(b))
-        self.stats.status[indices] = self.sim.status[indices]
-        self.stats.peak_tension[indices] = self.sim.tension[indices]
-        self.stats.substeps[indices] = 0
         self._evaluate()
 
     def _draw_episode_faults(self, rng: np.random.Generator, b: int) -> None:
@@ -1160,22 +1168,20 @@ class DampingTask:
                     actions.shape
                 )
         _task_kernels.command_forces(
+            self.task_settings,
             np.ascontiguousarray(actions),
             self.thrusters,
             self.max_thrust,
-            config.thrust_limit == "magnitude",
-            self.bias,
-            interval,
             mask,
-            self.force,
-            self.thrust,
-            self.impulse,
+            self.task_node_table,
+            self.sim.node_table,
+            self.task_cluster_table,
         )
         if self._perturbed:
             if rngs is None:
                 raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
             self._disturb(mask, rngs)
-        self.sim.advance_unchecked(interval, self.force, mask, self.stats)
+        self.sim.advance_unchecked(interval, mask)
         self.propellant[mask] += self.impulse[mask]
         self._evaluate()
 
@@ -1236,15 +1242,15 @@ class DampingTask:
             "vibration_energy": column[_COLUMN["vibration_energy"]],
             "kinetic_energy": kinetic,
             "strain_energy": strain,
-            "dissipated_energy": sim._dissipated,
-            "external_work": sim._work,
+            "dissipated_energy": sim.dissipated,
+            "external_work": sim.work,
             "frame_potential": column[_COLUMN["frame_potential"]],
             "energy_residual": kinetic
             + strain
             + column[_COLUMN["frame_potential"]]
-            - sim._energy0
-            + sim._dissipated
-            - sim._work,
+            - sim.initial_energy
+            + sim.dissipated
+            - sim.work,
             "tensions": sim.tension,
             "slack_count": np.rint(column[_COLUMN["slack_fraction"]] * self.cluster.num_cables).astype(np.int64),
             "max_deviation": column[_COLUMN["max_deviation"]],
@@ -1252,14 +1258,15 @@ class DampingTask:
             "thrust": self.thrust,
             "disturbance": self.disturbance,
             "thruster_ok": self.thruster_ok,
-            "broken_cables": ~sim.intact,
+            "broken_cables": sim.broken,
         }
         if stepped:
+            stats = self.stats
             arrays.update(
-                substeps=self.stats.substeps,
-                step_min=self.stats.step_min,
-                step_max=self.stats.step_max,
-                peak_tension=self.stats.peak_tension,
+                substeps=stats.substeps,
+                step_min=stats.step_min,
+                step_max=stats.step_max,
+                peak_tension=stats.peak_tension,
                 **{
                     key: column[_COLUMN[key]]
                     for key in ("reward_vibration", "reward_propellant", "reward_slack", "reward_failure")
@@ -1274,34 +1281,38 @@ class DampingTask:
         (not through info_arrays) because the single env's step rate depends on it; a test keeps
         the two identical."""
         sim = self.sim
-        row = self.scalars[index].tolist()
+        k = _kernels
+        tk = _task_kernels
+        task_row = self.task_cluster_table[index]
+        row = task_row[tk.SCALAR_COLUMNS : tk.OBSERVATION_COLUMNS].tolist()
+        cluster = sim.cluster_table[index].tolist()
+        cables = sim.cable_table[index]
         kinetic, strain = row[_COLUMN["kinetic_energy"]], row[_COLUMN["strain_energy"]]
         frame_potential = row[_COLUMN["frame_potential"]]
-        dissipated, work = float(sim._dissipated[index]), float(sim._work[index])
+        dissipated, work = cluster[k.DISSIPATED], cluster[k.WORK]
         info: dict[str, Any] = {
-            "time": float(sim.time[index]),
+            "time": cluster[k.TIME],
             "vibration_energy": row[_COLUMN["vibration_energy"]],
             "kinetic_energy": kinetic,
             "strain_energy": strain,
             "dissipated_energy": dissipated,
             "external_work": work,
             "frame_potential": frame_potential,
-            "energy_residual": kinetic + strain + frame_potential - float(sim._energy0[index]) + dissipated - work,
-            "tensions": sim.tension[index].copy(),
+            "energy_residual": kinetic + strain + frame_potential - cluster[k.INITIAL_ENERGY] + dissipated - work,
+            "tensions": cables[:, k.TENSION].copy(),
             "slack_count": round(row[_COLUMN["slack_fraction"]] * self.cluster.num_cables),
             "max_deviation": row[_COLUMN["max_deviation"]],
             "propellant_used": float(self.propellant[index]),
-            "thrust": self.thrust[index].copy(),
+            "thrust": self.task_node_table[index, :, tk.THRUST : tk.THRUST + 3].copy(),
             "disturbance": self.disturbance[index].copy(),
             "thruster_ok": self.thruster_ok[index].copy(),
-            "broken_cables": ~sim.intact[index],
+            "broken_cables": cables[:, k.INTACT] == 0.0,
         }
         if stepped:
-            stats = self.stats
-            info["substeps"] = int(stats.substeps[index])
-            info["step_min"] = float(stats.step_min[index])
-            info["step_max"] = float(stats.step_max[index])
-            info["peak_tension"] = stats.peak_tension[index].copy()
+            info["substeps"] = int(sim.counter_table[index, k.SUBSTEPS])
+            info["step_min"] = cluster[k.STEP_MIN]
+            info["step_max"] = cluster[k.STEP_MAX]
+            info["peak_tension"] = cables[:, k.PEAK_TENSION].copy()
             for key in ("reward_vibration", "reward_propellant", "reward_slack", "reward_failure"):
                 info[key] = row[_COLUMN[key]]
             info["end_reason"] = END_REASONS[int(self.end_reason[index])]
