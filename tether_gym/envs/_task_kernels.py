@@ -10,6 +10,11 @@ the same bits as measured alone.  They read the simulator's tables (columns name
   cluster: what the kernels read of the cluster's episode, the scalar results of the last
   evaluation (reward terms, energies, ...) and its observation vector;
 * the task settings ``(TASK_SETTINGS,)`` float64, shared by the batch.
+
+The scalar results follow :class:`~tether_gym.envs.contract.Scalar`, the end reasons
+:class:`~tether_gym.envs.contract.EndReason` and the observation the offsets of the task's
+:class:`~tether_gym.envs.contract.ObservationLayout`, all defined in
+:mod:`tether_gym.envs.contract`.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from tether_gym._kernels import (
     TENSION,
     VELOCITY,
 )
+from tether_gym.envs.contract import EndReason, Scalar
 
 # ---------------------------------------------------------------------------------------------
 # The task's node table, (B, n, TASK_NODE_COLUMNS).
@@ -47,27 +53,29 @@ TASK_NODE_COLUMNS = 9
 # The task's cluster table, (B, TASK_CLUSTER_COLUMNS + observation size).
 NOMINAL_STRAIN_ENERGY = 0  # J, the cables' strain energy at the nominal shape
 IMPULSE = 1  # N*s, the thrust impulse of the last interval, sum_j |F_j| dt
-SCALAR_COLUMNS = 2  # the first of the scalar results below, in this order
-REWARD = 0
-REWARD_VIBRATION = 1
-REWARD_PROPELLANT = 2
-REWARD_SLACK = 3
-REWARD_FAILURE = 4
-VIBRATION_ENERGY = 5  # J
-MAX_DEVIATION = 6  # m
-SLACK_FRACTION = 7
-KINETIC_ENERGY = 8  # J
-STRAIN_ENERGY = 9  # J
-FRAME_POTENTIAL = 10  # J
-NUM_SCALARS = 11
+SCALAR_COLUMNS = 2  # the first of the scalar results, in the order of contract.Scalar
+NUM_SCALARS = len(Scalar)
 OBSERVATION_COLUMNS = SCALAR_COLUMNS + NUM_SCALARS  # the observation vector fills the rest of the row
 TASK_CLUSTER_COLUMNS = OBSERVATION_COLUMNS
 
-# The end reasons.
-RUNNING = 0
-FORMATION_LOST = 1
-CABLE_BROKEN = 2
-NUMERICS_DIVERGED = 3
+# The scalar columns and end reasons of the contract (tether_gym.envs.contract), as the plain ints
+# the compiled code reads: an IntEnum member in numba code makes every load of the cache take
+# seconds.
+REWARD = int(Scalar.REWARD)
+REWARD_VIBRATION = int(Scalar.REWARD_VIBRATION)
+REWARD_PROPELLANT = int(Scalar.REWARD_PROPELLANT)
+REWARD_SLACK = int(Scalar.REWARD_SLACK)
+REWARD_FAILURE = int(Scalar.REWARD_FAILURE)
+VIBRATION_ENERGY = int(Scalar.VIBRATION_ENERGY)
+MAX_DEVIATION = int(Scalar.MAX_DEVIATION)
+SLACK_FRACTION = int(Scalar.SLACK_FRACTION)
+KINETIC_ENERGY = int(Scalar.KINETIC_ENERGY)
+STRAIN_ENERGY = int(Scalar.STRAIN_ENERGY)
+FRAME_POTENTIAL = int(Scalar.FRAME_POTENTIAL)
+RUNNING = int(EndReason.RUNNING)
+FORMATION_LOST = int(EndReason.FORMATION_LOST)
+CABLE_BROKEN = int(EndReason.CABLE_BROKEN)
+NUMERICS_DIVERGED = int(EndReason.NUMERICS_DIVERGED)
 
 # The task settings, (TASK_SETTINGS,).
 CONTROL_INTERVAL = 0  # s
@@ -80,10 +88,11 @@ VIBRATION_WEIGHT = 6  # 1/J: the vibration weight over the energy scale
 PROPELLANT_WEIGHT = 7  # 1/(N*s): the propellant weight over the full impulse
 SLACK_WEIGHT = 8  # per fraction of slack cables
 FAILURE_PENALTY = 9  # the one-off cost of a failure
-DISPLACEMENT_AT = 10  # where the observation's satellite displacements start
-VELOCITY_AT = 11  # ... the satellite velocities
-ELONGATION_AT = 12  # ... the cable elongations
-TENSION_RATIO_AT = 13  # ... the tension ratios, or -1 when they are not observed
+# Where the parts of the observation vector start (from the task's contract.ObservationLayout).
+DISPLACEMENT_AT = 10
+VELOCITY_AT = 11
+ELONGATION_AT = 12
+TENSION_RATIO_AT = 13  # -1 when the tension ratios are not observed
 TASK_SETTINGS = 14
 
 #: Observations are clipped to +-this (it is reached only far beyond a lost formation).
@@ -432,11 +441,11 @@ def _evaluate_cluster(
     )
 
 
-def _compile_drivers(simulator_layout: tuple) -> tuple:  # noqa: ANN202 - returns compiled functions
-    """Compile the kernels the task calls.  They read the simulator's tables, whose columns are
-    named in another file: numba's cache watches only this one, so the drivers hold the
-    simulator's ``LAYOUT`` in their closure, which it hashes into the cache key; an edit of that
-    layout then recompiles them instead of loading stale code."""
+def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns compiled functions
+    """Compile the kernels the task calls.  They read the simulator's tables and the contract's
+    columns and codes, which are written in other files: numba's cache watches only this one, so
+    the drivers hold those numbers (``foreign_layout``) in their closure, which it hashes into
+    the cache key; an edit there then recompiles them instead of loading stale code."""
 
     @njit(cache=True, nogil=True, error_model="numpy")
     def command_forces(
@@ -454,7 +463,7 @@ def _compile_drivers(simulator_layout: tuple) -> tuple:  # noqa: ANN202 - return
         (k,) N on the satellites ``thrusters`` (k,).  Writes the thrust, the simulator's applied
         force ``bias + thrust`` and the interval's thrust impulse ``sum_j |F_j| dt``, N*s, of the
         active clusters only."""
-        simulator_layout  # noqa: B018 - part of the cache key
+        foreign_layout  # noqa: B018 - part of the cache key
         for b in range(actions.shape[0]):
             if active[b]:
                 _command_cluster(settings, actions[b], thrusters, max_thrust, task_nodes[b], nodes[b], task_clusters[b])
@@ -518,7 +527,7 @@ def _compile_drivers(simulator_layout: tuple) -> tuple:  # noqa: ANN202 - return
         about the centre of mass), so that it measures the deformation against the frame's
         effective potential and is zero at the nominal equilibrium.
         """
-        simulator_layout  # noqa: B018 - part of the cache key
+        foreign_layout  # noqa: B018 - part of the cache key
         scratch = np.empty((4, 3))
         for b in range(nodes.shape[0]):
             evaluate_one(
@@ -540,7 +549,7 @@ def _compile_drivers(simulator_layout: tuple) -> tuple:  # noqa: ANN202 - return
         end_reason: np.ndarray,
     ) -> None:  # pragma: no cover - compiled
         """:func:`evaluate_serial` on all threads (the same bits)."""
-        simulator_layout  # noqa: B018 - part of the cache key
+        foreign_layout  # noqa: B018 - part of the cache key
         batch = nodes.shape[0]
         chunks = min(batch, PARALLEL_CHUNKS)
         for k in prange(chunks):
@@ -554,4 +563,12 @@ def _compile_drivers(simulator_layout: tuple) -> tuple:  # noqa: ANN202 - return
     return command_forces, evaluate_serial, evaluate_parallel
 
 
-command_forces, evaluate_serial, evaluate_parallel = _compile_drivers((_kernels.LAYOUT, PARALLEL_CHUNKS))
+command_forces, evaluate_serial, evaluate_parallel = _compile_drivers(
+    (
+        _kernels.LAYOUT,
+        PARALLEL_CHUNKS,
+        _kernels.STATUS_OK,
+        tuple((column.name, int(column)) for column in Scalar),
+        tuple((reason.name, int(reason)) for reason in EndReason),
+    )
+)

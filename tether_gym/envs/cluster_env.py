@@ -11,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from tether_gym.cluster import Cluster
+from tether_gym.envs.contract import ObservationLayout, Scalar
 from tether_gym.envs.task import (
     MAX_RENDER_EXAGGERATION,
     OBSERVATION_LIMIT,
@@ -61,12 +62,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     in which the nominal shape is at rest. ``D`` is
     ``initial_displacement`` and ``V`` is ``initial_velocity``.
 
-    | index | observation | unit |
-    |---|---|---|
-    | 0 .. 3s-1 | displacement of each observed satellite from its nominal place | D |
-    | 3s .. 6s-1 | velocity of each observed satellite relative to the centre of mass | V |
-    | 6s .. 6s+c-1 | cable elongation ``L - L0`` | D |
-    | 6s+c .. 6s+2c-1 | cable tension / breaking load (only with ``observe_tensions``) | 1 |
+    OBSERVATION_TABLE
 
     At reset every entry is of order 1; values are clipped to +-1e4. ``observation_noise`` adds Gaussian noise with that
     standard deviation, in these units.
@@ -235,7 +231,8 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         info = self.task.info(0)
         if self.render_mode == "human":
             self.render()
-        return observation, float(self.task.scalars[0, 0]), bool(self.task.end_reason[0] > 0), False, info
+        reward = float(self.task.scalars[0, Scalar.REWARD])
+        return observation, reward, bool(self.task.terminated()[0]), False, info
 
     def set_difficulty(self, difficulty: float) -> None:
         """Scale initial conditions, randomisation and disturbances by ``difficulty`` in [0, 1]
@@ -275,3 +272,10 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         for key, value in self.__getstate__().items():
             setattr(clone, key, copy.deepcopy(value, memo))
         return clone
+
+
+# The observation table is written once, in tether_gym.envs.contract (docstrings are absent under -OO).
+if TetherClusterEnv.__doc__:
+    TetherClusterEnv.__doc__ = TetherClusterEnv.__doc__.replace(
+        "OBSERVATION_TABLE", ObservationLayout.symbolic_table().replace("\n", "\n    ")
+    )

@@ -24,6 +24,15 @@ from numpy.typing import ArrayLike
 from tether_gym import _kernels
 from tether_gym.cluster import Cluster
 from tether_gym.envs import _task_kernels
+from tether_gym.envs.contract import (
+    END_REASONS,
+    REWARD_TERMS,
+    SCALARS,
+    EndReason,
+    ObservationLayout,
+    RewardWeights,
+    Scalar,
+)
 from tether_gym.limits import (
     MAX_COORDINATE,
     MAX_SPEED,
@@ -44,44 +53,29 @@ from tether_gym.simulator import (
 )
 
 __all__ = [
-    "TASK_STATE_FIELDS",
-    "TaskState",
     "END_REASONS",
     "OBSERVATION_LIMIT",
     "SCALARS",
+    "TASK_STATE_FIELDS",
     "ClusterScales",
     "DampingTask",
+    "EndReason",
     "EnvArgumentError",
+    "ObservationLayout",
+    "RewardWeights",
+    "Scalar",
     "TaskConfig",
+    "TaskState",
     "task_from_arguments",
 ]
 
 ThrustLimit = Literal["per_axis", "magnitude"]
 CableFailure = Literal["terminate", "continue"]
 
-#: ``end_reason`` codes reported in ``info`` (index into this tuple).
-END_REASONS = ("running", "formation_lost", "cable_broken", "numerics_diverged")
-
 RANDOMISABLE = ("masses", "EA", "damping", "N0", "axial_damping")
 
 #: Keys of ``reset(options=...)``: an exact initial state.
 RESET_OPTION_KEYS = ("positions", "velocities")
-
-#: Per-cluster quantities the task kernel writes after each step, in this column order.
-SCALARS = (
-    "reward",
-    "reward_vibration",
-    "reward_propellant",
-    "reward_slack",
-    "reward_failure",
-    "vibration_energy",
-    "max_deviation",
-    "slack_fraction",
-    "kinetic_energy",
-    "strain_energy",
-    "frame_potential",
-)
-_COLUMN = {name: k for k, name in enumerate(SCALARS)}
 
 OBSERVATION_LIMIT = _task_kernels.OBSERVATION_LIMIT
 
@@ -726,10 +720,11 @@ class DampingTask:
     """The damping task over a batch of B clusters of one topology.
 
     After every :meth:`reset` or :meth:`step` the results sit in preallocated arrays:
-    ``observation`` (B, observation_size) float64 (before noise), ``scalars`` (B, len(SCALARS))
-    (reward and its terms, vibration energy in J, largest deviation in m, slack fraction, kinetic
-    and strain energy in J) and ``end_reason`` (B,) (index into ``END_REASONS``; > 0 means
-    terminated).  Read them before the next call.
+    ``observation`` (B, observation_size) float64 (before noise; its parts are the slices of
+    :attr:`observation_layout`), ``scalars`` (B, len(Scalar)) (the reward, its terms and the
+    energies, ``scalars[:, Scalar.REWARD]`` and so on) and ``end_reason`` (B,) (an
+    :class:`EndReason` code; anything but ``RUNNING`` means terminated).  Read them before the
+    next call.
 
     The reward is always finite: a cluster whose reward comes out NaN, infinite or beyond
     ``REWARD_LIMIT`` ends as ``numerics_diverged`` with the reward ``-failure_penalty`` plus its
@@ -743,6 +738,9 @@ class DampingTask:
 
     Attributes:
         scales: the cluster's :class:`ClusterScales`, which bound the settings and reset states.
+        observation_layout: the :class:`ObservationLayout` of the observation vector.
+        perturbed: whether the task draws disturbances, thrust noise or faults (``step`` then
+            needs one generator per cluster).
 
     What the task kernels read and write lives in two tables and a settings vector (their columns
     are named in :mod:`tether_gym.envs._task_kernels`): ``task_node_table`` (B, n, ...),
@@ -761,7 +759,7 @@ class DampingTask:
         "task_cluster_table",
         _task_kernels.SCALAR_COLUMNS,
         _task_kernels.NUM_SCALARS,
-        "(B, len(SCALARS)) the scalar results of the last step: reward, its terms, energies (see SCALARS).",
+        "(B, len(Scalar)) the scalar results of the last step, columns named by Scalar: reward, its terms, energies.",
     )
     observation = TableColumns(
         "task_cluster_table",
@@ -787,6 +785,16 @@ class DampingTask:
     def stats(self) -> AdvanceStats:
         """What the simulator's last advance did (views; see :attr:`BatchSimulator.last_advance`)."""
         return self.sim.last_advance
+
+    @property
+    def reward_weights(self) -> RewardWeights:
+        """The reward's weights as the kernels apply them (a copy of :attr:`weights`, named)."""
+        return RewardWeights(*(float(w) for w in self.weights))
+
+    def terminated(self) -> np.ndarray:
+        """(B,) bool: clusters whose last step ended their episode (``end_reason`` is not
+        ``RUNNING``)."""
+        return self.end_reason != EndReason.RUNNING
 
     def __init__(self, cluster: Cluster, num_clusters: int, config: TaskConfig) -> None:
         if not isinstance(cluster, Cluster):
@@ -820,7 +828,8 @@ class DampingTask:
         # to 0.1 % of the shortest cable and 1 mm/s.
         self.length_scale = config.initial_displacement or 1e-3 * float(cluster.L0.min())
         self.speed_scale = config.initial_velocity or 1e-3
-        self.observation_size = 6 * self.observed.size + m + (m if config.observe_tensions else 0)
+        self.observation_layout = layout = ObservationLayout(self.observed.size, m, config.observe_tensions)
+        self.observation_size = layout.size
         tk = _task_kernels
         self.task_node_table = np.zeros((B, n, tk.TASK_NODE_COLUMNS))
         self.task_node_table[:, :, tk.NOMINAL : tk.NOMINAL + 3] = cluster.positions
@@ -832,7 +841,6 @@ class DampingTask:
             * config.control_interval
             * (math.sqrt(3.0) if config.thrust_limit == "per_axis" else 1.0)
         )
-        s = 6 * self.observed.size
         self.task_settings = np.zeros(tk.TASK_SETTINGS)
         for column, value in (
             (tk.CONTROL_INTERVAL, config.control_interval),
@@ -845,10 +853,10 @@ class DampingTask:
             (tk.PROPELLANT_WEIGHT, config.propellant_weight / self.full_impulse),
             (tk.SLACK_WEIGHT, config.slack_weight),
             (tk.FAILURE_PENALTY, config.failure_penalty),
-            (tk.DISPLACEMENT_AT, 0),
-            (tk.VELOCITY_AT, s // 2),
-            (tk.ELONGATION_AT, s),
-            (tk.TENSION_RATIO_AT, s + m if config.observe_tensions else -1),
+            (tk.DISPLACEMENT_AT, layout.displacement.start),
+            (tk.VELOCITY_AT, layout.velocity.start),
+            (tk.ELONGATION_AT, layout.elongation.start),
+            (tk.TENSION_RATIO_AT, layout.tension_ratio.start if layout.tensions else -1),
         ):
             self.task_settings[column] = value
         self.energy_scale = self._energy_scale()
@@ -863,7 +871,7 @@ class DampingTask:
         self.periodic_direction = np.zeros((B, n, 3))
         self.periodic_phase = np.zeros((B, n))
         self.action_queue = np.zeros((B, config.thrust_delay, self.action_size))
-        self._perturbed = bool(
+        self.perturbed = bool(
             config.impulse_magnitude
             or config.periodic_amplitude
             or config.thrust_noise
@@ -871,7 +879,7 @@ class DampingTask:
         )
         self.end_reason = np.zeros(B, dtype=np.int64)
         self._all = np.ones(B, dtype=np.bool_)
-        self._evaluate()
+        self.evaluate()
 
     # ------------------------------------------------------------------ nominal state
     def _set_nominal(self, index: int, cluster: Cluster) -> None:
@@ -898,7 +906,7 @@ class DampingTask:
         # The serial kernel even for 64 clusters (the same bits): a single env then never compiles
         # the parallel one.
         self._evaluate_tables(probe, task_nodes, task_clusters, np.zeros(count, dtype=np.int64), parallel=False)
-        scale = float(np.mean(task_clusters[:, tk.SCALAR_COLUMNS + tk.VIBRATION_ENERGY]))
+        scale = float(np.mean(task_clusters[:, tk.SCALAR_COLUMNS + Scalar.VIBRATION_ENERGY]))
         return scale if scale > 0 else 1.0
 
     def _evaluate_tables(
@@ -923,8 +931,10 @@ class DampingTask:
             end_reason,
         )
 
-    def _evaluate(self) -> None:
-        """Observation, scalar results and end reason of every cluster, from the current state."""
+    def evaluate(self) -> None:
+        """Recompute the observation, the scalar results and the end reason of every cluster from
+        the current state (``step`` and ``reset`` do it; call it after changing the state or the
+        weights directly)."""
         self._evaluate_tables(
             self.sim,
             self.task_node_table,
@@ -932,6 +942,9 @@ class DampingTask:
             self.end_reason,
             parallel=self.num_clusters >= PARALLEL_MIN_BATCH,
         )
+
+    #: The name :meth:`evaluate` had before it was public (kept for existing callers).
+    _evaluate = evaluate
 
     # ------------------------------------------------------------------ snapshots
     def _state_array(self, name: str) -> np.ndarray:
@@ -1103,10 +1116,10 @@ class DampingTask:
         self.disturbance[indices] = 0.0
         self.thruster_ok[indices] = True
         self.action_queue[indices] = 0.0
-        if self._perturbed:
+        if self.perturbed:
             for rng, b in zip(rngs, indices):
                 self._draw_episode_faults(rng, int(b))
-        self._evaluate()
+        self.evaluate()
 
     def _draw_episode_faults(self, rng: np.random.Generator, b: int) -> None:
         """Draw cluster ``b``'s periodic-force directions and phases and its thruster failure."""
@@ -1177,13 +1190,13 @@ class DampingTask:
             self.sim.node_table,
             self.task_cluster_table,
         )
-        if self._perturbed:
+        if self.perturbed:
             if rngs is None:
                 raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
             self._disturb(mask, rngs)
         self.sim.advance_unchecked(interval, mask)
         self.propellant[mask] += self.impulse[mask]
-        self._evaluate()
+        self.evaluate()
 
     def _disturb(self, mask: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
         """Add this interval's disturbance force and thrust noise to the active clusters' force.
@@ -1235,25 +1248,20 @@ class DampingTask:
         of the task's buffers (copy what you keep).  ``stepped=False`` (after a reset) leaves out
         the per-step quantities.  ``end_reason`` is the code; see ``END_REASONS``."""
         sim = self.sim
-        column = self.scalars.T
-        kinetic, strain = column[_COLUMN["kinetic_energy"]], column[_COLUMN["strain_energy"]]
+        values = dict(zip(SCALARS, self.scalars.T, strict=True))
+        kinetic, strain, frame_potential = values["kinetic_energy"], values["strain_energy"], values["frame_potential"]
         arrays: dict[str, np.ndarray] = {
             "time": sim.time,
-            "vibration_energy": column[_COLUMN["vibration_energy"]],
+            "vibration_energy": values["vibration_energy"],
             "kinetic_energy": kinetic,
             "strain_energy": strain,
             "dissipated_energy": sim.dissipated,
             "external_work": sim.work,
-            "frame_potential": column[_COLUMN["frame_potential"]],
-            "energy_residual": kinetic
-            + strain
-            + column[_COLUMN["frame_potential"]]
-            - sim.initial_energy
-            + sim.dissipated
-            - sim.work,
+            "frame_potential": frame_potential,
+            "energy_residual": kinetic + strain + frame_potential - sim.initial_energy + sim.dissipated - sim.work,
             "tensions": sim.tension,
-            "slack_count": np.rint(column[_COLUMN["slack_fraction"]] * self.cluster.num_cables).astype(np.int64),
-            "max_deviation": column[_COLUMN["max_deviation"]],
+            "slack_count": np.rint(values["slack_fraction"] * self.cluster.num_cables).astype(np.int64),
+            "max_deviation": values["max_deviation"],
             "propellant_used": self.propellant,
             "thrust": self.thrust,
             "disturbance": self.disturbance,
@@ -1267,10 +1275,7 @@ class DampingTask:
                 step_min=stats.step_min,
                 step_max=stats.step_max,
                 peak_tension=stats.peak_tension,
-                **{
-                    key: column[_COLUMN[key]]
-                    for key in ("reward_vibration", "reward_propellant", "reward_slack", "reward_failure")
-                },
+                **{term.key: values[term.key] for term in REWARD_TERMS},
                 end_reason=self.end_reason,
             )
         return arrays
@@ -1284,15 +1289,14 @@ class DampingTask:
         k = _kernels
         tk = _task_kernels
         task_row = self.task_cluster_table[index]
-        row = task_row[tk.SCALAR_COLUMNS : tk.OBSERVATION_COLUMNS].tolist()
+        values = dict(zip(SCALARS, task_row[tk.SCALAR_COLUMNS : tk.OBSERVATION_COLUMNS].tolist(), strict=True))
         cluster = sim.cluster_table[index].tolist()
         cables = sim.cable_table[index]
-        kinetic, strain = row[_COLUMN["kinetic_energy"]], row[_COLUMN["strain_energy"]]
-        frame_potential = row[_COLUMN["frame_potential"]]
+        kinetic, strain, frame_potential = values["kinetic_energy"], values["strain_energy"], values["frame_potential"]
         dissipated, work = cluster[k.DISSIPATED], cluster[k.WORK]
         info: dict[str, Any] = {
             "time": cluster[k.TIME],
-            "vibration_energy": row[_COLUMN["vibration_energy"]],
+            "vibration_energy": values["vibration_energy"],
             "kinetic_energy": kinetic,
             "strain_energy": strain,
             "dissipated_energy": dissipated,
@@ -1300,8 +1304,8 @@ class DampingTask:
             "frame_potential": frame_potential,
             "energy_residual": kinetic + strain + frame_potential - cluster[k.INITIAL_ENERGY] + dissipated - work,
             "tensions": cables[:, k.TENSION].copy(),
-            "slack_count": round(row[_COLUMN["slack_fraction"]] * self.cluster.num_cables),
-            "max_deviation": row[_COLUMN["max_deviation"]],
+            "slack_count": round(values["slack_fraction"] * self.cluster.num_cables),
+            "max_deviation": values["max_deviation"],
             "propellant_used": float(self.propellant[index]),
             "thrust": self.task_node_table[index, :, tk.THRUST : tk.THRUST + 3].copy(),
             "disturbance": self.disturbance[index].copy(),
@@ -1313,7 +1317,7 @@ class DampingTask:
             info["step_min"] = cluster[k.STEP_MIN]
             info["step_max"] = cluster[k.STEP_MAX]
             info["peak_tension"] = cables[:, k.PEAK_TENSION].copy()
-            for key in ("reward_vibration", "reward_propellant", "reward_slack", "reward_failure"):
-                info[key] = row[_COLUMN[key]]
-            info["end_reason"] = END_REASONS[int(self.end_reason[index])]
+            for term in REWARD_TERMS:
+                info[term.key] = values[term.key]
+            info["end_reason"] = END_REASONS[self.end_reason[index]]
         return info

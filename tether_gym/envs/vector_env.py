@@ -12,8 +12,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from tether_gym.cluster import Cluster
+from tether_gym.envs.contract import END_REASONS, REWARD_TERMS, Scalar
 from tether_gym.envs.task import (
-    END_REASONS,
     MAX_NUM_ENVS,
     OBSERVATION_LIMIT,
     EnvArgumentError,
@@ -27,17 +27,7 @@ from tether_gym.limits import is_whole_number
 __all__ = ["TetherClusterVectorEnv"]
 
 #: Info keys that exist only after a step (a reset's info lacks them, as in the single env).
-STEP_KEYS = (
-    "substeps",
-    "step_min",
-    "step_max",
-    "peak_tension",
-    "reward_vibration",
-    "reward_propellant",
-    "reward_slack",
-    "reward_failure",
-    "end_reason",
-)
+STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", *(term.key for term in REWARD_TERMS), "end_reason")
 
 
 class TetherClusterVectorEnv(VectorEnv):
@@ -167,8 +157,8 @@ class TetherClusterVectorEnv(VectorEnv):
         task = self.task
         task.step(np.ascontiguousarray(a), rngs=self._rngs)
         self._episode_steps += 1
-        rewards = task.scalars[:, 0].copy()
-        terminated = task.end_reason > 0
+        rewards = task.scalars[:, Scalar.REWARD].copy()
+        terminated = task.terminated()
         truncated = (
             self._episode_steps >= self._max_episode_steps
             if self._max_episode_steps is not None
