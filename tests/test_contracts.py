@@ -228,3 +228,101 @@ def test_copies_and_pickles_keep_their_views_on_their_own_tables() -> None:
         np.testing.assert_array_equal(
             copied.sim.positions, copied.sim.node_table[:, :, _kernels.POSITION : _kernels.POSITION + 3]
         )
+
+
+# ------------------------------------------------------------------ the split by concern
+FLAT_ARGUMENTS = {
+    "control_interval": 0.2,
+    "thrusters": (0, 2),
+    "max_thrust": 0.5,
+    "thrust_limit": "magnitude",
+    "initial_displacement": 0.02,
+    "initial_velocity": 0.05,
+    "vibration_weight": 2.0,
+    "propellant_weight": 0.3,
+    "slack_weight": 0.1,
+    "failure_penalty": 50.0,
+    "max_deviation": 1.0,
+    "observe_tensions": True,
+    "observation_noise": 0.01,
+    "observed_satellites": (1, 3),
+    "randomize": {"masses": 0.1},
+    "safety_factor": 0.2,
+    "impulse_magnitude": 0.5,
+    "impulse_rate": 0.2,
+    "periodic_amplitude": 0.1,
+    "periodic_period": 5.0,
+    "thrust_noise": 0.05,
+    "thrust_delay": 1,
+    "thruster_failure_probability": 0.5,
+    "thruster_failure_window": (1.0, 2.0),
+    "cable_failure": "continue",
+    "difficulty": 0.5,
+}
+
+
+def test_task_config_groups_hold_every_setting_of_their_concern() -> None:
+    from tether_gym.envs.config import TASK_CONFIG_GROUPS, TaskConfig
+
+    config = TaskConfig(**FLAT_ARGUMENTS)
+    grouped = {name for group in TASK_CONFIG_GROUPS.values() for name in group.__dataclass_fields__}
+    top_level = {"control_interval", "thrusters", "max_thrust", "thrust_limit", "max_deviation", "observe_tensions"}
+    top_level |= {"observation_noise", "observed_satellites", "safety_factor", "difficulty"}
+    assert grouped | top_level == set(FLAT_ARGUMENTS) == set(TaskConfig.__dataclass_fields__)
+    assert not grouped & top_level
+    for attribute, group_type in TASK_CONFIG_GROUPS.items():
+        group = getattr(config, attribute)
+        assert isinstance(group, group_type)
+        for name in group.__dataclass_fields__:
+            assert getattr(group, name) == getattr(config, name) == FLAT_ARGUMENTS[name], name
+    rebuilt = TaskConfig.from_groups(
+        reward=config.reward,
+        initial_state=config.initial_state,
+        disturbances=config.disturbances,
+        faults=config.faults,
+        **{name: FLAT_ARGUMENTS[name] for name in top_level},
+    )
+    assert rebuilt == config
+
+
+def test_groups_check_their_values_as_the_flat_arguments_do() -> None:
+    from tether_gym.envs.config import RewardConfig, TaskConfig
+    from tether_gym.envs.disturbances import DisturbanceConfig
+
+    for build in (lambda: TaskConfig(slack_weight=-1.0), lambda: RewardConfig(slack_weight=-1.0)):
+        with pytest.raises(tg.envs.EnvArgumentError, match=r"slack_weight must be a finite number in \[0, 1e\+06\]"):
+            build()
+    with pytest.raises(tg.envs.EnvArgumentError, match="periodic_period"):
+        TaskConfig.from_groups(disturbances=DisturbanceConfig(periodic_amplitude=1.0, periodic_period=0.1))
+    with pytest.raises(tg.envs.EnvArgumentError, match="slack_weight is given twice"):
+        TaskConfig.from_groups(reward=RewardConfig(), slack_weight=1.0)
+
+
+def test_make_takes_exactly_the_flat_arguments() -> None:
+    env = gym.make(ENV_ID, **FLAT_ARGUMENTS)
+    config = env.unwrapped.task.config
+    assert all(getattr(config, name) == value for name, value in FLAT_ARGUMENTS.items())
+    with pytest.raises(
+        TypeError, match=r"unknown argument\(s\) \['reward'\]; task arguments are \[.*'vibration_weight'"
+    ):
+        gym.make(ENV_ID, reward={"vibration_weight": 1.0})
+
+
+def test_disturbances_and_faults_live_in_their_own_module() -> None:
+    from tether_gym.envs.disturbances import Disturbances
+
+    task = task_from_arguments(2, "tetrahedron", thrust_delay=1, thruster_failure_probability=1.0)
+    assert isinstance(task.disturbances, Disturbances)
+    for name in Disturbances.STATE:
+        assert getattr(task, name) is getattr(task.disturbances, name)
+    assert task.perturbed is task.disturbances.draws is True
+
+
+def test_the_finite_difference_reference_lives_in_analysis() -> None:
+    from tether_gym.analysis import element_omega2_finite_difference
+
+    batch = tg.BatchSimulator(tg.make_cluster("hub"), 2)
+    batch.advance(0.05, np.random.default_rng(0).normal(0, 0.5, (2, batch.num_nodes, 3)))
+    np.testing.assert_array_equal(element_omega2_finite_difference(batch), batch.element_omega2_finite_difference())
+    with pytest.raises(ValueError, match="relative_perturbation must lie in"):
+        element_omega2_finite_difference(batch, 0.5)

@@ -35,6 +35,7 @@ __all__ = [
     "MIN_LENGTH",
     "MIN_MASS",
     "check_range",
+    "check_real",
     "is_real_number",
     "is_whole_number",
     "real_array",
@@ -169,3 +170,13 @@ def is_whole_number(value: Any) -> bool:
 def is_real_number(value: Any) -> bool:
     """True for a real, non-boolean number (int, float, numpy scalar)."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def check_real(name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = False) -> float:
+    """``value`` as a float, or a ``ValueError`` naming ``name`` unless it is a real number in
+    ``(low, high]`` (``[low, high]`` with ``low_inclusive``)."""
+    if not is_real_number(value):
+        raise ValueError(f"{name} must be a number ({unit}); got {value!r}")
+    number = to_float(value)
+    check_range(name, np.float64(number), low, high, unit, low_inclusive=low_inclusive)
+    return number

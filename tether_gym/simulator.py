@@ -23,6 +23,7 @@ from tether_gym.limits import (
     MAX_FORCE,
     MAX_SPEED,
     check_range,
+    check_real,
     is_real_number,
     is_whole_number,
     real_array,
@@ -200,18 +201,6 @@ def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str,
     return array
 
 
-def _check_number(
-    name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = False
-) -> float:
-    """``value`` as a float, or a ``ValueError`` naming ``name`` unless it is a real number in
-    ``(low, high]`` (``[low, high]`` with ``low_inclusive``)."""
-    if not is_real_number(value):
-        raise ValueError(f"{name} must be a number ({unit}); got {value!r}")
-    number = to_float(value)
-    check_range(name, np.float64(number), low, high, unit, low_inclusive=low_inclusive)
-    return number
-
-
 def _check_duration(duration: float) -> float:
     """``duration`` as a float, > 0 and finite (its sub-step count is checked by the kernel)."""
     value = to_float(duration) if is_real_number(duration) else math.nan
@@ -343,13 +332,11 @@ class BatchSimulator:
                 raise TypeError("clusters must be a Cluster or a non-empty sequence of Cluster objects")
             if num_clusters is not None and num_clusters != len(cluster_list):
                 raise ValueError(f"num_clusters={num_clusters} disagrees with the {len(cluster_list)} clusters given")
-        self.safety_factor = _check_number(
-            "safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, ""
-        )
+        self.safety_factor = check_real("safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, "")
         if not isinstance(elongation, str) or elongation not in ("exact", "linearised"):
             raise ValueError(f"elongation must be 'exact' or 'linearised'; got {elongation!r}")
         self.elongation: Elongation = elongation
-        self.max_step = _check_number("max_step", max_step, 0.0, math.inf, "s")
+        self.max_step = check_real("max_step", max_step, 0.0, math.inf, "s")
         if not is_whole_number(max_substeps) or not 1 <= max_substeps <= MAX_SUBSTEPS_LIMIT:
             raise ValueError(
                 f"max_substeps must be a whole number in 1..{MAX_SUBSTEPS_LIMIT:.0e}; got {max_substeps!r}"
@@ -499,7 +486,7 @@ class BatchSimulator:
         x0 = _check_array("positions", positions, shape, "m", MAX_COORDINATE)
         v0 = np.zeros(shape) if velocities is None else _check_array("velocities", velocities, shape, "m/s", MAX_SPEED)
         # Everything that can refuse the state is computed before any of it is stored.
-        nodes, cables, clusters, finite = self._evaluate(x0, idx, velocities=v0, intact=True)
+        nodes, cables, clusters, finite = self.evaluate_at(x0, idx, velocities=v0, intact=True)
         if not finite.all():
             raise ValueError(
                 f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable; "
@@ -577,7 +564,7 @@ class BatchSimulator:
             else:
                 getattr(self, attribute)[idx] = state.arrays[name][source]
 
-    def _evaluate(
+    def evaluate_at(
         self,
         x: np.ndarray,
         idx: np.ndarray,
@@ -585,12 +572,16 @@ class BatchSimulator:
         velocities: np.ndarray | None = None,
         intact: np.ndarray | bool | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Forces, tensions and the step-limiting omega^2 of clusters ``idx`` at ``x`` (k, n, 3),
-        with the cables' axial damping acting on ``velocities`` (default: at rest) and the cables
-        ``intact`` (k, m) (default: each cluster's current state; True: all).
+        """Forces, tensions and the step-limiting omega^2 of clusters ``idx`` (k,) at positions
+        ``x`` (k, n, 3) m, with the cables' axial damping acting on ``velocities`` (k, n, 3) m/s
+        (default: at rest) and the cables ``intact`` (k, m) (default: each cluster's current
+        state; True: all), on the taut branch with ``taut_branch`` (see
+        :func:`tether_gym._kernels.cable_forces`).  Unchecked: the inputs are used as they are.
 
-        Computed on scratch copies of the clusters' rows of the tables, which it returns, with
-        ``finite`` (k,) bool: ``(nodes, cables, clusters, finite)``; the state is not touched."""
+        Computed on scratch copies of the clusters' rows of the tables, which it returns with
+        ``finite`` (k,) bool, whether every cable length was finite and non-zero: ``(nodes,
+        cables, clusters, finite)``, the ``INTERNAL_FORCE``, ``TENSION`` and ``OMEGA2`` columns
+        filled in.  The state is not touched."""
         k = _kernels
         nodes = self.node_table[idx]
         nodes[:, :, k.POSITION : k.POSITION + 3] = x
@@ -691,7 +682,7 @@ class BatchSimulator:
         current state)."""
         idx = self.cluster_indices(indices)
         x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
-        nodes, _, _, finite = self._evaluate(x, idx, intact=intact)
+        nodes, _, _, finite = self.evaluate_at(x, idx, intact=intact)
         if not finite.all():
             raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
         column = _kernels.INTERNAL_FORCE
@@ -729,77 +720,11 @@ class BatchSimulator:
             return 2.0 / np.sqrt(omega2)
 
     def element_omega2_finite_difference(self, relative_perturbation: float = 1e-6) -> np.ndarray:
-        """(B, m) the paper's finite-difference column-L1 bound on each cable's squared frequency.
+        """(B, m) the paper's finite-difference column-L1 bound on each cable's squared frequency,
+        (rad/s)^2: see :func:`tether_gym.analysis.element_omega2_finite_difference`."""
+        from tether_gym.analysis import element_omega2_finite_difference
 
-        Each cable is cut out as a two-node element with its split masses; each of its 6 degrees of
-        freedom is perturbed by ``+-h`` (``h = relative_perturbation * L``) and the element force
-        evaluated, giving the stiffness columns of eq. (21); the bound is the largest L1 norm of a
-        column of ``M_e^-1/2 K_e M_e^-1/2``, in (rad/s)^2.  A slack cable is perturbed as if it
-        were just taut at its current length (pretension shifted so that ``N = 0`` there): the
-        stiffest it can be within a step, without the spurious compression of the linear law.
-        """
-        _check_number("relative_perturbation", relative_perturbation, 0.0, 0.1, "(a fraction of the cable length)")
-        k = _kernels
-        B, m = self.num_clusters, self.num_cables
-        x = self.positions_
-        ends = np.stack([x[:, self.cables[:, 0]], x[:, self.cables[:, 1]]], axis=2)  # (B, m, 2, 3)
-        lengths = np.linalg.norm(ends[:, :, 1] - ends[:, :, 0], axis=-1)  # (B, m)
-        h = relative_perturbation * lengths
-        # 12 perturbed copies of each element: dof j = 0..5, sign +-.
-        dof_shift = np.eye(6).reshape(6, 2, 3)
-        perturbed = (
-            ends[:, :, None, None]
-            + np.array([1.0, -1.0])[None, None, None, :, None, None]
-            * h[:, :, None, None, None, None]
-            * dof_shift[None, None, :, None]
-        )  # (B, m, 6, 2, 2, 3)
-        E = B * m * 12
-        ref = self.reference
-        ref_ends = np.stack([ref[:, self.cables[:, 0]], ref[:, self.cables[:, 1]]], axis=2)
-        ref_elements = np.broadcast_to(ref_ends[:, :, None, None], perturbed.shape).reshape(E, 2, 3)
-
-        def per_element(values: np.ndarray) -> np.ndarray:
-            return np.broadcast_to(values[:, :, None, None], (B, m, 6, 2)).reshape(E)
-
-        all_clusters = np.arange(B)
-        tension_taut_branch = self._evaluate(x, all_clusters, taut_branch=True)[1][:, :, k.TENSION]
-        just_taut_N0 = self.N0 - np.minimum(tension_taut_branch, 0.0)
-        # Each element is a cluster of two nodes and one cable, at rest, intact, in an inertial frame.
-        nodes = np.zeros((E, 2, k.NODE_COLUMNS))
-        nodes[:, :, k.POSITION : k.POSITION + 3] = perturbed.reshape(E, 2, 3)
-        nodes[:, :, k.REFERENCE : k.REFERENCE + 3] = ref_elements
-        cables = np.zeros((E, 1, k.CABLE_COLUMNS))
-        cables[:, 0, k.STIFFNESS] = per_element(self.stiffness)
-        cables[:, 0, k.REST_LENGTH] = per_element(self.L0)
-        cables[:, 0, k.PRETENSION] = per_element(just_taut_N0)
-        cables[:, 0, k.INV_SPLIT_MASS_SUM] = per_element(self.inv_split_mass_sum)
-        cables[:, 0, k.INTACT] = 1.0
-        k.evaluate_forces(
-            self.kernel_settings,
-            True,
-            np.array([[0, 1]], dtype=np.int64),
-            nodes,
-            cables,
-            np.zeros((E, k.CLUSTER_COLUMNS)),
-            np.empty(E, dtype=np.bool_),
-        )
-        f = nodes[:, :, k.INTERNAL_FORCE : k.INTERNAL_FORCE + 3].reshape(B, m, 6, 2, 6)
-        columns = (f[:, :, :, 0] - f[:, :, :, 1]) / (2.0 * h[:, :, None, None])  # (B, m, j, i)
-        degree = np.bincount(self.cables.ravel(), minlength=self.num_nodes)
-        split = self.masses / degree  # (B, n)
-        dof_mass = np.repeat(
-            np.stack([split[:, self.cables[:, 0]], split[:, self.cables[:, 1]]], axis=2), 3, axis=2
-        )  # (B, m, 6)
-        scale = 1.0 / np.sqrt(dof_mass)
-        scaled = np.abs(columns) * scale[:, :, :, None] * scale[:, :, None, :]
-        omega2 = scaled.sum(axis=3).max(axis=2)
-        # Axial damping with lagged velocity shortens the stable step (see _kernels.cable_forces).
-        axial_damping, inv_split_mass_sum = self.axial_damping, self.inv_split_mass_sum
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xi = np.where(axial_damping > 0.0, 0.5 * axial_damping * inv_split_mass_sum / np.sqrt(omega2), 0.0)
-        omega2 = omega2 * (np.sqrt(1.0 + xi * xi) + xi) ** 2
-        omega2 = omega2 + np.abs(self.frame_tidal).max(axis=1)[:, None]
-        return np.where(self.intact, omega2, 0.0)
+        return element_omega2_finite_difference(self, relative_perturbation)
 
     def energy(self) -> EnergyReport:
         """Energy accounting of every cluster since its last reset (see :class:`EnergyReport`)."""
@@ -811,7 +736,7 @@ class BatchSimulator:
         elastic = (
             self.tension
             if not self.axial_damping.any()
-            else self._evaluate(self.positions_, np.arange(self.num_clusters))[1][:, :, _kernels.TENSION]
+            else self.evaluate_at(self.positions_, np.arange(self.num_clusters))[1][:, :, _kernels.TENSION]
         )
         strain = (0.5 * elastic**2 / self.stiffness).sum(axis=1)
         tidal = np.ascontiguousarray(self.frame_tidal)

@@ -11,17 +11,16 @@ import numpy as np
 from gymnasium import spaces
 
 from tether_gym.cluster import Cluster
-from tether_gym.envs.contract import ObservationLayout, Scalar
-from tether_gym.envs.task import (
+from tether_gym.envs.arguments import (
     MAX_RENDER_EXAGGERATION,
     OBSERVATION_LIMIT,
-    RESET_OPTION_KEYS,
     EnvArgumentError,
     as_real_array,
     check_number,
     check_seed,
-    task_from_arguments,
 )
+from tether_gym.envs.contract import ObservationLayout, Scalar
+from tether_gym.envs.task import RESET_OPTION_KEYS, task_from_arguments
 
 __all__ = ["RESET_OPTION_KEYS", "TetherClusterEnv"]
 
@@ -152,7 +151,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     Every argument is checked before anything is built, and a bad one raises
     :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``; ``TypeError`` for an unknown
     argument) naming it, the allowed range and the fix. The ranges are named constants in
-    :mod:`tether_gym.envs.task`, generous but physical: e.g. ``control_interval`` in
+    :mod:`tether_gym.envs.arguments`, generous but physical: e.g. ``control_interval`` in
     [1e-4, 3600] s and within the simulator's sub-step budget at the cluster's critical step,
     ``max_thrust`` in [1e-9, 1e6] N, weights and ``failure_penalty`` up to 1e6,
     ``initial_displacement`` up to 10 % of the shortest cable, ``initial_velocity`` up to that

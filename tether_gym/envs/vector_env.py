@@ -12,16 +12,16 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from tether_gym.cluster import Cluster
-from tether_gym.envs.contract import END_REASONS, REWARD_TERMS, Scalar
-from tether_gym.envs.task import (
+from tether_gym.envs.arguments import (
     MAX_NUM_ENVS,
     OBSERVATION_LIMIT,
     EnvArgumentError,
     as_real_array,
     check_seed,
     check_whole,
-    task_from_arguments,
 )
+from tether_gym.envs.contract import END_REASONS, REWARD_TERMS, Scalar
+from tether_gym.envs.task import task_from_arguments
 from tether_gym.limits import is_whole_number
 
 __all__ = ["TetherClusterVectorEnv"]
