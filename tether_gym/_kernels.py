@@ -39,6 +39,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from tether_gym import _compilation  # noqa: F401 - announces the first compilation of a process
+
 # The OpenMP layer scheduled the batched kernels 1.5-2x faster than numba's default
 # "workqueue" layer on a busy 2-core machine (N = 1024 vector env: ~0.8 M against 0.4-0.58 M
 # env steps/s); results are the same bits either way.  Users keep control through numba's own
@@ -473,7 +475,7 @@ def _hold_cluster(cables: np.ndarray, cluster: np.ndarray, counters: np.ndarray)
         cables[c, PEAK_TENSION] = cables[c, TENSION]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(inline="always", error_model="numpy")
 def _advance_cluster(
     duration: float,
     settings: np.ndarray,
@@ -578,9 +580,8 @@ def _advance_cluster(
         cluster[TIME] += duration
 
 
-@njit(inline="always", error_model="numpy")
-def _advance_one(
-    b: int,
+@njit(cache=True, nogil=True, error_model="numpy")
+def _advance_clusters(
     duration: float,
     active: np.ndarray,
     settings: np.ndarray,
@@ -591,11 +592,20 @@ def _advance_one(
     counters: np.ndarray,
     step_record: np.ndarray,
 ) -> None:
-    """Cluster ``b`` of the drivers: integrated if active and healthy, else held."""
-    if active[b] and counters[b, STATUS] == STATUS_OK:
-        _advance_cluster(duration, settings, topology, nodes[b], cables[b], clusters[b], counters[b], step_record[b])
-    else:
-        _hold_cluster(cables[b], clusters[b], counters[b])
+    """Advance every cluster of the given tables (a batch, or a chunk of one) by ``duration`` s:
+    those ``active`` and healthy by :func:`_advance_cluster`, the others held.  ``step_record``
+    (B, R) receives the first R sub-steps of each cluster.
+
+    Compiled (and cached) once and called by both drivers: inlined into each, it made the
+    multi-threaded driver take seconds longer to compile, and a call per cluster cost more than
+    a short interval's work."""
+    for b in range(nodes.shape[0]):
+        if active[b] and counters[b, STATUS] == STATUS_OK:
+            _advance_cluster(
+                duration, settings, topology, nodes[b], cables[b], clusters[b], counters[b], step_record[b]
+            )
+        else:
+            _hold_cluster(cables[b], clusters[b], counters[b])
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -612,8 +622,7 @@ def advance_serial(
 ) -> None:  # pragma: no cover - compiled
     """Advance every ``active`` cluster of the batch by ``duration`` s (see :func:`_advance_cluster`),
     one thread.  ``step_record`` (B, R) receives the first R sub-steps of each cluster."""
-    for b in range(nodes.shape[0]):
-        _advance_one(b, duration, active, settings, topology, nodes, cables, clusters, counters, step_record)
+    _advance_clusters(duration, active, settings, topology, nodes, cables, clusters, counters, step_record)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
@@ -628,12 +637,22 @@ def advance_parallel(
     counters: np.ndarray,
     step_record: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """:func:`advance_serial` on all threads (the same bits)."""
+    """:func:`advance_serial` on all threads, a chunk of clusters each (the same bits)."""
     batch = nodes.shape[0]
     chunks = min(batch, PARALLEL_CHUNKS)
     for k in prange(chunks):
-        for b in range(k * batch // chunks, (k + 1) * batch // chunks):
-            _advance_one(b, duration, active, settings, topology, nodes, cables, clusters, counters, step_record)
+        lo, hi = k * batch // chunks, (k + 1) * batch // chunks
+        _advance_clusters(
+            duration,
+            active[lo:hi],
+            settings,
+            topology,
+            nodes[lo:hi],
+            cables[lo:hi],
+            clusters[lo:hi],
+            counters[lo:hi],
+            step_record[lo:hi],
+        )
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -22,6 +22,11 @@ from tether_gym.limits import check_real
 if TYPE_CHECKING:
     from tether_gym.simulator import BatchSimulator
 
+#: The topology of a lone cable element: node 0 to node 1 (read-only, like every topology the
+#: kernels get, so that they run the variant already compiled).
+_ELEMENT_TOPOLOGY = np.array([[0, 1]], dtype=np.int64)
+_ELEMENT_TOPOLOGY.flags.writeable = False
+
 __all__ = [
     "axial_damping_matrix",
     "element_omega2_finite_difference",
@@ -181,7 +186,7 @@ def element_omega2_finite_difference(batch: BatchSimulator, relative_perturbatio
     k.evaluate_forces(
         batch.kernel_settings,
         True,
-        np.array([[0, 1]], dtype=np.int64),
+        _ELEMENT_TOPOLOGY,
         nodes,
         cables,
         np.zeros((E, k.CLUSTER_COLUMNS)),

@@ -348,7 +348,9 @@ class BatchSimulator:
         self.num_clusters = len(cluster_list)
         self.num_nodes = template.num_nodes
         self.num_cables = template.num_cables
-        self.cables = np.ascontiguousarray(template.cables)
+        # Read-only, as every topology the kernels get: numba compiles a variant per writability.
+        self.cables = np.array(template.cables, dtype=np.int64)
+        self.cables.flags.writeable = False
         B, n, m = self.num_clusters, self.num_nodes, self.num_cables
         self.kernel_settings = np.zeros(_kernels.SETTINGS)
         self.kernel_settings[_kernels.SAFETY_FACTOR] = self.safety_factor
@@ -625,7 +627,7 @@ class BatchSimulator:
         if active is None:
             mask = self._all_active
         else:
-            mask = np.asarray(active)
+            mask = np.require(active, requirements=["C", "W"])  # the kernels' one compiled variant
             if mask.shape != (self.num_clusters,) or mask.dtype != np.bool_:
                 raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},); got {active!r}")
         self.applied_force[...] = p

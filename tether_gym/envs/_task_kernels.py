@@ -441,11 +441,66 @@ def _evaluate_cluster(
     )
 
 
+#: The numbers of other files the kernels below are compiled with (see :func:`_compile_drivers`).
+FOREIGN_LAYOUT = (
+    _kernels.LAYOUT,
+    PARALLEL_CHUNKS,
+    _kernels.STATUS_OK,
+    tuple((column.name, int(column)) for column in Scalar),
+    tuple((reason.name, int(reason)) for reason in EndReason),
+)
+
+
+def _compile_cluster_evaluation(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+    """Compile the evaluation of every cluster of some tables, which both drivers call: compiled
+    (and cached) once, where inlined into each driver it made the multi-threaded one take seconds
+    longer to compile, and a call per cluster cost as much as the evaluation itself.
+    ``foreign_layout`` is part of its cache key (see :func:`_compile_drivers`)."""
+
+    @njit(cache=True, nogil=True, error_model="numpy")
+    def evaluate_clusters(
+        settings: np.ndarray,
+        topology: np.ndarray,
+        observed: np.ndarray,
+        nodes: np.ndarray,
+        cables: np.ndarray,
+        clusters: np.ndarray,
+        counters: np.ndarray,
+        task_nodes: np.ndarray,
+        task_clusters: np.ndarray,
+        end_reason: np.ndarray,
+    ) -> None:
+        """Observation, scalar results and end reason of every cluster of the given tables (a
+        batch, or a chunk of one); see :func:`evaluate_serial`."""
+        foreign_layout  # noqa: B018 - part of the cache key
+        scratch = np.empty((4, 3))
+        for b in range(nodes.shape[0]):
+            end_reason[b] = _evaluate_cluster(
+                settings,
+                topology,
+                observed,
+                nodes[b],
+                cables[b],
+                clusters[b],
+                counters[b, STATUS],
+                task_nodes[b],
+                task_clusters[b],
+                scratch,
+            )
+
+    return evaluate_clusters
+
+
+_evaluate_clusters = _compile_cluster_evaluation(FOREIGN_LAYOUT)
+
+
 def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns compiled functions
     """Compile the kernels the task calls.  They read the simulator's tables and the contract's
     columns and codes, which are written in other files: numba's cache watches only this one, so
     the drivers hold those numbers (``foreign_layout``) in their closure, which it hashes into
-    the cache key; an edit there then recompiles them instead of loading stale code."""
+    the cache key; an edit there then recompiles them instead of loading stale code.  (Nothing
+    else may be in the closure: numba pickles it into the key, and a compiled function pickles
+    differently in every process, which would defeat the cache.)"""
 
     @njit(cache=True, nogil=True, error_model="numpy")
     def command_forces(
@@ -467,34 +522,6 @@ def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns 
         for b in range(actions.shape[0]):
             if active[b]:
                 _command_cluster(settings, actions[b], thrusters, max_thrust, task_nodes[b], nodes[b], task_clusters[b])
-
-    @njit(inline="always", error_model="numpy")
-    def evaluate_one(
-        b: int,
-        settings: np.ndarray,
-        topology: np.ndarray,
-        observed: np.ndarray,
-        nodes: np.ndarray,
-        cables: np.ndarray,
-        clusters: np.ndarray,
-        counters: np.ndarray,
-        task_nodes: np.ndarray,
-        task_clusters: np.ndarray,
-        end_reason: np.ndarray,
-        scratch: np.ndarray,
-    ) -> None:
-        end_reason[b] = _evaluate_cluster(
-            settings,
-            topology,
-            observed,
-            nodes[b],
-            cables[b],
-            clusters[b],
-            counters[b, STATUS],
-            task_nodes[b],
-            task_clusters[b],
-            scratch,
-        )
 
     @njit(cache=True, nogil=True, error_model="numpy")
     def evaluate_serial(
@@ -528,12 +555,9 @@ def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns 
         effective potential and is zero at the nominal equilibrium.
         """
         foreign_layout  # noqa: B018 - part of the cache key
-        scratch = np.empty((4, 3))
-        for b in range(nodes.shape[0]):
-            evaluate_one(
-                b, settings, topology, observed, nodes, cables, clusters, counters, task_nodes, task_clusters,
-                end_reason, scratch,
-            )  # fmt: skip
+        _evaluate_clusters(
+            settings, topology, observed, nodes, cables, clusters, counters, task_nodes, task_clusters, end_reason
+        )
 
     @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
     def evaluate_parallel(
@@ -553,22 +577,21 @@ def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns 
         batch = nodes.shape[0]
         chunks = min(batch, PARALLEL_CHUNKS)
         for k in prange(chunks):
-            scratch = np.empty((4, 3))
-            for b in range(k * batch // chunks, (k + 1) * batch // chunks):
-                evaluate_one(
-                    b, settings, topology, observed, nodes, cables, clusters, counters, task_nodes, task_clusters,
-                    end_reason, scratch,
-                )  # fmt: skip
+            lo, hi = k * batch // chunks, (k + 1) * batch // chunks
+            _evaluate_clusters(
+                settings,
+                topology,
+                observed,
+                nodes[lo:hi],
+                cables[lo:hi],
+                clusters[lo:hi],
+                counters[lo:hi],
+                task_nodes[lo:hi],
+                task_clusters[lo:hi],
+                end_reason[lo:hi],
+            )
 
     return command_forces, evaluate_serial, evaluate_parallel
 
 
-command_forces, evaluate_serial, evaluate_parallel = _compile_drivers(
-    (
-        _kernels.LAYOUT,
-        PARALLEL_CHUNKS,
-        _kernels.STATUS_OK,
-        tuple((column.name, int(column)) for column in Scalar),
-        tuple((reason.name, int(reason)) for reason in EndReason),
-    )
-)
+command_forces, evaluate_serial, evaluate_parallel = _compile_drivers(FOREIGN_LAYOUT)

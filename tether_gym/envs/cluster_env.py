@@ -19,7 +19,7 @@ from tether_gym.envs.arguments import (
     check_number,
     check_seed,
 )
-from tether_gym.envs.contract import ObservationLayout, Scalar
+from tether_gym.envs.contract import ObservationLayout
 from tether_gym.envs.task import RESET_OPTION_KEYS, task_from_arguments
 
 __all__ = ["RESET_OPTION_KEYS", "TetherClusterEnv"]
@@ -230,8 +230,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         info = self.task.info(0)
         if self.render_mode == "human":
             self.render()
-        reward = float(self.task.scalars[0, Scalar.REWARD])
-        return observation, reward, bool(self.task.terminated()[0]), False, info
+        return observation, float(self.task.rewards()[0]), bool(self.task.terminated()[0]), False, info
 
     def set_difficulty(self, difficulty: float) -> None:
         """Scale initial conditions, randomisation and disturbances by ``difficulty`` in [0, 1]

@@ -69,6 +69,8 @@ REWARD_TERMS: tuple[Scalar, ...] = (
     Scalar.REWARD_SLACK,
     Scalar.REWARD_FAILURE,
 )
+#: Their ``info`` keys (computed once: an enum property costs a microsecond, per step).
+REWARD_TERM_KEYS: tuple[str, ...] = tuple(term.key for term in REWARD_TERMS)
 
 
 class EndReason(enum.IntEnum):

@@ -159,6 +159,8 @@ class Disturbances:
         action_queue: (B, thrust_delay, 3k) the actions given but not acting yet.
         draws: whether any disturbance or fault draws random numbers (``apply`` then needs one
             generator per cluster).
+        alters_actions: whether :meth:`acting_actions` may change the actions (a delay or a
+            thruster failure is configured).
     """
 
     #: The arrays above, in the order the task's snapshots list them.
@@ -201,6 +203,7 @@ class Disturbances:
             or disturbances.thrust_noise
             or faults.thruster_failure_probability
         )
+        self.alters_actions = bool(disturbances.thrust_delay or faults.thruster_failure_probability)
 
     def reset(self, rngs: Sequence[np.random.Generator], indices: np.ndarray) -> None:
         """Start the episodes of clusters ``indices``: nothing in the delay line, every thruster

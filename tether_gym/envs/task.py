@@ -69,7 +69,7 @@ from tether_gym.envs.config import (
 )
 from tether_gym.envs.contract import (
     END_REASONS,
-    REWARD_TERMS,
+    REWARD_TERM_KEYS,
     SCALARS,
     EndReason,
     ObservationLayout,
@@ -354,7 +354,11 @@ class DampingTask:
     def terminated(self) -> np.ndarray:
         """(B,) bool: clusters whose last step ended their episode (``end_reason`` is not
         ``RUNNING``)."""
-        return self.end_reason != EndReason.RUNNING
+        return self.end_reason != _task_kernels.RUNNING  # EndReason.RUNNING, as an int: compared every step
+
+    def rewards(self) -> np.ndarray:
+        """(B,) the rewards of the last step (a copy of ``scalars[:, Scalar.REWARD]``)."""
+        return self.task_cluster_table[:, _task_kernels.SCALAR_COLUMNS + _task_kernels.REWARD].copy()
 
     def __init__(self, cluster: Cluster, num_clusters: int, config: TaskConfig) -> None:
         if not isinstance(cluster, Cluster):
@@ -550,7 +554,7 @@ class DampingTask:
         displacement -= (masses * displacement).sum(axis=1, keepdims=True) / masses.sum(axis=1, keepdims=True)
         x0 = self.cluster.positions[None] + displacement
         _task_kernels.remove_rigid_velocity(
-            x0, velocity, np.ascontiguousarray(np.broadcast_to(self.cluster.masses, (count, n)))
+            x0, velocity, np.repeat(self.cluster.masses[None], count, axis=0)
         )
         return x0, velocity
 
@@ -689,10 +693,11 @@ class DampingTask:
         """
         mask = self._all if active is None else active
         disturbances = self.disturbances
-        actions = disturbances.acting_actions(actions, mask, self.sim.time)
+        if disturbances.alters_actions:
+            actions = disturbances.acting_actions(actions, mask, self.sim.time)
         _task_kernels.command_forces(
             self.task_settings,
-            np.ascontiguousarray(actions),
+            np.require(actions, np.float64, ["C", "W"]),  # the kernel's one compiled variant
             self.thrusters,
             self.max_thrust,
             mask,
@@ -705,7 +710,7 @@ class DampingTask:
                 raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
             disturbances.apply(mask, rngs, self.sim.time, self.difficulty, self.force, self.thrust)
         self.sim.advance_unchecked(self.config.control_interval, mask)
-        self.propellant[mask] += self.impulse[mask]
+        self.propellant[mask] += self.task_cluster_table[mask, _task_kernels.IMPULSE]
         self.evaluate()
 
     # ------------------------------------------------------------------ results
@@ -751,7 +756,7 @@ class DampingTask:
                 step_min=stats.step_min,
                 step_max=stats.step_max,
                 peak_tension=stats.peak_tension,
-                **{term.key: values[term.key] for term in REWARD_TERMS},
+                **{key: values[key] for key in REWARD_TERM_KEYS},
                 end_reason=self.end_reason,
             )
         return arrays
@@ -793,7 +798,7 @@ class DampingTask:
             info["step_min"] = cluster[k.STEP_MIN]
             info["step_max"] = cluster[k.STEP_MAX]
             info["peak_tension"] = cables[:, k.PEAK_TENSION].copy()
-            for term in REWARD_TERMS:
-                info[term.key] = values[term.key]
+            for key in REWARD_TERM_KEYS:
+                info[key] = values[key]
             info["end_reason"] = END_REASONS[self.end_reason[index]]
         return info

@@ -20,14 +20,14 @@ from tether_gym.envs.arguments import (
     check_seed,
     check_whole,
 )
-from tether_gym.envs.contract import END_REASONS, REWARD_TERMS, Scalar
+from tether_gym.envs.contract import END_REASONS, REWARD_TERM_KEYS
 from tether_gym.envs.task import task_from_arguments
 from tether_gym.limits import is_whole_number
 
 __all__ = ["TetherClusterVectorEnv"]
 
 #: Info keys that exist only after a step (a reset's info lacks them, as in the single env).
-STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", *(term.key for term in REWARD_TERMS), "end_reason")
+STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", *REWARD_TERM_KEYS, "end_reason")
 
 
 class TetherClusterVectorEnv(VectorEnv):
@@ -157,7 +157,7 @@ class TetherClusterVectorEnv(VectorEnv):
         task = self.task
         task.step(np.ascontiguousarray(a), rngs=self._rngs)
         self._episode_steps += 1
-        rewards = task.scalars[:, Scalar.REWARD].copy()
+        rewards = task.rewards()
         terminated = task.terminated()
         truncated = (
             self._episode_steps >= self._max_episode_steps
