@@ -46,7 +46,7 @@ from tether_gym import _compilation  # noqa: F401 - announces the first compilat
 # env steps/s); results are the same bits either way.  Users keep control through numba's own
 # environment variables.
 if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY" not in os.environ:
-    numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+    numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]  # type: ignore[attr-defined]
 # OpenMP threads spin while they wait for work (libgomp: 300 000 spins by default). When other
 # jobs share the cores (training next to an evaluation, a benchmark next to the tests), the
 # spinning threads starve each other. Measured on this 2-core machine, native vector env at

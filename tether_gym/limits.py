@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -129,7 +129,7 @@ def _read_infinities(value: Any) -> Any:
 
 def check_range(
     name: str,
-    values: np.ndarray,
+    values: np.ndarray | np.floating[Any],
     low: float,
     high: float,
     unit: str,
@@ -148,9 +148,8 @@ def check_range(
         at = f" ({where} {index[0] if len(index) == 1 else index})" if index else ""
         bracket = "[" if low_inclusive else "("
         unit = f" {unit}" if unit else ""
-        raise error(
-            f"{name} must lie in {bracket}{low:g}, {high:g}]{unit}; got {values[index] if index else values}{at}"
-        )
+        got = np.asarray(values)[index] if index else values
+        raise error(f"{name} must lie in {bracket}{low:g}, {high:g}]{unit}; got {got}{at}")
 
 
 def to_float(value: Any) -> float:
@@ -162,7 +161,7 @@ def to_float(value: Any) -> float:
         return math.inf if value > 0 else -math.inf
 
 
-def is_whole_number(value: Any) -> bool:
+def is_whole_number(value: Any) -> TypeGuard[int | np.integer[Any]]:
     """True for a Python or numpy integer that is not a boolean."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 

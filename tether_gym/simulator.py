@@ -552,11 +552,11 @@ class BatchSimulator:
             )
         if state.settings != self.settings:
             raise ValueError(
-                f"state was taken with settings (safety_factor, elongation, max_step, max_substeps) = {state.settings}, "
-                f"this batch has {self.settings}; a restored cluster would not continue the same way"
+                "state was taken with settings (safety_factor, elongation, max_step, max_substeps) = "
+                f"{state.settings}, this batch has {self.settings}; a restored cluster would not continue the same way"
             )
         source = np.zeros(idx.size, dtype=np.int64) if state.num_clusters == 1 else np.arange(idx.size)
-        for k, b in zip(source, idx):
+        for k, b in zip(source, idx, strict=True):
             cluster = state.clusters[int(k)]
             if self.clusters[int(b)] is not cluster:
                 self.set_cluster(int(b), cluster, reset=False)
@@ -845,4 +845,5 @@ class Simulator:
     def energy(self) -> EnergyReport:
         """Energy accounting since the last reset, as floats (see :class:`EnergyReport`)."""
         report = self.batch.energy()
-        return EnergyReport(**{k: float(getattr(report, k)[0]) for k in report.__dataclass_fields__})
+        values = {k: float(getattr(report, k)[0]) for k in report.__dataclass_fields__}
+        return EnergyReport(**values)  # type: ignore[arg-type]  # a single cluster's report holds floats

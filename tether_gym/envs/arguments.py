@@ -173,9 +173,13 @@ def check_number(
     """``value`` as a float in [low, high] (``(low, high]`` with ``low_open``), or an
     :class:`EnvArgumentError` naming ``name``; bools, strings and NaN/inf are rejected."""
     number = real_or_none(value)
-    above = number is not None and (number > low if low_open else number >= low)
-    if above and math.isfinite(number) and number <= high:  # type: ignore[arg-type]
-        return number  # type: ignore[return-value]
+    if (
+        number is not None
+        and math.isfinite(number)
+        and (number > low if low_open else number >= low)
+        and number <= high
+    ):
+        return number
     kind = "" if number is not None else f" (a {type(value).__name__})"
     raise EnvArgumentError(
         f"{name} must be a finite number {_interval(low, high, low_open, unit)}; got {short_repr(value)}{kind}"

@@ -146,7 +146,14 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     | ``cluster`` | ``None`` | a :class:`~tether_gym.Cluster` to use instead of a preset |
     | ``render_mode`` | ``None`` | ``"rgb_array"`` or ``"human"`` |
     | ``render_exaggeration`` | 100 | displacements from nominal are drawn this many times larger |
-    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor``, and the disturbance, fault and ``difficulty`` options above |
+    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field (listed below) |
+
+    The task fields and their defaults: ``control_interval`` (0.1 s), ``thrusters`` (all),
+    ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m),
+    ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1),
+    ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest
+    cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``,
+    ``safety_factor``, and the disturbance, fault and ``difficulty`` options above.
 
     Every argument is checked before anything is built, and a bad one raises
     :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``; ``TypeError`` for an unknown

@@ -167,7 +167,8 @@ class InitialStateConfig:
         """``randomize`` as a dict of known keys to spreads within [0, MAX_SPREAD]."""
         if not isinstance(self.randomize, Mapping):
             raise EnvArgumentError(
-                f"randomize must be a dict of relative spreads, e.g. {{'masses': 0.2}}; got {short_repr(self.randomize)}"
+                "randomize must be a dict of relative spreads, e.g. {'masses': 0.2}; "
+                f"got {short_repr(self.randomize)}"
             )
         unknown = [key for key in self.randomize if key not in RANDOMISABLE]
         if unknown:
@@ -406,7 +407,8 @@ class TaskConfig:
             value = getattr(self, name)
             if value and not (MIN_INITIAL_FRACTION * limit <= value <= limit):
                 raise EnvArgumentError(
-                    f"{name} must be 0 or in [{MIN_INITIAL_FRACTION * limit:.3g}, {limit:.3g}] {unit} for this cluster; "
+                    f"{name} must be 0 or in [{MIN_INITIAL_FRACTION * limit:.3g}, {limit:.3g}] {unit} "
+                    "for this cluster; "
                     f"got {value!r}.  The upper limit is a deformation of {MAX_DISPLACEMENT_FRACTION:.0%} of the "
                     f"shortest cable ({scales.shortest_cable:.3g} m)"
                     + (" swinging at the fastest cable frequency" if unit == "m/s" else "")

@@ -271,7 +271,7 @@ class Disturbances:
             disturbance += difficulty * config.periodic_amplitude * wave[:, :, None] * self.periodic_direction[clusters]
         if config.impulse_magnitude:
             # Per cluster: whether a kick comes, which satellite, and a direction uniform on the sphere.
-            draws = np.array([rngs[b].random(4) for b in clusters]).reshape(-1, 4)
+            draws = np.array([rngs[int(b)].random(4) for b in clusters]).reshape(-1, 4)
             kicked = np.flatnonzero(draws[:, 0] < 1.0 - math.exp(-config.impulse_rate * interval))
             node = np.minimum((draws[kicked, 1] * n).astype(np.int64), n - 1)
             z = 2.0 * draws[kicked, 2] - 1.0
@@ -281,7 +281,7 @@ class Disturbances:
             disturbance[kicked, node] += difficulty * config.impulse_magnitude / interval * direction
         if config.thrust_noise:
             k = self.thrusters.size
-            noise = np.array([rngs[b].standard_normal((k, 3)) for b in clusters]).reshape(-1, k, 3)
+            noise = np.array([rngs[int(b)].standard_normal((k, 3)) for b in clusters]).reshape(-1, k, 3)
             noise *= (difficulty * config.thrust_noise * self.max_thrust[None, :] * self.thruster_ok[clusters])[
                 :, :, None
             ]

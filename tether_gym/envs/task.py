@@ -553,9 +553,7 @@ class DampingTask:
         masses = self.cluster.masses[None, :, None]
         displacement -= (masses * displacement).sum(axis=1, keepdims=True) / masses.sum(axis=1, keepdims=True)
         x0 = self.cluster.positions[None] + displacement
-        _task_kernels.remove_rigid_velocity(
-            x0, velocity, np.repeat(self.cluster.masses[None], count, axis=0)
-        )
+        _task_kernels.remove_rigid_velocity(x0, velocity, np.repeat(self.cluster.masses[None], count, axis=0))
         return x0, velocity
 
     def check_reset_state(self, options: Any, shape: tuple[int, ...]) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -579,14 +577,15 @@ class DampingTask:
             return None, None
         if not isinstance(options, Mapping):
             raise EnvArgumentError(
-                f"options must be a dict such as {{'positions': X0, 'velocities': V0}} or None; got {short_repr(options)}"
+                "options must be a dict such as {'positions': X0, 'velocities': V0} or None; "
+                f"got {short_repr(options)}"
             )
         unknown = sorted(set(options) - set(RESET_OPTION_KEYS), key=repr)
         if unknown:
             raise EnvArgumentError(f"unknown reset option(s) {unknown}; accepted options are {list(RESET_OPTION_KEYS)}")
         n = self.cluster.num_nodes
         arrays: dict[str, np.ndarray | None] = {}
-        for key, unit in zip(RESET_OPTION_KEYS, ("m", "m/s")):
+        for key, unit in zip(RESET_OPTION_KEYS, ("m", "m/s"), strict=True):
             name = f"reset option {key!r}"
             if options.get(key) is None:
                 arrays[key] = None
@@ -599,14 +598,14 @@ class DampingTask:
             arrays[key] = array.reshape(-1, n, 3)
         positions, velocities = arrays["positions"], arrays["velocities"]
         scales = self.scales
-        for key, array, limit, unit in (
+        for key, values, limit, unit in (
             ("positions", positions, MAX_COORDINATE, "m"),
             ("velocities", velocities, MAX_SPEED, "m/s"),
         ):
-            if array is not None and not np.abs(array).max() <= limit:
+            if values is not None and not np.abs(values).max() <= limit:
                 raise EnvArgumentError(
                     f"reset option {key!r} must have every entry within +-{limit:g} {unit} (the simulator's range); "
-                    f"got {float(np.abs(array).max()):.3g} {unit}"
+                    f"got {float(np.abs(values).max()):.3g} {unit}"
                 )
         if positions is not None:
             deviation = float(np.linalg.norm(positions - self.cluster.positions, axis=-1).max())
@@ -656,6 +655,8 @@ class DampingTask:
                 self._set_nominal(int(b), self.config.initial_state.randomised(self.cluster, rng, self.difficulty))
             elif self.sim.clusters[b] is not self.cluster:
                 self._set_nominal(int(b), self.cluster)
+        x0: ArrayLike
+        v0: ArrayLike | None
         if positions is None and velocities is None:
             states = [self.sample_initial_state(rng, 1) for rng in rngs]
             x0 = np.concatenate([x for x, _ in states])

@@ -135,6 +135,7 @@ class TetherClusterVectorEnv(VectorEnv):
             return [None] * self.num_envs
         if is_whole_number(seed):
             first = check_seed("seed", seed)
+            assert first is not None  # a whole number gives an int (or an error)
             return [first + i for i in range(self.num_envs)]
         if not isinstance(seed, (list, tuple, np.ndarray)) or (isinstance(seed, np.ndarray) and seed.ndim != 1):
             raise EnvArgumentError(
