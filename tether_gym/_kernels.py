@@ -596,9 +596,9 @@ def _advance_clusters(
     those ``active`` and healthy by :func:`_advance_cluster`, the others held.  ``step_record``
     (B, R) receives the first R sub-steps of each cluster.
 
-    Compiled (and cached) once and called by both drivers: inlined into each, it made the
-    multi-threaded driver take seconds longer to compile, and a call per cluster cost more than
-    a short interval's work."""
+    It is the one-thread driver, and :func:`advance_parallel` calls it on chunks: compiled once
+    for both (inlined into the parallel driver, it made that take seconds longer to compile), and
+    one call per chunk (a call per cluster cost more than a short interval's work)."""
     for b in range(nodes.shape[0]):
         if active[b] and counters[b, STATUS] == STATUS_OK:
             _advance_cluster(
@@ -608,21 +608,8 @@ def _advance_clusters(
             _hold_cluster(cables[b], clusters[b], counters[b])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def advance_serial(
-    duration: float,
-    active: np.ndarray,
-    settings: np.ndarray,
-    topology: np.ndarray,
-    nodes: np.ndarray,
-    cables: np.ndarray,
-    clusters: np.ndarray,
-    counters: np.ndarray,
-    step_record: np.ndarray,
-) -> None:  # pragma: no cover - compiled
-    """Advance every ``active`` cluster of the batch by ``duration`` s (see :func:`_advance_cluster`),
-    one thread.  ``step_record`` (B, R) receives the first R sub-steps of each cluster."""
-    _advance_clusters(duration, active, settings, topology, nodes, cables, clusters, counters, step_record)
+#: The integrator on one thread, for small batches (its start-up cost is lower).
+advance_serial = _advance_clusters
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)

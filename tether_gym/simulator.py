@@ -301,6 +301,10 @@ class BatchSimulator:
     _dissipated = _cluster(_kernels.DISSIPATED, "(B,) energy dissipated since the reset, J.")
     _energy0 = _cluster(_kernels.INITIAL_ENERGY, "(B,) mechanical energy at the reset, J.")
     status = TableColumns("counter_table", _kernels.STATUS, 1, "(B,) status code of each cluster (0: healthy).")
+    positions = _node(_kernels.POSITION, "(B, n, 3) current node positions, m (a read-only view).", 3, read_only=True)
+    velocities = _node(
+        _kernels.VELOCITY, "(B, n, 3) node velocities at the current time, m/s (a read-only view).", 3, read_only=True
+    )
     work = _cluster(_kernels.WORK, "(B,) external work since each cluster's reset, J (read-only).", read_only=True)
     dissipated = _cluster(
         _kernels.DISSIPATED,
@@ -402,20 +406,6 @@ class BatchSimulator:
             self.reset(cluster.positions[None], indices=[index])
 
     # ------------------------------------------------------------------ state
-    @property
-    def positions(self) -> np.ndarray:
-        """(B, n, 3) current node positions, m (a read-only view)."""
-        view = self.positions_
-        view.flags.writeable = False
-        return view
-
-    @property
-    def velocities(self) -> np.ndarray:
-        """(B, n, 3) node velocities at the current time, m/s (a read-only view)."""
-        view = self.velocities_
-        view.flags.writeable = False
-        return view
-
     @property
     def intact(self) -> np.ndarray:
         """(B, m) bool: cables that have not broken since the cluster's last reset (a copy)."""

@@ -441,7 +441,7 @@ def _evaluate_cluster(
     )
 
 
-#: The numbers of other files the kernels below are compiled with (see :func:`_compile_drivers`).
+#: The numbers of other files the kernels below are compiled with (see :func:`_compile_command_forces`).
 FOREIGN_LAYOUT = (
     _kernels.LAYOUT,
     PARALLEL_CHUNKS,
@@ -452,10 +452,10 @@ FOREIGN_LAYOUT = (
 
 
 def _compile_cluster_evaluation(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
-    """Compile the evaluation of every cluster of some tables, which both drivers call: compiled
-    (and cached) once, where inlined into each driver it made the multi-threaded one take seconds
-    longer to compile, and a call per cluster cost as much as the evaluation itself.
-    ``foreign_layout`` is part of its cache key (see :func:`_compile_drivers`)."""
+    """Compile the evaluation of every cluster of some tables: the one-thread driver, which the
+    parallel one calls on chunks (inlined into it, it made that take seconds longer to compile;
+    a call per cluster cost as much as the evaluation itself).
+    ``foreign_layout`` is part of its cache key (see :func:`_compile_command_forces`)."""
 
     @njit(cache=True, nogil=True, error_model="numpy")
     def evaluate_clusters(
@@ -470,8 +470,25 @@ def _compile_cluster_evaluation(foreign_layout: tuple):  # noqa: ANN202 - return
         task_clusters: np.ndarray,
         end_reason: np.ndarray,
     ) -> None:
-        """Observation, scalar results and end reason of every cluster of the given tables (a
-        batch, or a chunk of one); see :func:`evaluate_serial`."""
+        """Everything the task reads off each cluster of the given tables (a batch, or a chunk of one)
+        after a step (or a reset); the one-thread driver, which the parallel one calls on chunks.
+
+        Writes the observation (NaN as 0, clipped to +-OBSERVATION_LIMIT; see
+        :class:`~tether_gym.envs.TetherClusterEnv`), ``end_reason`` and the scalar results:
+        the reward and its terms, with the weights of the settings, the vibration energy (J), the
+        largest deviation (m), the slack fraction, and the kinetic, strain and frame energies (J).
+        A cable past its breaking load ends the episode only with ``TERMINATE_ON_BREAK``.  A
+        cluster whose reward would pass ``REWARD_LIMIT`` (or be NaN), or whose energies would not
+        be finite, ends as numerics diverged, with the vibration term (and any non-finite term)
+        set to 0: the reward is always finite.
+
+        The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension
+        may hold a viscous part).  In a turning frame (``FRAME_TIDAL``, 1/s^2) the vibration energy
+        also holds the change of the frame potential of the shape about its centre of mass,
+        ``-1/2 sum_i m_i (r_i.T r_i - R_i.T R_i)`` (``r``, ``R``: current and nominal positions
+        about the centre of mass), so that it measures the deformation against the frame's
+        effective potential and is zero at the nominal equilibrium.
+        """
         foreign_layout  # noqa: B018 - part of the cache key
         scratch = np.empty((4, 3))
         for b in range(nodes.shape[0]):
@@ -494,13 +511,12 @@ def _compile_cluster_evaluation(foreign_layout: tuple):  # noqa: ANN202 - return
 _evaluate_clusters = _compile_cluster_evaluation(FOREIGN_LAYOUT)
 
 
-def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns compiled functions
-    """Compile the kernels the task calls.  They read the simulator's tables and the contract's
-    columns and codes, which are written in other files: numba's cache watches only this one, so
-    the drivers hold those numbers (``foreign_layout``) in their closure, which it hashes into
-    the cache key; an edit there then recompiles them instead of loading stale code.  (Nothing
-    else may be in the closure: numba pickles it into the key, and a compiled function pickles
-    differently in every process, which would defeat the cache.)"""
+def _compile_command_forces(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+    """Compile :func:`command_forces`.  It writes the simulator's table, whose columns are named in
+    another file: numba's cache watches only this one, so the kernel holds those numbers
+    (``foreign_layout``) in its closure, which numba hashes into the cache key; an edit there then
+    recompiles it instead of loading stale code.  (Nothing else may be in such a closure: numba
+    pickles it into the key, and a compiled function pickles differently in every process.)"""
 
     @njit(cache=True, nogil=True, error_model="numpy")
     def command_forces(
@@ -523,41 +539,12 @@ def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns 
             if active[b]:
                 _command_cluster(settings, actions[b], thrusters, max_thrust, task_nodes[b], nodes[b], task_clusters[b])
 
-    @njit(cache=True, nogil=True, error_model="numpy")
-    def evaluate_serial(
-        settings: np.ndarray,
-        topology: np.ndarray,
-        observed: np.ndarray,
-        nodes: np.ndarray,
-        cables: np.ndarray,
-        clusters: np.ndarray,
-        counters: np.ndarray,
-        task_nodes: np.ndarray,
-        task_clusters: np.ndarray,
-        end_reason: np.ndarray,
-    ) -> None:  # pragma: no cover - compiled
-        """Everything the task reads off each cluster after a step (or a reset), one thread.
+    return command_forces
 
-        Writes the observation (NaN as 0, clipped to +-OBSERVATION_LIMIT; see
-        :class:`~tether_gym.envs.TetherClusterEnv`), ``end_reason`` and the scalar results:
-        the reward and its terms, with the weights of the settings, the vibration energy (J), the
-        largest deviation (m), the slack fraction, and the kinetic, strain and frame energies (J).
-        A cable past its breaking load ends the episode only with ``TERMINATE_ON_BREAK``.  A
-        cluster whose reward would pass ``REWARD_LIMIT`` (or be NaN), or whose energies would not
-        be finite, ends as numerics diverged, with the vibration term (and any non-finite term)
-        set to 0: the reward is always finite.
 
-        The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension
-        may hold a viscous part).  In a turning frame (``FRAME_TIDAL``, 1/s^2) the vibration energy
-        also holds the change of the frame potential of the shape about its centre of mass,
-        ``-1/2 sum_i m_i (r_i.T r_i - R_i.T R_i)`` (``r``, ``R``: current and nominal positions
-        about the centre of mass), so that it measures the deformation against the frame's
-        effective potential and is zero at the nominal equilibrium.
-        """
-        foreign_layout  # noqa: B018 - part of the cache key
-        _evaluate_clusters(
-            settings, topology, observed, nodes, cables, clusters, counters, task_nodes, task_clusters, end_reason
-        )
+def _compile_parallel_evaluation(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+    """Compile :func:`evaluate_serial` on all threads, a chunk of clusters each (the same bits).
+    ``foreign_layout`` as for :func:`_compile_command_forces`."""
 
     @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
     def evaluate_parallel(
@@ -572,7 +559,7 @@ def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns 
         task_clusters: np.ndarray,
         end_reason: np.ndarray,
     ) -> None:  # pragma: no cover - compiled
-        """:func:`evaluate_serial` on all threads (the same bits)."""
+        """:func:`evaluate_serial` on all threads, a chunk of clusters each (the same bits)."""
         foreign_layout  # noqa: B018 - part of the cache key
         batch = nodes.shape[0]
         chunks = min(batch, PARALLEL_CHUNKS)
@@ -591,7 +578,11 @@ def _compile_drivers(foreign_layout: tuple) -> tuple:  # noqa: ANN202 - returns 
                 end_reason[lo:hi],
             )
 
-    return command_forces, evaluate_serial, evaluate_parallel
+    return evaluate_parallel
 
 
-command_forces, evaluate_serial, evaluate_parallel = _compile_drivers(FOREIGN_LAYOUT)
+command_forces = _compile_command_forces(FOREIGN_LAYOUT)
+#: The task's evaluation on one thread, for small batches (its start-up cost is lower).
+evaluate_serial = _evaluate_clusters
+#: The task's evaluation on all threads.
+evaluate_parallel = _compile_parallel_evaluation(FOREIGN_LAYOUT)
