@@ -151,11 +151,11 @@ class Controller:
         """(N, n, 3) positions relative to the centre of mass (m), (N, n, 3) velocities relative
         to the centre of mass (m/s) and (N, c) cable elongations (m) from (N, obs_size)
         observations."""
-        n = self.num_nodes
         task = self.task
-        displacement = observation[:, : 3 * n].reshape(-1, n, 3) * task.length_scale
-        velocity = observation[:, 3 * n : 6 * n].reshape(-1, n, 3) * task.speed_scale
-        elongation = observation[:, 6 * n : 6 * n + self.cluster.num_cables] * task.length_scale
+        layout = task.observation_layout
+        displacement = layout.satellite_values(observation, "displacement") * task.length_scale
+        velocity = layout.satellite_values(observation, "velocity") * task.speed_scale
+        elongation = observation[:, layout.elongation] * task.length_scale
         return self.nominal_relative[None] + displacement, velocity, elongation
 
     def deformation_velocity(self, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:

@@ -42,13 +42,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from tether_gym.envs.task import SCALARS, DampingTask, TaskState
+from tether_gym.envs.contract import Scalar
+from tether_gym.envs.task import DampingTask, TaskState
 from tether_gym.limits import is_whole_number
 
 __all__ = ["MPC_SETTINGS_FILE", "MPCController", "MPCSettings", "load_mpc_settings"]
-
-#: Column of the reward's vibration term in the task's scalars.
-VIBRATION_TERM = SCALARS.index("reward_vibration")
 
 #: Per-id settings of the ``mpc`` controller (plain YAML, nothing evaluated).
 MPC_SETTINGS_FILE = Path(__file__).resolve().parent / "hyperparams" / "mpc.yml"
@@ -277,14 +275,14 @@ class MPCController:
         planner.restore(snapshot)
         flat = candidates.reshape(self.batch * self.settings.samples, self.settings.horizon, self.action_size)
         total = np.zeros(flat.shape[0])
-        rngs = self.planner_rngs if planner._perturbed else None
+        rngs = self.planner_rngs if planner.perturbed else None
         for h in range(self.settings.horizon):
             # The env receives float32 actions: rounding the planned ones alike keeps the
             # planner's rollouts bit-identical to what the env would do with them.
             actions = self._actions(planner, flat[:, h]).astype(np.float32).astype(np.float64)
             planner.step(actions, rngs=rngs)
-            total += self.weights[h] * planner.scalars[:, 0]
-        total += self.settings.terminal_weight * self.weights[-1] * planner.scalars[:, VIBRATION_TERM]
+            total += self.weights[h] * planner.scalars[:, Scalar.REWARD]
+        total += self.settings.terminal_weight * self.weights[-1] * planner.scalars[:, Scalar.REWARD_VIBRATION]
         return -total.reshape(self.batch, self.settings.samples)
 
     def _update(self, candidates: np.ndarray, costs: np.ndarray) -> np.ndarray:

@@ -5,16 +5,29 @@ parallel loop.  Clusters never share data inside a kernel, so a cluster integrat
 follows exactly the same floating-point operations as the same cluster integrated alone
 (bit-identical results, whatever the batch size or the number of threads).
 
-Conventions (SI units throughout):
+**The tables.**  The kernels read and write the simulator's state through a few tables, one per
+kind of entity, whose columns are named below and nowhere else:
 
-* ``x`` (n, 3) node positions in m; ``v`` (n, 3) velocities in m/s.
-* ``cables`` (m, 2) node indices; per cable ``stiffness = EA / L0`` in N/m, ``L0`` in m,
-  ``N0`` (pretension) in N, ``inv_split_mass_sum = 1/m_i^e + 1/m_j^e`` in 1/kg, where the node
-  masses are split equally among the cables meeting at the node (so that the element masses sum to
-  the assembled mass and the Irons-Treharne bound holds).
-* ``f_int`` (n, 3) is the restoring force of the equation of motion ``M a + C v + f_int = p``:
-  a taut cable contributes ``-N e`` at node i and ``+N e`` at node j, with ``e`` the unit vector
-  from i to j.
+* the node table ``(B, n, NODE_COLUMNS)`` float64, one row per satellite;
+* the cable table ``(B, m, CABLE_COLUMNS)`` float64, one row per cable;
+* the cluster table ``(B, CLUSTER_COLUMNS)`` float64 and the counter table
+  ``(B, COUNTER_COLUMNS)`` int64, one row per cluster;
+* the topology ``(m, 2)`` int64 (the node indices of each cable, shared by the batch), and the
+  settings ``(SETTINGS,)`` float64 (shared too).
+
+Each table holds its entity's parameters, its state and what the last advance measured, so a
+kernel takes a handful of arrays however many physical quantities there are, and a new quantity
+is a new column, not a new argument in every signature.  (numba charges about 0.2 us per array
+argument on every call: the 40 arguments the integrator once took were most of a single env's
+step.)  Vector quantities take three consecutive columns (x, y, z), starting at the named one.
+
+Conventions (SI units throughout): per cable ``stiffness = EA / L0`` in N/m, the rest length
+``L0`` in m, the pretension ``N0`` in N, ``inv_split_mass_sum = 1/m_i^e + 1/m_j^e`` in 1/kg, where
+the node masses are split equally among the cables meeting at the node (so that the element
+masses sum to the assembled mass and the Irons-Treharne bound holds).  The internal force
+``f_int`` is the restoring force of the equation of motion ``M a + C v + f_int = p``: a taut
+cable contributes ``-N e`` at node i and ``+N e`` at node j, with ``e`` the unit vector from i to
+j.
 """
 
 from __future__ import annotations
@@ -26,12 +39,14 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from tether_gym import _compilation  # noqa: F401 - announces the first compilation of a process
+
 # The OpenMP layer scheduled the batched kernels 1.5-2x faster than numba's default
 # "workqueue" layer on a busy 2-core machine (N = 1024 vector env: ~0.8 M against 0.4-0.58 M
 # env steps/s); results are the same bits either way.  Users keep control through numba's own
 # environment variables.
 if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY" not in os.environ:
-    numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+    numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]  # type: ignore[attr-defined]
 # OpenMP threads spin while they wait for work (libgomp: 300 000 spins by default). When other
 # jobs share the cores (training next to an evaluation, a benchmark next to the tests), the
 # spinning threads starve each other. Measured on this 2-core machine, native vector env at
@@ -47,12 +62,81 @@ if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY
 if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "1000")
 
+# ---------------------------------------------------------------------------------------------
+# The node table, (B, n, NODE_COLUMNS): one row per satellite.
+MASS = 0  # kg
+DAMPING = 1  # N*s/m, the satellite's diagonal (absolute) damping
+REFERENCE = 2  # m, 3 columns: the position the linearised elongation is measured from
+POSITION = 5  # m, 3 columns, in the cluster's frame
+HALF_STEP_VELOCITY = 8  # m/s, 3 columns: v_{n-1/2}, the velocity the cables' axial damping sees (v_0 after a reset)
+VELOCITY = 11  # m/s, 3 columns: v_n, at the current time
+INTERNAL_FORCE = 14  # N, 3 columns: f_int at the current positions
+PREVIOUS_FORCE = 17  # N, 3 columns: the applied force of the last interval (for exact impulses)
+APPLIED_FORCE = 20  # N, 3 columns: the external force p held over the coming interval
+NODE_COLUMNS = 23
+
+# The cable table, (B, m, CABLE_COLUMNS): one row per cable.
+STIFFNESS = 0  # N/m, EA / L0
+REST_LENGTH = 1  # m, L0
+PRETENSION = 2  # N, N0
+INV_SPLIT_MASS_SUM = 3  # 1/kg
+BREAKING_LOAD = 4  # N
+AXIAL_DAMPING = 5  # N*s/m, Kelvin-Voigt
+TENSION = 6  # N, at the current positions (0 when slack or broken)
+INTACT = 7  # 1.0 intact, 0.0 broken (a float, so that the whole cable lives in one table)
+PEAK_TENSION = 8  # N, the largest tension during the last advance (the tension itself after a reset)
+CABLE_COLUMNS = 9
+
+# The cluster table, (B, CLUSTER_COLUMNS): one row per cluster.
+FRAME_RATE = 0  # rad/s, the frame's rotation rate about z
+FRAME_TIDAL = 1  # 1/s^2, 3 columns: the diagonal of the frame's centrifugal and tidal term
+TIME = 4  # s since the reset
+LAST_STEP = 5  # s, the last sub-step (0 right after a reset: the next one starts uniformly accelerated)
+OMEGA2 = 6  # (rad/s)^2, the step-limiting frequency estimate at the current positions
+WORK = 7  # J, external work since the reset
+DISSIPATED = 8  # J, damping and broken cables since the reset
+INITIAL_ENERGY = 9  # J, at the reset
+STEP_MIN = 10  # s, the smallest sub-step of the last advance (inf if it took none)
+STEP_MAX = 11  # s, the largest sub-step of the last advance (0 if it took none)
+CLUSTER_COLUMNS = 12
+
+# The counter table, (B, COUNTER_COLUMNS) int64: one row per cluster.
+STATUS = 0  # a STATUS_* code; a cluster that is not STATUS_OK is frozen until reset
+SUBSTEPS = 1  # sub-steps of the last advance
+COUNTER_COLUMNS = 2
+
+# The settings, (SETTINGS,) float64: one per batch.
+SAFETY_FACTOR = 0  # the sub-step as a fraction of the estimated critical step
+MAX_STEP = 1  # s, an upper bound on the sub-step
+MAX_SUBSTEPS = 2  # sub-steps one advance may take per cluster (a whole number, exact in float64)
+LINEARISED = 3  # 1.0: the paper's linearised elongation (eq. 11), 0.0: the exact one
+SETTINGS = 4
+
+#: Every column number above, in one tuple: the kernels of other modules that read these tables
+#: hold it in their closure, which numba's cache hashes, so that a change here recompiles them
+#: (the cache watches only the file a kernel is written in).
+LAYOUT = (
+    (MASS, DAMPING, REFERENCE, POSITION, HALF_STEP_VELOCITY, VELOCITY, INTERNAL_FORCE, PREVIOUS_FORCE),
+    (APPLIED_FORCE, NODE_COLUMNS),
+    (STIFFNESS, REST_LENGTH, PRETENSION, INV_SPLIT_MASS_SUM, BREAKING_LOAD, AXIAL_DAMPING, TENSION, INTACT),
+    (PEAK_TENSION, CABLE_COLUMNS),
+    (FRAME_RATE, FRAME_TIDAL, TIME, LAST_STEP, OMEGA2, WORK, DISSIPATED, INITIAL_ENERGY, STEP_MIN, STEP_MAX),
+    (CLUSTER_COLUMNS, STATUS, SUBSTEPS, COUNTER_COLUMNS),
+    (SAFETY_FACTOR, MAX_STEP, MAX_SUBSTEPS, LINEARISED, SETTINGS),
+)
+
 # Status codes of a cluster in a batch.
 STATUS_OK = 0
 STATUS_NON_FINITE = 1  # a non-finite state, or a cable of zero length
 STATUS_TOO_MANY_SUBSTEPS = 2
 
+#: Chunks the parallel drivers split a batch into: enough to even out clusters that sub-step more
+#: over any likely number of threads, few enough that the per-chunk call costs nothing.
+PARALLEL_CHUNKS = 64
 
+
+# ---------------------------------------------------------------------------------------------
+# Cable forces
 def _make_cable_forces(viscous: bool):  # noqa: ANN202 - returns a compiled function
     """Compile :func:`cable_forces` with the Kelvin-Voigt term (``viscous=True``: the general
     kernel) or without it.  ``viscous`` is frozen into the compiled code: merely having the
@@ -60,33 +144,23 @@ def _make_cable_forces(viscous: bool):  # noqa: ANN202 - returns a compiled func
 
     @njit(cache=True, nogil=True, error_model="numpy")
     def cable_forces(
-        x: np.ndarray,
-        v: np.ndarray,
-        reference: np.ndarray,
+        nodes: np.ndarray,
         cables: np.ndarray,
-        stiffness: np.ndarray,
-        L0: np.ndarray,
-        N0: np.ndarray,
-        axial_damping: np.ndarray,
-        inv_split_mass_sum: np.ndarray,
-        breaking_load: np.ndarray,
-        intact: np.ndarray,
+        topology: np.ndarray,
         linearised: bool,
         taut_branch: bool,
         may_break: bool,
-        f_int: np.ndarray,
-        tension: np.ndarray,
-        peak: np.ndarray,
     ) -> tuple[float, bool, float, float]:
         """Restoring forces and cable tensions of one cluster, plus its largest element frequency.
 
-        Writes ``f_int`` (n, 3) in N and ``tension`` (m,) in N (0 for slack and broken cables), and
-        raises ``peak`` (m,) to any larger tension.  A taut cable carries
-        ``N = max(0, N0 + EA/L0 dL + c_ax dL')``, its stretching rate ``dL'`` taken from the
-        velocities ``v`` (n, 3) m/s: in the integrator these are the half-step velocities
-        ``v_{n-1/2}``, the usual explicit (lagged) treatment of a velocity-dependent internal force.
-        With ``may_break``, a cable whose tension passes its ``breaking_load`` is marked broken in
-        ``intact`` (m,) and carries nothing from then on.
+        Reads the cluster's node table ``nodes`` (n, NODE_COLUMNS) and cable table ``cables``
+        (m, CABLE_COLUMNS); writes ``INTERNAL_FORCE`` of every node and ``TENSION`` of every
+        cable (0 for slack and broken ones), and raises ``PEAK_TENSION`` to any larger tension.  A
+        taut cable carries ``N = max(0, N0 + EA/L0 dL + c_ax dL')``, its stretching rate ``dL'``
+        taken from the ``HALF_STEP_VELOCITY`` columns: in the integrator these are ``v_{n-1/2}``,
+        the usual explicit (lagged) treatment of a velocity-dependent internal force.  With
+        ``may_break``, a cable whose tension passes its breaking load is marked broken
+        (``INTACT`` 0) and carries nothing from then on.
 
         Returns ``(omega2_max, finite, viscous_power, released_energy)``:
 
@@ -101,24 +175,29 @@ def _make_cable_forces(viscous: bool):  # noqa: ANN202 - returns a compiled func
         * ``viscous_power``: power dissipated by the cables' axial damping, W.
         * ``released_energy``: elastic energy of the cables that broke in this call, J.
 
-        ``taut_branch=True`` drops the tension-only cut-off (``N`` may go negative): the smooth law
-        that the finite-difference critical-step estimate perturbs.
+        ``linearised`` measures the elongation as the paper's eq. (11) (end displacements from the
+        ``REFERENCE`` positions projected on the current direction).  ``taut_branch=True`` drops
+        the tension-only cut-off (``N`` may go negative): the smooth law that the
+        finite-difference critical-step estimate perturbs.
         """
-        f_int[:, :] = 0.0
+        for i in range(nodes.shape[0]):
+            for d in range(3):
+                nodes[i, INTERNAL_FORCE + d] = 0.0
         omega2_max = 0.0
         length_sum = 0.0
         shortest = math.inf
         viscous_power = 0.0
         released = 0.0
-        for c in range(cables.shape[0]):
-            if not intact[c]:
-                tension[c] = 0.0
+        for c in range(topology.shape[0]):
+            cable = cables[c]
+            if cable[INTACT] == 0.0:
+                cable[TENSION] = 0.0
                 continue
-            i = cables[c, 0]
-            j = cables[c, 1]
-            dx = x[j, 0] - x[i, 0]
-            dy = x[j, 1] - x[i, 1]
-            dz = x[j, 2] - x[i, 2]
+            i = topology[c, 0]
+            j = topology[c, 1]
+            dx = nodes[j, POSITION] - nodes[i, POSITION]
+            dy = nodes[j, POSITION + 1] - nodes[i, POSITION + 1]
+            dz = nodes[j, POSITION + 2] - nodes[i, POSITION + 2]
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
             length_sum += length
             if length < shortest:
@@ -130,48 +209,53 @@ def _make_cable_forces(viscous: bool):  # noqa: ANN202 - returns a compiled func
             if linearised:
                 # The paper's eq. (11): end displacements projected on the current direction.
                 elongation = (
-                    (dx - (reference[j, 0] - reference[i, 0])) * ex
-                    + (dy - (reference[j, 1] - reference[i, 1])) * ey
-                    + (dz - (reference[j, 2] - reference[i, 2])) * ez
+                    (dx - (nodes[j, REFERENCE] - nodes[i, REFERENCE])) * ex
+                    + (dy - (nodes[j, REFERENCE + 1] - nodes[i, REFERENCE + 1])) * ey
+                    + (dz - (nodes[j, REFERENCE + 2] - nodes[i, REFERENCE + 2])) * ez
                 )
             else:
-                elongation = length - L0[c]
-            n_taut = N0[c] + stiffness[c] * elongation
+                elongation = length - cable[REST_LENGTH]
+            stiffness = cable[STIFFNESS]
+            n_taut = cable[PRETENSION] + stiffness * elongation
             n_cable = n_taut if (n_taut > 0.0 or taut_branch) else 0.0
-            damping_c = axial_damping[c]
+            damping_c = cable[AXIAL_DAMPING]
             if viscous and damping_c > 0.0 and n_cable != 0.0:
-                rate = (v[j, 0] - v[i, 0]) * ex + (v[j, 1] - v[i, 1]) * ey + (v[j, 2] - v[i, 2]) * ez
+                rate = (
+                    (nodes[j, HALF_STEP_VELOCITY] - nodes[i, HALF_STEP_VELOCITY]) * ex
+                    + (nodes[j, HALF_STEP_VELOCITY + 1] - nodes[i, HALF_STEP_VELOCITY + 1]) * ey
+                    + (nodes[j, HALF_STEP_VELOCITY + 2] - nodes[i, HALF_STEP_VELOCITY + 2]) * ez
+                )
                 n_cable = n_taut + damping_c * rate
                 if n_cable < 0.0 and not taut_branch:
                     n_cable = 0.0
                 viscous_power += (n_cable - n_taut) * rate
             geometric = n_cable * inverse_length
-            k_max = stiffness[c] if stiffness[c] >= geometric else geometric
-            omega2 = k_max * inv_split_mass_sum[c]
+            k_max = stiffness if stiffness >= geometric else geometric
+            omega2 = k_max * cable[INV_SPLIT_MASS_SUM]
             if damping_c > 0.0:
-                xi = 0.5 * damping_c * inv_split_mass_sum[c] / math.sqrt(omega2)
+                xi = 0.5 * damping_c * cable[INV_SPLIT_MASS_SUM] / math.sqrt(omega2)
                 factor = math.sqrt(1.0 + xi * xi) + xi
                 omega2 *= factor * factor
             if omega2 > omega2_max:
                 omega2_max = omega2
-            if n_cable > peak[c]:
-                peak[c] = n_cable
-            if may_break and n_cable > breaking_load[c]:
-                intact[c] = False
+            if n_cable > cable[PEAK_TENSION]:
+                cable[PEAK_TENSION] = n_cable
+            if may_break and n_cable > cable[BREAKING_LOAD]:
+                cable[INTACT] = 0.0
                 elastic = n_taut if n_taut > 0.0 else 0.0
-                released += 0.5 * elastic * elastic / stiffness[c]
+                released += 0.5 * elastic * elastic / stiffness
                 n_cable = 0.0
-            tension[c] = n_cable
+            cable[TENSION] = n_cable
             if n_cable != 0.0:
                 fx = n_cable * ex
                 fy = n_cable * ey
                 fz = n_cable * ez
-                f_int[i, 0] -= fx
-                f_int[i, 1] -= fy
-                f_int[i, 2] -= fz
-                f_int[j, 0] += fx
-                f_int[j, 1] += fy
-                f_int[j, 2] += fz
+                nodes[i, INTERNAL_FORCE] -= fx
+                nodes[i, INTERNAL_FORCE + 1] -= fy
+                nodes[i, INTERNAL_FORCE + 2] -= fz
+                nodes[j, INTERNAL_FORCE] += fx
+                nodes[j, INTERNAL_FORCE + 1] += fy
+                nodes[j, INTERNAL_FORCE + 2] += fz
         finite = math.isfinite(length_sum) and shortest > 0.0
         return omega2_max, finite, viscous_power, released
 
@@ -184,13 +268,16 @@ cable_forces = _make_cable_forces(True)
 _cable_forces_undamped = _make_cable_forces(False)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _largest_tidal(tidal: np.ndarray) -> float:
-    """``max |T_d|`` of a frame's tidal diagonal (3,), 1/s^2: the frame's share of omega_max^2."""
-    return max(abs(tidal[0]), abs(tidal[1]), abs(tidal[2]))
+# ---------------------------------------------------------------------------------------------
+# The integrator's pieces, inlined into it.  ``nodes`` and ``cables`` are one cluster's node
+# and cable tables, ``cluster`` its row of the cluster table.
+@njit(inline="always", error_model="numpy")
+def _largest_tidal(cluster: np.ndarray) -> float:
+    """``max |T_d|`` of a frame's tidal diagonal, 1/s^2: the frame's share of omega_max^2."""
+    return max(abs(cluster[FRAME_TIDAL]), abs(cluster[FRAME_TIDAL + 1]), abs(cluster[FRAME_TIDAL + 2]))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(inline="always", error_model="numpy")
 def _solve_gyroscopic(lhs: float, gyro: float, rx: float, ry: float) -> tuple[float, float]:
     """Solve ``lhs vx - gyro vy = rx, lhs vy + gyro vx = ry``: the in-plane part of a velocity
     update whose Coriolis term is taken at the centred velocity (a Cayley rotation, which, like
@@ -199,51 +286,207 @@ def _solve_gyroscopic(lhs: float, gyro: float, rx: float, ry: float) -> tuple[fl
     return (lhs * rx + gyro * ry) / det, (lhs * ry - gyro * rx) / det
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _advance_clusters(
-    first: int,
-    stop: int,
-    active: np.ndarray,
+@njit(inline="always", error_model="numpy")
+def _frame_force(nodes: np.ndarray, cluster: np.ndarray, i: int, d: int) -> float:
+    """The frame's centrifugal and tidal force on node ``i`` along axis ``d``, ``m T_d x_d``, N."""
+    return nodes[i, MASS] * cluster[FRAME_TIDAL + d] * nodes[i, POSITION + d]
+
+
+@njit(inline="always", error_model="numpy")
+def _damping_step(nodes: np.ndarray, safety_factor: float) -> float:
+    """``safety_factor * min 2 m / c`` over the damped satellites, s (inf without damping).
+
+    The centred damping update scales v by (m/h - c/2) / (m/h + c/2): stable for any h, but past
+    h = 2 m/c it reverses the velocity, which free damped motion never does.  So the step also
+    respects the damping time scale, with the same safety factor; it binds only where no cable
+    limits the step more (all cables broken, or very heavy damping)."""
+    h_damping = math.inf
+    for i in range(nodes.shape[0]):
+        mass, damping = nodes[i, MASS], nodes[i, DAMPING]
+        if damping > 0.0 and 2.0 * mass / damping < h_damping:
+            h_damping = 2.0 * mass / damping
+    return h_damping * safety_factor
+
+
+@njit(inline="always", error_model="numpy")
+def _step_size(
+    omega2: float, h_damping: float, settings: np.ndarray, remaining: float, taken: int
+) -> tuple[float, bool]:
+    """``(h, last)``: the next sub-step, s, for the ``remaining`` seconds of the interval after
+    ``taken`` sub-steps, and whether it ends the interval; ``h = 0`` when the rest of the interval
+    would need more sub-steps than the budget allows.
+
+    The stable step is ``min(safety_factor * 2 / omega_est, h_damping, max_step)``; what remains
+    is spread evenly over the fewest steps no longer than that: equal steps within an interval,
+    and no sliver step before its end."""
+    max_substeps = np.int64(settings[MAX_SUBSTEPS])
+    h_stable = settings[SAFETY_FACTOR] * 2.0 / math.sqrt(omega2) if omega2 > 0.0 else math.inf
+    if h_stable > h_damping:
+        h_stable = h_damping
+    if h_stable > settings[MAX_STEP]:
+        h_stable = settings[MAX_STEP]
+    # The step count is compared as a float before it becomes an integer: a duration far beyond
+    # the budget would overflow the integer, and the cluster is flagged before it takes steps it
+    # could not finish.
+    steps_wanted = remaining / h_stable - 1e-9
+    if taken >= max_substeps or steps_wanted > max_substeps - taken:
+        return 0.0, False
+    steps_left = math.ceil(steps_wanted)
+    if steps_left <= 1:
+        return remaining, True
+    return remaining / steps_left, False
+
+
+@njit(inline="always", error_model="numpy")
+def _kick_from_rest(nodes: np.ndarray, cluster: np.ndarray, h: float) -> None:
+    """The first half step after a reset, ``v_{1/2} = v_0 + h/2 a_0`` (uniformly accelerated
+    motion, paper section 2), with the frame's terms at the initial state."""
+    rate = cluster[FRAME_RATE]
+    for i in range(nodes.shape[0]):
+        mass, damping = nodes[i, MASS], nodes[i, DAMPING]
+        v0, v1, v2 = nodes[i, HALF_STEP_VELOCITY], nodes[i, HALF_STEP_VELOCITY + 1], nodes[i, HALF_STEP_VELOCITY + 2]
+        ax = (
+            nodes[i, APPLIED_FORCE] - nodes[i, INTERNAL_FORCE] - damping * v0 + _frame_force(nodes, cluster, i, 0)
+        ) / mass + 2.0 * rate * v1
+        ay = (
+            nodes[i, APPLIED_FORCE + 1]
+            - nodes[i, INTERNAL_FORCE + 1]
+            - damping * v1
+            + _frame_force(nodes, cluster, i, 1)
+        ) / mass - 2.0 * rate * v0
+        az = (
+            nodes[i, APPLIED_FORCE + 2]
+            - nodes[i, INTERNAL_FORCE + 2]
+            - damping * v2
+            + _frame_force(nodes, cluster, i, 2)
+        ) / mass
+        nodes[i, HALF_STEP_VELOCITY] = v0 + 0.5 * h * ax
+        nodes[i, HALF_STEP_VELOCITY + 1] = v1 + 0.5 * h * ay
+        nodes[i, HALF_STEP_VELOCITY + 2] = v2 + 0.5 * h * az
+
+
+@njit(inline="always", error_model="numpy")
+def _dual_force(nodes: np.ndarray, i: int, d: int, blend: float) -> float:
+    """The applied force over the velocity update's span, N: ``blend`` of it under the previous
+    interval's force and the rest under the new one (exact impulses at force switches)."""
+    applied = nodes[i, APPLIED_FORCE + d]
+    return applied + blend * (nodes[i, PREVIOUS_FORCE + d] - applied)
+
+
+@njit(inline="always", error_model="numpy")
+def _kick(nodes: np.ndarray, h_mid: float, blend: float) -> None:
+    """The velocity update ``v_{n+1/2} = [(M/h_n - C/2) v_{n-1/2} + p - f_int] / (M/h_n + C/2)``
+    of the inertial frame, kept free of the frame terms: it is the hot loop."""
+    inverse_h_mid = 1.0 / h_mid
+    for i in range(nodes.shape[0]):
+        inertia = nodes[i, MASS] * inverse_h_mid
+        inverse_lhs = 1.0 / (inertia + 0.5 * nodes[i, DAMPING])
+        rhs_factor = inertia - 0.5 * nodes[i, DAMPING]
+        for d in range(3):
+            p_dual = _dual_force(nodes, i, d, blend)
+            nodes[i, HALF_STEP_VELOCITY + d] = (
+                rhs_factor * nodes[i, HALF_STEP_VELOCITY + d] + p_dual - nodes[i, INTERNAL_FORCE + d]
+            ) * inverse_lhs
+
+
+@njit(inline="always", error_model="numpy")
+def _kick_turning(nodes: np.ndarray, cluster: np.ndarray, h_mid: float, blend: float) -> None:
+    """:func:`_kick` in a turning frame: with the frame's force ``M T u_n`` and the Coriolis force
+    taken at the centred velocity (a 2x2 solve per satellite)."""
+    inverse_h_mid = 1.0 / h_mid
+    rate = cluster[FRAME_RATE]
+    for i in range(nodes.shape[0]):
+        mass, damping = nodes[i, MASS], nodes[i, DAMPING]
+        inertia = mass * inverse_h_mid
+        lhs = inertia + 0.5 * damping
+        rhs_factor = inertia - 0.5 * damping
+        gyro = mass * rate
+        v0, v1, v2 = nodes[i, HALF_STEP_VELOCITY], nodes[i, HALF_STEP_VELOCITY + 1], nodes[i, HALF_STEP_VELOCITY + 2]
+        r0 = rhs_factor * v0 + gyro * v1
+        r1 = rhs_factor * v1 - gyro * v0
+        r2 = rhs_factor * v2
+        r0 += _dual_force(nodes, i, 0, blend) - nodes[i, INTERNAL_FORCE] + _frame_force(nodes, cluster, i, 0)
+        r1 += _dual_force(nodes, i, 1, blend) - nodes[i, INTERNAL_FORCE + 1] + _frame_force(nodes, cluster, i, 1)
+        r2 += _dual_force(nodes, i, 2, blend) - nodes[i, INTERNAL_FORCE + 2] + _frame_force(nodes, cluster, i, 2)
+        nodes[i, HALF_STEP_VELOCITY], nodes[i, HALF_STEP_VELOCITY + 1] = _solve_gyroscopic(lhs, gyro, r0, r1)
+        nodes[i, HALF_STEP_VELOCITY + 2] = r2 / lhs
+
+
+@njit(inline="always", error_model="numpy")
+def _drift(nodes: np.ndarray, h: float, work: float, dissipated: float) -> tuple[float, float]:
+    """``u_{n+1} = u_n + h v_{n+1/2}``, adding the step's external work and diagonal-damping loss to
+    the running totals ``work`` and ``dissipated`` (J), which it returns."""
+    for i in range(nodes.shape[0]):
+        speed2 = 0.0
+        for d in range(3):
+            velocity = nodes[i, HALF_STEP_VELOCITY + d]
+            dx = h * velocity
+            work += nodes[i, APPLIED_FORCE + d] * dx
+            speed2 += velocity * velocity
+            nodes[i, POSITION + d] += dx
+        dissipated += h * nodes[i, DAMPING] * speed2
+    return work, dissipated
+
+
+@njit(inline="always", error_model="numpy")
+def _synchronise_velocity(nodes: np.ndarray, cluster: np.ndarray, h_last: float) -> None:
+    """The velocity at the end of the interval, consistent with the force just applied:
+    ``(M + h/2 C) v_n + h M Omega x v_n = M v_{n-1/2} + h/2 (p - f_int(u_n) + M T u_n)``."""
+    half = 0.5 * h_last
+    rate = cluster[FRAME_RATE]
+    for i in range(nodes.shape[0]):
+        mass = nodes[i, MASS]
+        denominator = mass + half * nodes[i, DAMPING]
+        r0 = mass * nodes[i, HALF_STEP_VELOCITY] + half * (
+            nodes[i, APPLIED_FORCE] - nodes[i, INTERNAL_FORCE] + _frame_force(nodes, cluster, i, 0)
+        )
+        r1 = mass * nodes[i, HALF_STEP_VELOCITY + 1] + half * (
+            nodes[i, APPLIED_FORCE + 1] - nodes[i, INTERNAL_FORCE + 1] + _frame_force(nodes, cluster, i, 1)
+        )
+        r2 = mass * nodes[i, HALF_STEP_VELOCITY + 2] + half * (
+            nodes[i, APPLIED_FORCE + 2] - nodes[i, INTERNAL_FORCE + 2] + _frame_force(nodes, cluster, i, 2)
+        )
+        if rate == 0.0:
+            nodes[i, VELOCITY] = r0 / denominator
+            nodes[i, VELOCITY + 1] = r1 / denominator
+        else:
+            nodes[i, VELOCITY], nodes[i, VELOCITY + 1] = _solve_gyroscopic(denominator, h_last * mass * rate, r0, r1)
+        nodes[i, VELOCITY + 2] = r2 / denominator
+
+
+@njit(inline="always", error_model="numpy")
+def _update_forces(
+    nodes: np.ndarray, cables: np.ndarray, topology: np.ndarray, linearised: bool, viscous: bool
+) -> tuple[float, bool, float, float]:
+    """:func:`cable_forces` at the new positions, breaking overloaded cables; the undamped variant
+    when no cable of the cluster has axial damping."""
+    if viscous:
+        return cable_forces(nodes, cables, topology, linearised, False, True)
+    return _cable_forces_undamped(nodes, cables, topology, linearised, False, True)
+
+
+@njit(inline="always", error_model="numpy")
+def _hold_cluster(cables: np.ndarray, cluster: np.ndarray, counters: np.ndarray) -> None:
+    """The measurements of a cluster that takes no step (inactive, or frozen by its status)."""
+    counters[SUBSTEPS] = 0
+    cluster[STEP_MIN] = math.inf
+    cluster[STEP_MAX] = 0.0
+    for c in range(cables.shape[0]):
+        cables[c, PEAK_TENSION] = cables[c, TENSION]
+
+
+@njit(inline="always", error_model="numpy")
+def _advance_cluster(
     duration: float,
-    time: np.ndarray,
-    x: np.ndarray,
-    v_half: np.ndarray,
-    v_sync: np.ndarray,
-    f_int: np.ndarray,
-    tension: np.ndarray,
-    h_prev: np.ndarray,
-    omega2: np.ndarray,
-    force: np.ndarray,
-    previous_force: np.ndarray,
-    masses: np.ndarray,
-    damping: np.ndarray,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
     cables: np.ndarray,
-    stiffness: np.ndarray,
-    L0: np.ndarray,
-    N0: np.ndarray,
-    axial_damping: np.ndarray,
-    inv_split_mass_sum: np.ndarray,
-    breaking_load: np.ndarray,
-    intact: np.ndarray,
-    frame_rate: np.ndarray,
-    frame_tidal: np.ndarray,
-    reference: np.ndarray,
-    linearised: bool,
-    safety_factor: float,
-    max_step: float,
-    max_substeps: int,
-    work: np.ndarray,
-    dissipated: np.ndarray,
-    substeps: np.ndarray,
-    step_min: np.ndarray,
-    step_max: np.ndarray,
-    status: np.ndarray,
+    cluster: np.ndarray,
+    counters: np.ndarray,
     step_record: np.ndarray,
-    peak_tension: np.ndarray,
-    status_out: np.ndarray,
 ) -> None:
-    """Integrate clusters ``first..stop-1`` over ``duration`` seconds, each with its external force
-    held constant.  A cluster that is inactive or unhealthy takes no step (zero sub-steps).
+    """Integrate one healthy cluster over ``duration`` seconds with its ``APPLIED_FORCE`` held.
 
     Central differences in half-step (leapfrog) form, valid for variable steps::
 
@@ -251,469 +494,169 @@ def _advance_clusters(
         v_{n+1/2}  = [(M/h_n - C/2) v_{n-1/2} + p - f_int(u_n)] / (M/h_n + C/2)
         u_{n+1}    = u_n + h_{n+1/2} v_{n+1/2}
 
-    which at constant step is the paper's three-level scheme (eqs. 7-9).  ``h_prev[b] == 0`` marks
-    a fresh state (just reset): ``v_half`` then holds the initial velocity and the first interval
-    assumes uniformly accelerated motion, ``v_{1/2} = v_0 + h/2 a_0`` (paper, section 2).
+    which at constant step is the paper's three-level scheme (eqs. 7-9).  ``LAST_STEP == 0`` marks
+    a fresh state (just reset): the half-step velocity then holds the initial velocity and the
+    first interval assumes uniformly accelerated motion, ``v_{1/2} = v_0 + h/2 a_0`` (paper,
+    section 2).
 
-    In a turning frame (``frame_rate[b] = Omega`` about z, tidal diagonal ``frame_tidal[b]``,
-    1/s^2) the force gains ``M diag(T) u_n`` and the Coriolis force ``-2 M Omega x v``, which is
-    taken at the centred velocity ``(v_{n-1/2} + v_{n+1/2}) / 2`` like the diagonal damping: the
-    update stays explicit (a 2x2 solve per satellite), unconditionally stable in the Coriolis
-    term and free of spurious Coriolis work.
+    In a turning frame (``FRAME_RATE`` Omega about z, tidal diagonal ``FRAME_TIDAL``, 1/s^2) the
+    force gains ``M diag(T) u_n`` and the Coriolis force ``-2 M Omega x v``, which is taken at the
+    centred velocity ``(v_{n-1/2} + v_{n+1/2}) / 2`` like the diagonal damping: the update stays
+    explicit (a 2x2 solve per satellite), unconditionally stable in the Coriolis term and free of
+    spurious Coriolis work.
 
     The force is piecewise constant and switches at the start of the interval.  The first velocity
     update spans ``[t_n - h_{n-1/2}/2, t_n + h_{n+1/2}/2]``, half under the previous interval's force
-    ``previous_force`` and half under the new one, so it uses their time-weighted mean: the impulse
-    of every force switch is then exact, instead of half a sub-step early.
+    (``PREVIOUS_FORCE``) and half under the new one, so it uses their time-weighted mean: the
+    impulse of every force switch is then exact, instead of half a sub-step early.
 
     Each sub-step is ``min(safety_factor * 2 / omega_est, safety_factor * 2 min(m/c), max_step)``,
-    re-estimated at every configuration, then shortened so that the rest of the interval splits into equal steps; the
-    interval ends exactly at ``duration``.  A cluster whose remaining sub-steps at the current step
-    size would exceed ``max_substeps`` is flagged ``STATUS_TOO_MANY_SUBSTEPS`` without taking
-    them.  ``omega_est^2`` is the largest element value of
-    :func:`cable_forces` plus ``max |T|``.  Cables whose tension passes their breaking load break
-    (``intact``) and the cluster goes on without them.  ``peak_tension[b]`` receives each cable's
-    largest tension over the interval, N.  ``status_out[b]`` receives the cluster's status, and a
-    cluster that stays healthy has ``duration`` added to its ``time[b]``.
-
-    The loop over clusters lives inside this function (the drivers hand it a range) because a
-    call per cluster with this many array arguments cost more than the whole sub-stepping of a
-    short interval.
+    re-estimated at every configuration, then shortened so that the rest of the interval splits
+    into equal steps; the interval ends exactly at ``duration``.  A cluster whose remaining
+    sub-steps at the current step size would exceed the settings' ``MAX_SUBSTEPS`` is flagged
+    ``STATUS_TOO_MANY_SUBSTEPS`` without taking them.  ``omega_est^2`` is the largest element value
+    of :func:`cable_forces` plus ``max |T|``.  Cables whose tension passes their breaking load
+    break and the cluster goes on without them.  The cable table's ``PEAK_TENSION`` receives each
+    cable's largest tension over the interval, N; ``step_record`` (R,) the first R sub-steps, s.
+    A cluster that stays healthy has ``duration`` added to its ``TIME``.
     """
-    for b in range(first, stop):
-        if not (active[b] and status[b] == STATUS_OK):
-            substeps[b] = 0
-            step_min[b] = math.inf
-            step_max[b] = 0.0
-            peak_tension[b, :] = tension[b, :]
-            status_out[b] = status[b]
-            continue
-        n_nodes = x.shape[1]
-        xb = x[b]
-        vb = v_half[b]
-        fb = f_int[b]
-        pb = force[b]
-        mb = masses[b]
-        cb = damping[b]
-        wb = frame_rate[b]
-        tb = frame_tidal[b]
-        tidal_max = _largest_tidal(tb)
-        turning = wb != 0.0 or tidal_max != 0.0
-        viscous = False
-        for c in range(axial_damping.shape[1]):
-            viscous = viscous or axial_damping[b, c] > 0.0
-        n_record = step_record.shape[1]
-        elapsed = 0.0
-        count = 0
-        h_lo = math.inf
-        h_hi = 0.0
-        work_b = work[b]
-        dissipated_b = dissipated[b]
-        h_last = h_prev[b]
-        peak = peak_tension[b]
-        tension_b = tension[b]
-        for c in range(tension_b.shape[0]):
-            peak[c] = tension_b[c]
-        # The centred damping update scales v by (m/h - c/2) / (m/h + c/2): stable for any h, but
-        # past h = 2 m/c it reverses the velocity, which free damped motion never does.  So the
-        # step also respects the damping time scale, with the same safety factor; it binds only
-        # where no cable limits the step more (all cables broken, or very heavy damping).
-        h_damping = math.inf
-        for i in range(n_nodes):
-            if cb[i] > 0.0 and 2.0 * mb[i] / cb[i] < h_damping:
-                h_damping = 2.0 * mb[i] / cb[i]
-        h_damping *= safety_factor
-        while True:
-            h_stable = safety_factor * 2.0 / math.sqrt(omega2[b]) if omega2[b] > 0.0 else math.inf
-            if h_stable > h_damping:
-                h_stable = h_damping
-            if h_stable > max_step:
-                h_stable = max_step
-            remaining = duration - elapsed
-            # The step count is compared as a float before it becomes an integer: a duration
-            # far beyond the budget would overflow the integer, and the cluster is flagged
-            # before it takes steps it could not finish.
-            steps_wanted = remaining / h_stable - 1e-9
-            if count >= max_substeps or steps_wanted > max_substeps - count:
-                status[b] = STATUS_TOO_MANY_SUBSTEPS
-                break
-            # Spread what remains evenly over the fewest steps no longer than h_stable: equal steps
-            # within an interval, and no sliver step before its end.
-            steps_left = math.ceil(steps_wanted)
-            if steps_left <= 1:
-                h = remaining
-                last = True
+    linearised = settings[LINEARISED] != 0.0
+    tidal_max = _largest_tidal(cluster)
+    turning = cluster[FRAME_RATE] != 0.0 or tidal_max != 0.0
+    viscous = False
+    for c in range(cables.shape[0]):
+        viscous = viscous or cables[c, AXIAL_DAMPING] > 0.0
+        cables[c, PEAK_TENSION] = cables[c, TENSION]
+    h_damping = _damping_step(nodes, settings[SAFETY_FACTOR])
+    elapsed = 0.0
+    count = 0
+    h_lo = math.inf
+    h_hi = 0.0
+    work = cluster[WORK]
+    dissipated = cluster[DISSIPATED]
+    h_last = cluster[LAST_STEP]
+    while True:
+        h, last = _step_size(cluster[OMEGA2], h_damping, settings, duration - elapsed, count)
+        if h == 0.0:
+            counters[STATUS] = STATUS_TOO_MANY_SUBSTEPS
+            break
+        if h_last == 0.0:
+            _kick_from_rest(nodes, cluster, h)
+        else:
+            blend = h_last / (h_last + h) if count == 0 else 0.0
+            if turning:
+                _kick_turning(nodes, cluster, 0.5 * (h_last + h), blend)
             else:
-                h = remaining / steps_left
-                last = False
-            if h_last == 0.0:
-                for i in range(n_nodes):
-                    ax = (pb[i, 0] - fb[i, 0] - cb[i] * vb[i, 0] + mb[i] * tb[0] * xb[i, 0]) / mb[i] + 2.0 * wb * vb[
-                        i, 1
-                    ]
-                    ay = (pb[i, 1] - fb[i, 1] - cb[i] * vb[i, 1] + mb[i] * tb[1] * xb[i, 1]) / mb[i] - 2.0 * wb * vb[
-                        i, 0
-                    ]
-                    az = (pb[i, 2] - fb[i, 2] - cb[i] * vb[i, 2] + mb[i] * tb[2] * xb[i, 2]) / mb[i]
-                    vb[i, 0] = vb[i, 0] + 0.5 * h * ax
-                    vb[i, 1] = vb[i, 1] + 0.5 * h * ay
-                    vb[i, 2] = vb[i, 2] + 0.5 * h * az
-            else:
-                h_mid = 0.5 * (h_last + h)
-                blend = h_last / (h_last + h) if count == 0 else 0.0
-                inverse_h_mid = 1.0 / h_mid
-                if not turning:
-                    # The inertial frame, kept free of the frame terms: it is the hot loop.
-                    for i in range(n_nodes):
-                        inertia = mb[i] * inverse_h_mid
-                        inverse_lhs = 1.0 / (inertia + 0.5 * cb[i])
-                        rhs_factor = inertia - 0.5 * cb[i]
-                        for d in range(3):
-                            p_dual = pb[i, d] + blend * (previous_force[b, i, d] - pb[i, d])
-                            vb[i, d] = (rhs_factor * vb[i, d] + p_dual - fb[i, d]) * inverse_lhs
-                else:
-                    for i in range(n_nodes):
-                        inertia = mb[i] * inverse_h_mid
-                        lhs = inertia + 0.5 * cb[i]
-                        rhs_factor = inertia - 0.5 * cb[i]
-                        gyro = mb[i] * wb
-                        r0 = rhs_factor * vb[i, 0] + gyro * vb[i, 1]
-                        r1 = rhs_factor * vb[i, 1] - gyro * vb[i, 0]
-                        r2 = rhs_factor * vb[i, 2]
-                        r0 += (
-                            pb[i, 0]
-                            + blend * (previous_force[b, i, 0] - pb[i, 0])
-                            - fb[i, 0]
-                            + mb[i] * tb[0] * xb[i, 0]
-                        )
-                        r1 += (
-                            pb[i, 1]
-                            + blend * (previous_force[b, i, 1] - pb[i, 1])
-                            - fb[i, 1]
-                            + mb[i] * tb[1] * xb[i, 1]
-                        )
-                        r2 += (
-                            pb[i, 2]
-                            + blend * (previous_force[b, i, 2] - pb[i, 2])
-                            - fb[i, 2]
-                            + mb[i] * tb[2] * xb[i, 2]
-                        )
-                        vb[i, 0], vb[i, 1] = _solve_gyroscopic(lhs, gyro, r0, r1)
-                        vb[i, 2] = r2 / lhs
-            for i in range(n_nodes):
-                speed2 = 0.0
-                for d in range(3):
-                    dx = h * vb[i, d]
-                    work_b += pb[i, d] * dx
-                    speed2 += vb[i, d] * vb[i, d]
-                    xb[i, d] += dx
-                dissipated_b += h * cb[i] * speed2
-            if count < n_record:
-                step_record[b, count] = h
-            count += 1
-            h_last = h
-            if h < h_lo:
-                h_lo = h
-            if h > h_hi:
-                h_hi = h
-            if viscous:
-                omega2_cables, finite, viscous_power, released = cable_forces(
-                    xb,
-                    vb,
-                    reference[b],
-                    cables,
-                    stiffness[b],
-                    L0[b],
-                    N0[b],
-                    axial_damping[b],
-                    inv_split_mass_sum[b],
-                    breaking_load[b],
-                    intact[b],
-                    linearised,
-                    False,
-                    True,
-                    fb,
-                    tension_b,
-                    peak,
-                )
-            else:
-                omega2_cables, finite, viscous_power, released = _cable_forces_undamped(
-                    xb,
-                    vb,
-                    reference[b],
-                    cables,
-                    stiffness[b],
-                    L0[b],
-                    N0[b],
-                    axial_damping[b],
-                    inv_split_mass_sum[b],
-                    breaking_load[b],
-                    intact[b],
-                    linearised,
-                    False,
-                    True,
-                    fb,
-                    tension_b,
-                    peak,
-                )
-            omega2[b] = omega2_cables + tidal_max
-            dissipated_b += h * viscous_power + released
-            if not finite:
-                status[b] = STATUS_NON_FINITE
-                break
-            if last:
-                break
-            elapsed += h
-        h_prev[b] = h_last
-        work[b] = work_b
-        dissipated[b] = dissipated_b
-        substeps[b] = count
-        step_min[b] = h_lo
-        step_max[b] = h_hi
-        if count == 0:  # refused before its first step: the state is left exactly as it was
-            status_out[b] = status[b]
-            continue
-        previous_force[b, :, :] = pb
-        # Velocity at the end of the interval, consistent with the force just applied:
-        # (M + h/2 C) v_n + h M Omega x v_n = M v_{n-1/2} + h/2 (p - f_int(u_n) + M T u_n).
-        half = 0.5 * h_last
-        for i in range(n_nodes):
-            denominator = mb[i] + half * cb[i]
-            r0 = mb[i] * vb[i, 0] + half * (pb[i, 0] - fb[i, 0] + mb[i] * tb[0] * xb[i, 0])
-            r1 = mb[i] * vb[i, 1] + half * (pb[i, 1] - fb[i, 1] + mb[i] * tb[1] * xb[i, 1])
-            r2 = mb[i] * vb[i, 2] + half * (pb[i, 2] - fb[i, 2] + mb[i] * tb[2] * xb[i, 2])
-            if wb == 0.0:
-                v_sync[b, i, 0] = r0 / denominator
-                v_sync[b, i, 1] = r1 / denominator
-            else:
-                v_sync[b, i, 0], v_sync[b, i, 1] = _solve_gyroscopic(denominator, h_last * mb[i] * wb, r0, r1)
-            v_sync[b, i, 2] = r2 / denominator
-        if status[b] == STATUS_OK:
-            time[b] += duration
-        status_out[b] = status[b]
-
-
-#: Chunks the parallel driver splits a batch into: enough to even out clusters that sub-step more
-#: over any likely number of threads, few enough that the per-chunk call costs nothing.
-PARALLEL_CHUNKS = 64
+                _kick(nodes, 0.5 * (h_last + h), blend)
+        work, dissipated = _drift(nodes, h, work, dissipated)
+        if count < step_record.shape[0]:
+            step_record[count] = h
+        count += 1
+        h_last = h
+        h_lo = min(h_lo, h)
+        h_hi = max(h_hi, h)
+        omega2_cables, finite, viscous_power, released = _update_forces(nodes, cables, topology, linearised, viscous)
+        cluster[OMEGA2] = omega2_cables + tidal_max
+        dissipated += h * viscous_power + released
+        if not finite:
+            counters[STATUS] = STATUS_NON_FINITE
+            break
+        if last:
+            break
+        elapsed += h
+    cluster[LAST_STEP] = h_last
+    cluster[WORK] = work
+    cluster[DISSIPATED] = dissipated
+    counters[SUBSTEPS] = count
+    cluster[STEP_MIN] = h_lo
+    cluster[STEP_MAX] = h_hi
+    if count == 0:  # refused before its first step: the state is left exactly as it was
+        return
+    for i in range(nodes.shape[0]):
+        for d in range(3):
+            nodes[i, PREVIOUS_FORCE + d] = nodes[i, APPLIED_FORCE + d]
+    _synchronise_velocity(nodes, cluster, h_last)
+    if counters[STATUS] == STATUS_OK:
+        cluster[TIME] += duration
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def advance_serial(
-    active,
-    duration,
-    time,
-    x,
-    v_half,
-    v_sync,
-    f_int,
-    tension,
-    h_prev,
-    omega2,
-    force,
-    previous_force,
-    masses,
-    damping,
-    cables,
-    stiffness,
-    L0,
-    N0,
-    axial_damping,
-    inv_split_mass_sum,
-    breaking_load,
-    intact,
-    frame_rate,
-    frame_tidal,
-    reference,
-    linearised,
-    safety_factor,
-    max_step,
-    max_substeps,
-    work,
-    dissipated,
-    substeps,
-    step_min,
-    step_max,
-    status,
-    step_record,
-    peak_tension,
-    status_out,
-):  # pragma: no cover - compiled
-    _advance_clusters(
-        0,
-        x.shape[0],
-        active,
-        duration,
-        time,
-        x,
-        v_half,
-        v_sync,
-        f_int,
-        tension,
-        h_prev,
-        omega2,
-        force,
-        previous_force,
-        masses,
-        damping,
-        cables,
-        stiffness,
-        L0,
-        N0,
-        axial_damping,
-        inv_split_mass_sum,
-        breaking_load,
-        intact,
-        frame_rate,
-        frame_tidal,
-        reference,
-        linearised,
-        safety_factor,
-        max_step,
-        max_substeps,
-        work,
-        dissipated,
-        substeps,
-        step_min,
-        step_max,
-        status,
-        step_record,
-        peak_tension,
-        status_out,
-    )
+def _advance_clusters(
+    duration: float,
+    active: np.ndarray,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
+    counters: np.ndarray,
+    step_record: np.ndarray,
+) -> None:
+    """Advance every cluster of the given tables (a batch, or a chunk of one) by ``duration`` s:
+    those ``active`` and healthy by :func:`_advance_cluster`, the others held.  ``step_record``
+    (B, R) receives the first R sub-steps of each cluster.
+
+    It is the one-thread driver, and :func:`advance_parallel` calls it on chunks: compiled once
+    for both (inlined into the parallel driver, it made that take seconds longer to compile), and
+    one call per chunk (a call per cluster cost more than a short interval's work)."""
+    for b in range(nodes.shape[0]):
+        if active[b] and counters[b, STATUS] == STATUS_OK:
+            _advance_cluster(
+                duration, settings, topology, nodes[b], cables[b], clusters[b], counters[b], step_record[b]
+            )
+        else:
+            _hold_cluster(cables[b], clusters[b], counters[b])
+
+
+#: The integrator on one thread, for small batches (its start-up cost is lower).
+advance_serial = _advance_clusters
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def advance_parallel(
-    active,
-    duration,
-    time,
-    x,
-    v_half,
-    v_sync,
-    f_int,
-    tension,
-    h_prev,
-    omega2,
-    force,
-    previous_force,
-    masses,
-    damping,
-    cables,
-    stiffness,
-    L0,
-    N0,
-    axial_damping,
-    inv_split_mass_sum,
-    breaking_load,
-    intact,
-    frame_rate,
-    frame_tidal,
-    reference,
-    linearised,
-    safety_factor,
-    max_step,
-    max_substeps,
-    work,
-    dissipated,
-    substeps,
-    step_min,
-    step_max,
-    status,
-    step_record,
-    peak_tension,
-    status_out,
-):  # pragma: no cover - compiled
-    batch = x.shape[0]
+    duration: float,
+    active: np.ndarray,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
+    counters: np.ndarray,
+    step_record: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """:func:`advance_serial` on all threads, a chunk of clusters each (the same bits)."""
+    batch = nodes.shape[0]
     chunks = min(batch, PARALLEL_CHUNKS)
     for k in prange(chunks):
+        lo, hi = k * batch // chunks, (k + 1) * batch // chunks
         _advance_clusters(
-            k * batch // chunks,
-            (k + 1) * batch // chunks,
-            active,
             duration,
-            time,
-            x,
-            v_half,
-            v_sync,
-            f_int,
-            tension,
-            h_prev,
-            omega2,
-            force,
-            previous_force,
-            masses,
-            damping,
-            cables,
-            stiffness,
-            L0,
-            N0,
-            axial_damping,
-            inv_split_mass_sum,
-            breaking_load,
-            intact,
-            frame_rate,
-            frame_tidal,
-            reference,
-            linearised,
-            safety_factor,
-            max_step,
-            max_substeps,
-            work,
-            dissipated,
-            substeps,
-            step_min,
-            step_max,
-            status,
-            step_record,
-            peak_tension,
-            status_out,
+            active[lo:hi],
+            settings,
+            topology,
+            nodes[lo:hi],
+            cables[lo:hi],
+            clusters[lo:hi],
+            counters[lo:hi],
+            step_record[lo:hi],
         )
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def evaluate_batch(
-    x: np.ndarray,
-    v: np.ndarray,
-    reference: np.ndarray,
-    cables: np.ndarray,
-    stiffness: np.ndarray,
-    L0: np.ndarray,
-    N0: np.ndarray,
-    axial_damping: np.ndarray,
-    inv_split_mass_sum: np.ndarray,
-    intact: np.ndarray,
-    frame_tidal: np.ndarray,
-    linearised: bool,
+def evaluate_forces(
+    settings: np.ndarray,
     taut_branch: bool,
-    f_int: np.ndarray,
-    tension: np.ndarray,
-    omega2: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
     finite: np.ndarray,
 ) -> None:
-    """``cable_forces`` for every cluster of a batch, without breaking any cable: fills f_int
-    (B, n, 3), tension (B, m), omega2 (B,) (the step-limiting value, tidal term included) and
-    finite (B,)."""
-    peak = np.empty(cables.shape[0])
-    for b in range(x.shape[0]):
-        # may_break=False: the breaking-load argument is never read, any (m,) array will do.
-        omega2_cables, finite[b], _, _ = cable_forces(
-            x[b],
-            v[b],
-            reference[b],
-            cables,
-            stiffness[b],
-            L0[b],
-            N0[b],
-            axial_damping[b],
-            inv_split_mass_sum[b],
-            stiffness[b],
-            intact[b],
-            linearised,
-            taut_branch,
-            False,
-            f_int[b],
-            tension[b],
-            peak,
-        )
-        omega2[b] = omega2_cables + _largest_tidal(frame_tidal[b])
+    """:func:`cable_forces` for every cluster of a batch of tables, without breaking any cable:
+    fills ``INTERNAL_FORCE``, ``TENSION`` and ``OMEGA2`` (the step-limiting value, tidal term
+    included), and ``finite`` (B,) bool.  The axial damping acts on the ``HALF_STEP_VELOCITY``
+    columns.  (The callers pass scratch copies of the tables: it also raises ``PEAK_TENSION``.)"""
+    linearised = settings[LINEARISED] != 0.0
+    for b in range(nodes.shape[0]):
+        omega2_cables, finite[b], _, _ = cable_forces(nodes[b], cables[b], topology, linearised, taut_branch, False)
+        clusters[b, OMEGA2] = omega2_cables + _largest_tidal(clusters[b])

@@ -1,19 +1,35 @@
-"""Linear analysis of a cluster: assembled tangent stiffness and normal modes.
+"""Analysis of a cluster: the paper's finite-difference reference, assembled tangent stiffness and
+normal modes.
 
 The integrator never assembles a stiffness matrix.  These functions do, for what needs one:
-verifying the critical-step estimate against the true largest frequency, and designing linear
-controllers (LQR) about a nominal state.  They use the exact elongation ``|x_j - x_i| - L0``.
+verifying the critical-step estimate against the true largest frequency and against the paper's
+finite-difference bound (:func:`element_omega2_finite_difference`), and designing linear
+controllers (LQR) about a nominal state.  The linear analysis uses the exact elongation
+``|x_j - x_i| - L0``.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import ArrayLike
 
+from tether_gym import _kernels
 from tether_gym.cluster import Cluster
+from tether_gym.limits import check_real
+
+if TYPE_CHECKING:
+    from tether_gym.simulator import BatchSimulator
+
+#: The topology of a lone cable element: node 0 to node 1 (read-only, like every topology the
+#: kernels get, so that they run the variant already compiled).
+_ELEMENT_TOPOLOGY = np.array([[0, 1]], dtype=np.int64)
+_ELEMENT_TOPOLOGY.flags.writeable = False
 
 __all__ = [
     "axial_damping_matrix",
+    "element_omega2_finite_difference",
     "frame_stiffness",
     "gyroscopic_matrix",
     "max_frequency",
@@ -117,3 +133,79 @@ def gyroscopic_matrix(cluster: Cluster) -> np.ndarray:
     frame, N*s/m (zero in an inertial frame)."""
     block = 2.0 * cluster.frame.rate * np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     return np.kron(np.diag(cluster.masses), block)
+
+
+def element_omega2_finite_difference(batch: BatchSimulator, relative_perturbation: float = 1e-6) -> np.ndarray:
+    """(B, m) the paper's finite-difference column-L1 bound on each cable's squared frequency, at
+    the current positions of every cluster of ``batch``: the reference method of the
+    critical-step estimate (paper section 4; ``batch.critical_time_step("finite-difference")``).
+
+    Each cable is cut out as a two-node element with its split masses; each of its 6 degrees of
+    freedom is perturbed by ``+-h`` (``h = relative_perturbation * L``) and the element force
+    evaluated, giving the stiffness columns of eq. (21); the bound is the largest L1 norm of a
+    column of ``M_e^-1/2 K_e M_e^-1/2``, in (rad/s)^2.  A slack cable is perturbed as if it
+    were just taut at its current length (pretension shifted so that ``N = 0`` there): the
+    stiffest it can be within a step, without the spurious compression of the linear law.
+    """
+    check_real("relative_perturbation", relative_perturbation, 0.0, 0.1, "(a fraction of the cable length)")
+    k = _kernels
+    B, m = batch.num_clusters, batch.num_cables
+    x = batch.positions_
+    ends = np.stack([x[:, batch.cables[:, 0]], x[:, batch.cables[:, 1]]], axis=2)  # (B, m, 2, 3)
+    lengths = np.linalg.norm(ends[:, :, 1] - ends[:, :, 0], axis=-1)  # (B, m)
+    h = relative_perturbation * lengths
+    # 12 perturbed copies of each element: dof j = 0..5, sign +-.
+    dof_shift = np.eye(6).reshape(6, 2, 3)
+    perturbed = (
+        ends[:, :, None, None]
+        + np.array([1.0, -1.0])[None, None, None, :, None, None]
+        * h[:, :, None, None, None, None]
+        * dof_shift[None, None, :, None]
+    )  # (B, m, 6, 2, 2, 3)
+    E = B * m * 12
+    ref = batch.reference
+    ref_ends = np.stack([ref[:, batch.cables[:, 0]], ref[:, batch.cables[:, 1]]], axis=2)
+    ref_elements = np.broadcast_to(ref_ends[:, :, None, None], perturbed.shape).reshape(E, 2, 3)
+
+    def per_element(values: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(values[:, :, None, None], (B, m, 6, 2)).reshape(E)
+
+    all_clusters = np.arange(B)
+    tension_taut_branch = batch.evaluate_at(x, all_clusters, taut_branch=True)[1][:, :, k.TENSION]
+    just_taut_N0 = batch.N0 - np.minimum(tension_taut_branch, 0.0)
+    # Each element is a cluster of two nodes and one cable, at rest, intact, in an inertial frame.
+    nodes = np.zeros((E, 2, k.NODE_COLUMNS))
+    nodes[:, :, k.POSITION : k.POSITION + 3] = perturbed.reshape(E, 2, 3)
+    nodes[:, :, k.REFERENCE : k.REFERENCE + 3] = ref_elements
+    cables = np.zeros((E, 1, k.CABLE_COLUMNS))
+    cables[:, 0, k.STIFFNESS] = per_element(batch.stiffness)
+    cables[:, 0, k.REST_LENGTH] = per_element(batch.L0)
+    cables[:, 0, k.PRETENSION] = per_element(just_taut_N0)
+    cables[:, 0, k.INV_SPLIT_MASS_SUM] = per_element(batch.inv_split_mass_sum)
+    cables[:, 0, k.INTACT] = 1.0
+    k.evaluate_forces(
+        batch.kernel_settings,
+        True,
+        _ELEMENT_TOPOLOGY,
+        nodes,
+        cables,
+        np.zeros((E, k.CLUSTER_COLUMNS)),
+        np.empty(E, dtype=np.bool_),
+    )
+    f = nodes[:, :, k.INTERNAL_FORCE : k.INTERNAL_FORCE + 3].reshape(B, m, 6, 2, 6)
+    columns = (f[:, :, :, 0] - f[:, :, :, 1]) / (2.0 * h[:, :, None, None])  # (B, m, j, i)
+    degree = np.bincount(batch.cables.ravel(), minlength=batch.num_nodes)
+    split = batch.masses / degree  # (B, n)
+    dof_mass = np.repeat(
+        np.stack([split[:, batch.cables[:, 0]], split[:, batch.cables[:, 1]]], axis=2), 3, axis=2
+    )  # (B, m, 6)
+    scale = 1.0 / np.sqrt(dof_mass)
+    scaled = np.abs(columns) * scale[:, :, :, None] * scale[:, :, None, :]
+    omega2 = scaled.sum(axis=3).max(axis=2)
+    # Axial damping with lagged velocity shortens the stable step (see _kernels.cable_forces).
+    axial_damping, inv_split_mass_sum = batch.axial_damping, batch.inv_split_mass_sum
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xi = np.where(axial_damping > 0.0, 0.5 * axial_damping * inv_split_mass_sum / np.sqrt(omega2), 0.0)
+    omega2 = omega2 * (np.sqrt(1.0 + xi * xi) + xi) ** 2
+    omega2 = omega2 + np.abs(batch.frame_tidal).max(axis=1)[:, None]
+    return np.where(batch.intact, omega2, 0.0)

@@ -15,6 +15,7 @@ import argparse
 import os
 import platform
 import time
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -27,7 +28,7 @@ def single_env_steps_per_second(env_id: str, steps: int, policy: str, seed: int 
     """Steps/s of ``gym.make(env_id)`` over ``steps`` steps (resetting at episode ends)."""
     env = gym.make(env_id)
     rng = np.random.default_rng(seed)
-    shape = env.action_space.shape
+    shape = tuple(env.action_space.shape or ())
     actions = (
         np.zeros((steps,) + shape, dtype=np.float32)
         if policy == "zero"
@@ -45,12 +46,12 @@ def single_env_steps_per_second(env_id: str, steps: int, policy: str, seed: int 
     return steps / (time.perf_counter() - start)
 
 
-def vector_env_steps_per_second(env_id: str, num_envs: int, steps: int, sync: bool = False, **kwargs: object) -> float:
+def vector_env_steps_per_second(env_id: str, num_envs: int, steps: int, sync: bool = False, **kwargs: Any) -> float:
     """Env steps/s (sub-env steps summed) of ``gym.make_vec`` with random actions."""
     mode = "sync" if sync else None
     envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **kwargs)
     rng = np.random.default_rng(0)
-    actions = rng.uniform(-1, 1, (8,) + envs.action_space.shape).astype(np.float32)
+    actions = rng.uniform(-1, 1, (8,) + tuple(envs.action_space.shape or ())).astype(np.float32)
     envs.reset(seed=0)
     for k in range(5):
         envs.step(actions[k % 8])
@@ -81,7 +82,7 @@ def ppo_env_share(env_id: str, num_envs: int, timesteps: int) -> tuple[float, fl
 
         def __init__(self, like: VecEnv) -> None:
             super().__init__(like.num_envs, like.observation_space, like.action_space)
-            self._obs = np.zeros((like.num_envs,) + like.observation_space.shape, dtype=np.float32)
+            self._obs = np.zeros((like.num_envs,) + tuple(like.observation_space.shape or ()), dtype=np.float32)
             self._rewards = np.zeros(like.num_envs, dtype=np.float32)
             self._dones = np.zeros(like.num_envs, dtype=bool)
 
@@ -116,7 +117,7 @@ def ppo_env_share(env_id: str, num_envs: int, timesteps: int) -> tuple[float, fl
             super().__init__(venv)
             self.seconds = 0.0
 
-        def reset(self) -> np.ndarray:
+        def reset(self) -> Any:
             start = time.perf_counter()
             observation = self.venv.reset()
             self.seconds += time.perf_counter() - start
@@ -174,7 +175,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"vector envs, random actions, env steps/s (sub-env steps summed), best of {args.repeats}")
     print(f"{'id':<24}{'vectorisation':<38}{'N':>6}{'steps/s':>14}")
     for env_id in ENV_IDS if args.all_ids else [DEFAULT_ENV_ID]:
-        cases = [("native", n, {}) for n in (1, 64, 1024, 4096)]
+        cases: list[tuple[str, int, dict[str, Any]]] = [("native", n, {}) for n in (1, 64, 1024, 4096)]
         cases += [
             ("native, safety_factor 0.2", 1024, {"safety_factor": 0.2}),
             ("native, every disturbance and fault", 1024, ALL_FAULTS),

@@ -15,7 +15,7 @@ import math
 import sys
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -106,17 +106,35 @@ class Cluster:
         name: a short label.
     """
 
+    # Each field is stored as an array (see __post_init__); the constructor takes anything array-like.
     positions: np.ndarray
     masses: np.ndarray
     cables: np.ndarray
     EA: np.ndarray
     N0: np.ndarray = 0.0  # type: ignore[assignment]
     damping: np.ndarray = 0.0  # type: ignore[assignment]
-    L0: np.ndarray | None = None
+    L0: np.ndarray = None  # type: ignore[assignment]  # None: the distances in positions
     breaking_load: np.ndarray = math.inf  # type: ignore[assignment]
     axial_damping: np.ndarray = 0.0  # type: ignore[assignment]
     frame: Frame = dataclasses.field(default_factory=Frame.inertial)
     name: str = "custom"
+
+    if TYPE_CHECKING:  # the signature type checkers see; at run time the dataclass's own
+
+        def __init__(
+            self,
+            positions: ArrayLike,
+            masses: ArrayLike,
+            cables: ArrayLike,
+            EA: ArrayLike,
+            N0: ArrayLike = 0.0,
+            damping: ArrayLike = 0.0,
+            L0: ArrayLike | None = None,
+            breaking_load: ArrayLike = math.inf,
+            axial_damping: ArrayLike = 0.0,
+            frame: Frame = ...,
+            name: str = "custom",
+        ) -> None: ...
 
     def __post_init__(self) -> None:
         positions = real_array("positions", self.positions, ClusterError)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -35,6 +35,7 @@ __all__ = [
     "MIN_LENGTH",
     "MIN_MASS",
     "check_range",
+    "check_real",
     "is_real_number",
     "is_whole_number",
     "real_array",
@@ -128,7 +129,7 @@ def _read_infinities(value: Any) -> Any:
 
 def check_range(
     name: str,
-    values: np.ndarray,
+    values: np.ndarray | np.floating[Any],
     low: float,
     high: float,
     unit: str,
@@ -147,9 +148,8 @@ def check_range(
         at = f" ({where} {index[0] if len(index) == 1 else index})" if index else ""
         bracket = "[" if low_inclusive else "("
         unit = f" {unit}" if unit else ""
-        raise error(
-            f"{name} must lie in {bracket}{low:g}, {high:g}]{unit}; got {values[index] if index else values}{at}"
-        )
+        got = np.asarray(values)[index] if index else values
+        raise error(f"{name} must lie in {bracket}{low:g}, {high:g}]{unit}; got {got}{at}")
 
 
 def to_float(value: Any) -> float:
@@ -161,7 +161,7 @@ def to_float(value: Any) -> float:
         return math.inf if value > 0 else -math.inf
 
 
-def is_whole_number(value: Any) -> bool:
+def is_whole_number(value: Any) -> TypeGuard[int | np.integer[Any]]:
     """True for a Python or numpy integer that is not a boolean."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
@@ -169,3 +169,13 @@ def is_whole_number(value: Any) -> bool:
 def is_real_number(value: Any) -> bool:
     """True for a real, non-boolean number (int, float, numpy scalar)."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def check_real(name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = False) -> float:
+    """``value`` as a float, or a ``ValueError`` naming ``name`` unless it is a real number in
+    ``(low, high]`` (``[low, high]`` with ``low_inclusive``)."""
+    if not is_real_number(value):
+        raise ValueError(f"{name} must be a number ({unit}); got {value!r}")
+    number = to_float(value)
+    check_range(name, np.float64(number), low, high, unit, low_inclusive=low_inclusive)
+    return number

@@ -115,7 +115,7 @@ def _scalar_rows(
         if key.startswith("_") or key in skip:
             continue
         if isinstance(value, Mapping):
-            for row, nested in zip(out, _scalar_rows(value, rows, num_envs)):
+            for row, nested in zip(out, _scalar_rows(value, rows, num_envs), strict=True):
                 if nested:
                     row[key] = nested
             continue
@@ -130,9 +130,9 @@ def _scalar_rows(
         mask = infos.get("_" + key)
         present = [True] * len(values) if mask is None else np.asarray(mask)[rows].tolist()
         if value.dtype.kind == "O":
-            present = [p and isinstance(item, _SCALAR_TYPES) for p, item in zip(present, values)]
+            present = [p and isinstance(item, _SCALAR_TYPES) for p, item in zip(present, values, strict=True)]
             values = [item.item() if isinstance(item, np.generic) else item for item in values]
-        for row, item, p in zip(out, values, present):
+        for row, item, p in zip(out, values, present, strict=True):
             if p:
                 row[key] = item
     return out
@@ -217,7 +217,9 @@ class SB3VecEnv(VecEnv):
         """
         seeds = None if all(s is None for s in self._seeds) else list(self._seeds)
         options = self._batch_options()
-        obs, infos = self.venv.reset(seed=seeds, options=options)
+        # Gymnasium declares one seed for a whole VectorEnv; the native and the sync vector envs
+        # take one per sub-env.
+        obs, infos = self.venv.reset(seed=seeds, options=options)  # type: ignore[arg-type]
         self._reset_seeds()
         self._reset_options()
         self._actions = None
@@ -311,7 +313,7 @@ class SB3VecEnv(VecEnv):
             )
         final_rows = _scalar_rows(infos.get("final_info", {}), ended, self.num_envs)
         reset_rows = _scalar_rows(infos, ended, self.num_envs, skip=_FINAL_KEYS)
-        for i, final, new in zip(ended.tolist(), final_rows, reset_rows):
+        for i, final, new in zip(ended.tolist(), final_rows, reset_rows, strict=True):
             final["terminal_observation"] = final_obs[i]
             final["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
             step_infos[i] = final

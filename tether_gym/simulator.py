@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -23,6 +23,7 @@ from tether_gym.limits import (
     MAX_FORCE,
     MAX_SPEED,
     check_range,
+    check_real,
     is_real_number,
     is_whole_number,
     real_array,
@@ -200,24 +201,48 @@ def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str,
     return array
 
 
-def _check_number(
-    name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = False
-) -> float:
-    """``value`` as a float, or a ``ValueError`` naming ``name`` unless it is a real number in
-    ``(low, high]`` (``[low, high]`` with ``low_inclusive``)."""
-    if not is_real_number(value):
-        raise ValueError(f"{name} must be a number ({unit}); got {value!r}")
-    number = to_float(value)
-    check_range(name, np.float64(number), low, high, unit, low_inclusive=low_inclusive)
-    return number
-
-
 def _check_duration(duration: float) -> float:
     """``duration`` as a float, > 0 and finite (its sub-step count is checked by the kernel)."""
     value = to_float(duration) if is_real_number(duration) else math.nan
     if not (math.isfinite(value) and value > 0.0):
         raise ValueError(f"duration must be a finite number of seconds > 0; got {duration!r}")
     return value
+
+
+class TableColumns:
+    """A named view of columns of one of an object's tables (see :mod:`tether_gym._kernels`):
+    column ``column`` alone (``width`` 1), ``width`` columns from it, or every column from it to
+    the end (``width`` None).
+
+    A descriptor, not an attribute holding a view: a view kept in the instance would come apart
+    from its table in a copy or a pickle.  Each access builds a fresh view (writable unless
+    ``read_only``), so hot loops read the tables themselves."""
+
+    def __init__(self, table: str, column: int, width: int | None, doc: str, *, read_only: bool = False) -> None:
+        self.table = table
+        self.columns: int | slice = column if width == 1 else slice(column, None if width is None else column + width)
+        self.read_only = read_only
+        self.__doc__ = doc
+
+    def __get__(self, owner: object, owner_type: type | None = None) -> Any:
+        if owner is None:
+            return self
+        view = getattr(owner, self.table)[..., self.columns]
+        if self.read_only:
+            view.flags.writeable = False
+        return view
+
+
+def _node(column: int, doc: str, width: int = 1, **kwargs: Any) -> TableColumns:
+    return TableColumns("node_table", column, width, doc, **kwargs)
+
+
+def _cable(column: int, doc: str, **kwargs: Any) -> TableColumns:
+    return TableColumns("cable_table", column, 1, doc, **kwargs)
+
+
+def _cluster(column: int, doc: str, width: int = 1, **kwargs: Any) -> TableColumns:
+    return TableColumns("cluster_table", column, width, doc, **kwargs)
 
 
 class BatchSimulator:
@@ -238,7 +263,57 @@ class BatchSimulator:
             flagged as diverged.
 
     The state after construction is every cluster at rest at its nominal positions.
+
+    Everything the integration reads and writes lives in four tables, the kernels' contract (their
+    columns are named in :mod:`tether_gym._kernels`): ``node_table`` (B, n, NODE_COLUMNS),
+    ``cable_table`` (B, m, CABLE_COLUMNS), ``cluster_table`` (B, CLUSTER_COLUMNS) and
+    ``counter_table`` (B, COUNTER_COLUMNS) int64, plus the topology ``cables`` (m, 2) and the
+    ``kernel_settings``.  The named attributes below (``masses``, ``tension``, ``time``, ...) are
+    views of their columns.
     """
+
+    # Parameters.
+    masses = _node(_kernels.MASS, "(B, n) satellite masses, kg.")
+    damping = _node(_kernels.DAMPING, "(B, n) diagonal damping of each satellite, N*s/m.")
+    reference = _node(_kernels.REFERENCE, "(B, n, 3) nominal positions (the linearised elongation's reference), m.", 3)
+    stiffness = _cable(_kernels.STIFFNESS, "(B, m) axial stiffness EA / L0 of each cable, N/m.")
+    L0 = _cable(_kernels.REST_LENGTH, "(B, m) rest lengths, m.")
+    N0 = _cable(_kernels.PRETENSION, "(B, m) pretensions, N.")
+    inv_split_mass_sum = _cable(_kernels.INV_SPLIT_MASS_SUM, "(B, m) 1/m_i^e + 1/m_j^e of each cable, 1/kg.")
+    breaking_load = _cable(_kernels.BREAKING_LOAD, "(B, m) breaking loads, N.")
+    axial_damping = _cable(_kernels.AXIAL_DAMPING, "(B, m) Kelvin-Voigt damping of each cable, N*s/m.")
+    frame_rate = _cluster(_kernels.FRAME_RATE, "(B,) rotation rate of each cluster's frame about z, rad/s.")
+    frame_tidal = _cluster(
+        _kernels.FRAME_TIDAL, "(B, 3) diagonal of each frame's centrifugal and tidal term, 1/s^2.", 3
+    )
+    # State (writable views; the public, read-only ones are the properties further down).
+    positions_ = _node(_kernels.POSITION, "(B, n, 3) node positions, m (writable).", 3)
+    _v_half = _node(_kernels.HALF_STEP_VELOCITY, "(B, n, 3) half-step velocities v_{n-1/2}, m/s.", 3)
+    velocities_ = _node(_kernels.VELOCITY, "(B, n, 3) velocities at the current time, m/s (writable).", 3)
+    _f_int = _node(_kernels.INTERNAL_FORCE, "(B, n, 3) internal forces at the current positions, N.", 3)
+    _previous_force = _node(_kernels.PREVIOUS_FORCE, "(B, n, 3) applied force of the last interval, N.", 3)
+    applied_force = _node(_kernels.APPLIED_FORCE, "(B, n, 3) external force of the coming interval, N (writable).", 3)
+    tension = _cable(_kernels.TENSION, "(B, m) cable tensions at the current positions, N.")
+    time = _cluster(_kernels.TIME, "(B,) time since each cluster's reset, s.")
+    _h_prev = _cluster(_kernels.LAST_STEP, "(B,) last sub-step, s (0 right after a reset).")
+    _omega2 = _cluster(_kernels.OMEGA2, "(B,) step-limiting frequency estimate, (rad/s)^2.")
+    _work = _cluster(_kernels.WORK, "(B,) external work since the reset, J.")
+    _dissipated = _cluster(_kernels.DISSIPATED, "(B,) energy dissipated since the reset, J.")
+    _energy0 = _cluster(_kernels.INITIAL_ENERGY, "(B,) mechanical energy at the reset, J.")
+    status = TableColumns("counter_table", _kernels.STATUS, 1, "(B,) status code of each cluster (0: healthy).")
+    positions = _node(_kernels.POSITION, "(B, n, 3) current node positions, m (a read-only view).", 3, read_only=True)
+    velocities = _node(
+        _kernels.VELOCITY, "(B, n, 3) node velocities at the current time, m/s (a read-only view).", 3, read_only=True
+    )
+    work = _cluster(_kernels.WORK, "(B,) external work since each cluster's reset, J (read-only).", read_only=True)
+    dissipated = _cluster(
+        _kernels.DISSIPATED,
+        "(B,) energy dissipated since each cluster's reset (damping, broken cables), J (read-only).",
+        read_only=True,
+    )
+    initial_energy = _cluster(
+        _kernels.INITIAL_ENERGY, "(B,) mechanical energy at each cluster's reset, J (read-only).", read_only=True
+    )
 
     def __init__(
         self,
@@ -261,13 +336,11 @@ class BatchSimulator:
                 raise TypeError("clusters must be a Cluster or a non-empty sequence of Cluster objects")
             if num_clusters is not None and num_clusters != len(cluster_list):
                 raise ValueError(f"num_clusters={num_clusters} disagrees with the {len(cluster_list)} clusters given")
-        self.safety_factor = _check_number(
-            "safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, ""
-        )
+        self.safety_factor = check_real("safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, "")
         if not isinstance(elongation, str) or elongation not in ("exact", "linearised"):
             raise ValueError(f"elongation must be 'exact' or 'linearised'; got {elongation!r}")
         self.elongation: Elongation = elongation
-        self.max_step = _check_number("max_step", max_step, 0.0, math.inf, "s")
+        self.max_step = check_real("max_step", max_step, 0.0, math.inf, "s")
         if not is_whole_number(max_substeps) or not 1 <= max_substeps <= MAX_SUBSTEPS_LIMIT:
             raise ValueError(
                 f"max_substeps must be a whole number in 1..{MAX_SUBSTEPS_LIMIT:.0e}; got {max_substeps!r}"
@@ -279,38 +352,24 @@ class BatchSimulator:
         self.num_clusters = len(cluster_list)
         self.num_nodes = template.num_nodes
         self.num_cables = template.num_cables
-        self.cables = np.ascontiguousarray(template.cables)
+        # Read-only, as every topology the kernels get: numba compiles a variant per writability.
+        self.cables = np.array(template.cables, dtype=np.int64)
+        self.cables.flags.writeable = False
         B, n, m = self.num_clusters, self.num_nodes, self.num_cables
-        self.masses = np.empty((B, n))
-        self.damping = np.empty((B, n))
-        self.stiffness = np.empty((B, m))
-        self.L0 = np.empty((B, m))
-        self.N0 = np.empty((B, m))
-        self.inv_split_mass_sum = np.empty((B, m))
-        self.breaking_load = np.empty((B, m))
-        self.axial_damping = np.empty((B, m))
-        self.frame_rate = np.empty(B)
-        self.frame_tidal = np.empty((B, 3))
-        self.reference = np.empty((B, n, 3))
+        self.kernel_settings = np.zeros(_kernels.SETTINGS)
+        self.kernel_settings[_kernels.SAFETY_FACTOR] = self.safety_factor
+        self.kernel_settings[_kernels.MAX_STEP] = self.max_step
+        self.kernel_settings[_kernels.MAX_SUBSTEPS] = self.max_substeps  # exact: at most 1e12 < 2^53
+        self.kernel_settings[_kernels.LINEARISED] = 1.0 if elongation == "linearised" else 0.0
+        self.node_table = np.zeros((B, n, _kernels.NODE_COLUMNS))
+        self.cable_table = np.zeros((B, m, _kernels.CABLE_COLUMNS))
+        self.cluster_table = np.zeros((B, _kernels.CLUSTER_COLUMNS))
+        self.counter_table = np.zeros((B, _kernels.COUNTER_COLUMNS), dtype=np.int64)
         self.clusters: list[Cluster] = [template] * B
         for b, cluster in enumerate(cluster_list):
             self.set_cluster(b, cluster, reset=False)
-
-        self.positions_ = np.empty((B, n, 3))
-        self._v_half = np.zeros((B, n, 3))
-        self.velocities_ = np.zeros((B, n, 3))
-        self._f_int = np.zeros((B, n, 3))
-        self.tension = np.zeros((B, m))
-        self.intact = np.ones((B, m), dtype=np.bool_)
-        self._h_prev = np.zeros(B)
-        self._omega2 = np.zeros(B)
-        self._previous_force = np.zeros((B, n, 3))
-        self.time = np.zeros(B)
-        self._work = np.zeros(B)
-        self._dissipated = np.zeros(B)
-        self._energy0 = np.zeros(B)
-        self.status = np.zeros(B, dtype=np.int64)
         self._all_active = np.ones(B, dtype=np.bool_)
+        self._no_record = np.zeros((B, 0))
         self.reset(self.reference)
 
     # ------------------------------------------------------------------ parameters
@@ -331,46 +390,55 @@ class BatchSimulator:
                 f"{self.num_cables} cables, same cable list required)"
             )
         self.clusters[index] = cluster
-        self.masses[index] = cluster.masses
-        self.damping[index] = cluster.damping
-        self.stiffness[index] = cluster.stiffness
-        self.L0[index] = cluster.L0
-        self.N0[index] = cluster.N0
-        self.inv_split_mass_sum[index] = cluster.inv_split_mass_sum
-        self.breaking_load[index] = cluster.breaking_load
-        self.axial_damping[index] = cluster.axial_damping
-        self.frame_rate[index] = cluster.frame.rate
-        self.frame_tidal[index] = cluster.frame.tidal
-        self.reference[index] = cluster.positions
+        nodes, cables, row = self.node_table[index], self.cable_table[index], self.cluster_table[index]
+        nodes[:, _kernels.MASS] = cluster.masses
+        nodes[:, _kernels.DAMPING] = cluster.damping
+        nodes[:, _kernels.REFERENCE : _kernels.REFERENCE + 3] = cluster.positions
+        cables[:, _kernels.STIFFNESS] = cluster.stiffness
+        cables[:, _kernels.REST_LENGTH] = cluster.L0
+        cables[:, _kernels.PRETENSION] = cluster.N0
+        cables[:, _kernels.INV_SPLIT_MASS_SUM] = cluster.inv_split_mass_sum
+        cables[:, _kernels.BREAKING_LOAD] = cluster.breaking_load
+        cables[:, _kernels.AXIAL_DAMPING] = cluster.axial_damping
+        row[_kernels.FRAME_RATE] = cluster.frame.rate
+        row[_kernels.FRAME_TIDAL : _kernels.FRAME_TIDAL + 3] = cluster.frame.tidal
         if reset:
             self.reset(cluster.positions[None], indices=[index])
 
     # ------------------------------------------------------------------ state
     @property
-    def positions(self) -> np.ndarray:
-        """(B, n, 3) current node positions, m (a read-only view)."""
-        view = self.positions_.view()
-        view.flags.writeable = False
-        return view
-
-    @property
-    def velocities(self) -> np.ndarray:
-        """(B, n, 3) node velocities at the current time, m/s (a read-only view)."""
-        view = self.velocities_.view()
-        view.flags.writeable = False
-        return view
+    def intact(self) -> np.ndarray:
+        """(B, m) bool: cables that have not broken since the cluster's last reset (a copy)."""
+        return self.cable_table[:, :, _kernels.INTACT] != 0.0
 
     @property
     def slack(self) -> np.ndarray:
         """(B, m) bool: cables carrying no tension at the current positions (broken ones too)."""
-        return self.tension <= 0.0
+        return self.cable_table[:, :, _kernels.TENSION] <= 0.0
 
     @property
     def broken(self) -> np.ndarray:
         """(B, m) bool: cables that broke since the cluster's last reset (they stay broken)."""
-        return ~self.intact
+        return self.cable_table[:, :, _kernels.INTACT] == 0.0
 
-    def _indices(self, indices: Sequence[int] | np.ndarray | None) -> np.ndarray:
+    @property
+    def last_advance(self) -> AdvanceStats:
+        """What the last :meth:`advance` (or :meth:`advance_unchecked`) did, per cluster, as views
+        of the tables (the next advance overwrites them; :meth:`advance` returns copies).  After a
+        reset: no sub-step, and each cable's peak tension is its tension."""
+        return AdvanceStats(
+            substeps=self.counter_table[:, _kernels.SUBSTEPS],
+            step_min=self.cluster_table[:, _kernels.STEP_MIN],
+            step_max=self.cluster_table[:, _kernels.STEP_MAX],
+            status=self.counter_table[:, _kernels.STATUS],
+            step_sizes=self._no_record,
+            peak_tension=self.cable_table[:, :, _kernels.PEAK_TENSION],
+        )
+
+    def cluster_indices(self, indices: Sequence[int] | np.ndarray | None) -> np.ndarray:
+        """``indices`` checked and as an int array: None (every cluster, in order), a sequence of
+        cluster indices in 0..B-1, or a (B,) boolean mask.  Raises ``ValueError`` naming the
+        problem."""
         if indices is None:
             return np.arange(self.num_clusters)
         try:
@@ -405,32 +473,36 @@ class BatchSimulator:
         Every cable is intact again.  The next :meth:`advance` of these clusters starts with
         uniformly accelerated motion.
         """
-        idx = self._indices(indices)
+        idx = self.cluster_indices(indices)
         shape = (idx.size, self.num_nodes, 3)
         x0 = _check_array("positions", positions, shape, "m", MAX_COORDINATE)
         v0 = np.zeros(shape) if velocities is None else _check_array("velocities", velocities, shape, "m/s", MAX_SPEED)
         # Everything that can refuse the state is computed before any of it is stored.
-        intact = np.ones((idx.size, self.num_cables), dtype=np.bool_)
-        f_int, tension, omega2, finite = self._evaluate(x0, idx, velocities=v0, intact=intact)
+        nodes, cables, clusters, finite = self.evaluate_at(x0, idx, velocities=v0, intact=True)
         if not finite.all():
             raise ValueError(
                 f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable; "
                 "two connected satellites may not occupy the same point"
             )
-        self.positions_[idx] = x0
-        self._v_half[idx] = v0
-        self.velocities_[idx] = v0
-        self._h_prev[idx] = 0.0
-        self.time[idx] = 0.0
-        self._work[idx] = 0.0
-        self._dissipated[idx] = 0.0
-        self.status[idx] = _kernels.STATUS_OK
-        self.intact[idx] = True
-        self._f_int[idx] = f_int
-        self.tension[idx] = tension
-        self._omega2[idx] = omega2
+        k = _kernels
+        self.node_table[idx, :, k.POSITION : k.POSITION + 3] = x0
+        self.node_table[idx, :, k.HALF_STEP_VELOCITY : k.HALF_STEP_VELOCITY + 3] = v0
+        self.node_table[idx, :, k.VELOCITY : k.VELOCITY + 3] = v0
+        self.node_table[idx, :, k.INTERNAL_FORCE : k.INTERNAL_FORCE + 3] = nodes[
+            :, :, k.INTERNAL_FORCE : k.INTERNAL_FORCE + 3
+        ]
+        self.cable_table[idx, :, k.TENSION] = cables[:, :, k.TENSION]
+        self.cable_table[idx, :, k.PEAK_TENSION] = cables[:, :, k.TENSION]
+        self.cable_table[idx, :, k.INTACT] = 1.0
+        self.cluster_table[idx, k.OMEGA2] = clusters[:, k.OMEGA2]
+        for column, value in ((k.LAST_STEP, 0.0), (k.TIME, 0.0), (k.WORK, 0.0), (k.DISSIPATED, 0.0)):
+            self.cluster_table[idx, column] = value
+        self.cluster_table[idx, k.STEP_MIN] = math.inf
+        self.cluster_table[idx, k.STEP_MAX] = 0.0
+        self.counter_table[idx, k.STATUS] = k.STATUS_OK
+        self.counter_table[idx, k.SUBSTEPS] = 0
         report = self.energy()
-        self._energy0[idx] = report.total[idx]
+        self.cluster_table[idx, k.INITIAL_ENERGY] = report.total[idx]
 
     # ------------------------------------------------------------------ snapshots
     @property
@@ -442,7 +514,7 @@ class BatchSimulator:
     def snapshot(self, indices: Sequence[int] | np.ndarray | None = None) -> SimulatorState:
         """An exact copy of the state of clusters ``indices`` (default all, in order): see
         :class:`SimulatorState`.  For planning and search: snapshot, try something, restore."""
-        idx = self._indices(indices)
+        idx = self.cluster_indices(indices)
         arrays = read_only_rows({name: getattr(self, attribute) for name, attribute in STATE_FIELDS.items()}, idx)
         return SimulatorState(tuple(self.clusters[int(b)] for b in idx), arrays, self.settings)
 
@@ -454,7 +526,7 @@ class BatchSimulator:
         batch of the same topology and :attr:`settings`; nothing changes when it is refused."""
         if not isinstance(state, SimulatorState):
             raise TypeError(f"state must be a SimulatorState from BatchSimulator.snapshot; got {type(state).__name__}")
-        idx = np.arange(state.num_clusters) if indices is None else self._indices(indices)
+        idx = np.arange(state.num_clusters) if indices is None else self.cluster_indices(indices)
         if state.num_clusters not in (1, idx.size):
             raise ValueError(
                 f"state holds {state.num_clusters} clusters and cannot fill the {idx.size} clusters of indices; "
@@ -470,55 +542,50 @@ class BatchSimulator:
             )
         if state.settings != self.settings:
             raise ValueError(
-                f"state was taken with settings (safety_factor, elongation, max_step, max_substeps) = {state.settings}, "
-                f"this batch has {self.settings}; a restored cluster would not continue the same way"
+                "state was taken with settings (safety_factor, elongation, max_step, max_substeps) = "
+                f"{state.settings}, this batch has {self.settings}; a restored cluster would not continue the same way"
             )
         source = np.zeros(idx.size, dtype=np.int64) if state.num_clusters == 1 else np.arange(idx.size)
-        for k, b in zip(source, idx):
+        for k, b in zip(source, idx, strict=True):
             cluster = state.clusters[int(k)]
             if self.clusters[int(b)] is not cluster:
                 self.set_cluster(int(b), cluster, reset=False)
         for name, attribute in STATE_FIELDS.items():
-            getattr(self, attribute)[idx] = state.arrays[name][source]
+            if name == "intact":  # a flag column: the attribute is a bool copy
+                self.cable_table[idx, :, _kernels.INTACT] = state.arrays[name][source]
+            else:
+                getattr(self, attribute)[idx] = state.arrays[name][source]
 
-    def _evaluate(
+    def evaluate_at(
         self,
         x: np.ndarray,
         idx: np.ndarray,
         taut_branch: bool = False,
         velocities: np.ndarray | None = None,
-        intact: np.ndarray | None = None,
+        intact: np.ndarray | bool | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Forces, tensions, step-limiting omega^2 and finiteness of clusters ``idx`` at ``x``
-        (k, n, 3), with the cables' axial damping acting on ``velocities`` (default: at rest) and
-        the cables ``intact`` (default: each cluster's current state)."""
-        k = idx.size
-        f_int = np.empty((k, self.num_nodes, 3))
-        tension = np.empty((k, self.num_cables))
-        omega2 = np.empty(k)
-        finite = np.empty(k, dtype=np.bool_)
-        v = np.zeros((k, self.num_nodes, 3)) if velocities is None else np.ascontiguousarray(velocities)
+        """Forces, tensions and the step-limiting omega^2 of clusters ``idx`` (k,) at positions
+        ``x`` (k, n, 3) m, with the cables' axial damping acting on ``velocities`` (k, n, 3) m/s
+        (default: at rest) and the cables ``intact`` (k, m) (default: each cluster's current
+        state; True: all), on the taut branch with ``taut_branch`` (see
+        :func:`tether_gym._kernels.cable_forces`).  Unchecked: the inputs are used as they are.
+
+        Computed on scratch copies of the clusters' rows of the tables, which it returns with
+        ``finite`` (k,) bool, whether every cable length was finite and non-zero: ``(nodes,
+        cables, clusters, finite)``, the ``INTERNAL_FORCE``, ``TENSION`` and ``OMEGA2`` columns
+        filled in.  The state is not touched."""
+        k = _kernels
+        nodes = self.node_table[idx]
+        nodes[:, :, k.POSITION : k.POSITION + 3] = x
+        nodes[:, :, k.HALF_STEP_VELOCITY : k.HALF_STEP_VELOCITY + 3] = 0.0 if velocities is None else velocities
+        cables = self.cable_table[idx]
+        if intact is not None:
+            cables[:, :, k.INTACT] = intact
+        clusters = self.cluster_table[idx]
+        finite = np.empty(idx.size, dtype=np.bool_)
         with np.errstate(divide="ignore", invalid="ignore"):
-            _kernels.evaluate_batch(
-                np.ascontiguousarray(x),
-                v,
-                self.reference[idx],
-                self.cables,
-                self.stiffness[idx],
-                self.L0[idx],
-                self.N0[idx],
-                self.axial_damping[idx],
-                self.inv_split_mass_sum[idx],
-                self.intact[idx] if intact is None else np.ascontiguousarray(intact),
-                self.frame_tidal[idx],
-                self.elongation == "linearised",
-                taut_branch,
-                f_int,
-                tension,
-                omega2,
-                finite,
-            )
-        return f_int, tension, omega2, finite
+            k.evaluate_forces(self.kernel_settings, taut_branch, self.cables, nodes, cables, clusters, finite)
+        return nodes, cables, clusters, finite
 
     # ------------------------------------------------------------------ integration
     def advance(
@@ -550,68 +617,41 @@ class BatchSimulator:
         if active is None:
             mask = self._all_active
         else:
-            mask = np.asarray(active)
+            mask = np.require(active, requirements=["C", "W"])  # the kernels' one compiled variant
             if mask.shape != (self.num_clusters,) or mask.dtype != np.bool_:
                 raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},); got {active!r}")
-        B = self.num_clusters
-        stats = AdvanceStats(
-            substeps=np.zeros(B, dtype=np.int64),
-            step_min=np.full(B, np.inf),
-            step_max=np.zeros(B),
-            status=np.zeros(B, dtype=np.int64),
-            step_sizes=np.full((B, int(record_steps)), np.nan),
-            peak_tension=np.empty((B, self.num_cables)),
+        self.applied_force[...] = p
+        step_sizes = np.full((self.num_clusters, int(record_steps)), np.nan)
+        self.advance_unchecked(duration, mask, step_sizes)
+        last = self.last_advance
+        return AdvanceStats(
+            substeps=last.substeps.copy(),
+            step_min=last.step_min.copy(),
+            step_max=last.step_max.copy(),
+            status=last.status.copy(),
+            step_sizes=step_sizes,
+            peak_tension=last.peak_tension.copy(),
         )
-        self.advance_unchecked(duration, p, mask, stats)
-        return stats
 
-    def advance_unchecked(self, duration: float, force: np.ndarray, active: np.ndarray, stats: AdvanceStats) -> None:
-        """:meth:`advance` without argument checks, writing into the arrays of ``stats``.
+    def advance_unchecked(self, duration: float, active: np.ndarray, step_sizes: np.ndarray | None = None) -> None:
+        """:meth:`advance` without argument checks, with the force already in :attr:`applied_force`;
+        the results are in :attr:`last_advance`.
 
-        For callers that validated their inputs and reuse one :class:`AdvanceStats` per step
-        (the environments): ``duration`` > 0, ``force`` a C-contiguous finite float64 (B, n, 3)
-        array, ``active`` a (B,) bool array.
+        For callers that validated their inputs (the environments): ``duration`` > 0, the
+        applied force finite, ``active`` a (B,) bool array, ``step_sizes`` None or a (B, R)
+        float64 array that receives the first R sub-steps.
         """
         kernel = _kernels.advance_parallel if self.num_clusters >= PARALLEL_MIN_BATCH else _kernels.advance_serial
         kernel(
-            active,
             duration,
-            self.time,
-            self.positions_,
-            self._v_half,
-            self.velocities_,
-            self._f_int,
-            self.tension,
-            self._h_prev,
-            self._omega2,
-            force,
-            self._previous_force,
-            self.masses,
-            self.damping,
+            active,
+            self.kernel_settings,
             self.cables,
-            self.stiffness,
-            self.L0,
-            self.N0,
-            self.axial_damping,
-            self.inv_split_mass_sum,
-            self.breaking_load,
-            self.intact,
-            self.frame_rate,
-            self.frame_tidal,
-            self.reference,
-            self.elongation == "linearised",
-            self.safety_factor,
-            self.max_step,
-            self.max_substeps,
-            self._work,
-            self._dissipated,
-            stats.substeps,
-            stats.step_min,
-            stats.step_max,
-            self.status,
-            stats.step_sizes,
-            stats.peak_tension,
-            stats.status,
+            self.node_table,
+            self.cable_table,
+            self.cluster_table,
+            self.counter_table,
+            self._no_record if step_sizes is None else step_sizes,
         )
 
     # ------------------------------------------------------------------ queries
@@ -627,16 +667,18 @@ class BatchSimulator:
         return self._forces_at(positions, indices)[2]
 
     def _forces_at(
-        self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None, intact: np.ndarray | None = None
+        self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None, intact: bool | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(idx, x, f_int)``: the checked cluster indices and (k, n, 3) positions, and the elastic
-        forces there with the cables ``intact`` (default: each cluster's current state)."""
-        idx = self._indices(indices)
+        forces there, with every cable intact when ``intact`` is True (default: each cluster's
+        current state)."""
+        idx = self.cluster_indices(indices)
         x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
-        f_int, _, _, finite = self._evaluate(x, idx, intact=intact)
+        nodes, _, _, finite = self.evaluate_at(x, idx, intact=intact)
         if not finite.all():
             raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
-        return idx, x, f_int
+        column = _kernels.INTERNAL_FORCE
+        return idx, x, nodes[:, :, column : column + 3]
 
     def equilibrium_force(self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """(k, n, 3) external force, N, that holds clusters ``indices`` at rest in their frame at
@@ -645,8 +687,7 @@ class BatchSimulator:
         It is zero (to round-off) for a cluster whose shape is an equilibrium of its frame, such as
         a radial chain in the Hill frame or a spinning formation in its rotating frame.
         """
-        all_intact = np.ones((self._indices(indices).size, self.num_cables), dtype=np.bool_)
-        idx, x, f_int = self._forces_at(positions, indices, intact=all_intact)
+        idx, x, f_int = self._forces_at(positions, indices, intact=True)
         return f_int - self.masses[idx][:, :, None] * self.frame_tidal[idx][:, None, :] * x
 
     def critical_time_step(self, method: CriticalStepMethod = "closed-form") -> np.ndarray:
@@ -671,98 +712,39 @@ class BatchSimulator:
             return 2.0 / np.sqrt(omega2)
 
     def element_omega2_finite_difference(self, relative_perturbation: float = 1e-6) -> np.ndarray:
-        """(B, m) the paper's finite-difference column-L1 bound on each cable's squared frequency.
+        """(B, m) the paper's finite-difference column-L1 bound on each cable's squared frequency,
+        (rad/s)^2: see :func:`tether_gym.analysis.element_omega2_finite_difference`."""
+        from tether_gym.analysis import element_omega2_finite_difference
 
-        Each cable is cut out as a two-node element with its split masses; each of its 6 degrees of
-        freedom is perturbed by ``+-h`` (``h = relative_perturbation * L``) and the element force
-        evaluated, giving the stiffness columns of eq. (21); the bound is the largest L1 norm of a
-        column of ``M_e^-1/2 K_e M_e^-1/2``, in (rad/s)^2.  A slack cable is perturbed as if it
-        were just taut at its current length (pretension shifted so that ``N = 0`` there): the
-        stiffest it can be within a step, without the spurious compression of the linear law.
-        """
-        _check_number("relative_perturbation", relative_perturbation, 0.0, 0.1, "(a fraction of the cable length)")
-        B, m = self.num_clusters, self.num_cables
-        x = self.positions_
-        ends = np.stack([x[:, self.cables[:, 0]], x[:, self.cables[:, 1]]], axis=2)  # (B, m, 2, 3)
-        lengths = np.linalg.norm(ends[:, :, 1] - ends[:, :, 0], axis=-1)  # (B, m)
-        h = relative_perturbation * lengths
-        # 12 perturbed copies of each element: dof j = 0..5, sign +-.
-        dof_shift = np.eye(6).reshape(6, 2, 3)
-        perturbed = (
-            ends[:, :, None, None]
-            + np.array([1.0, -1.0])[None, None, None, :, None, None]
-            * h[:, :, None, None, None, None]
-            * dof_shift[None, None, :, None]
-        )  # (B, m, 6, 2, 2, 3)
-        E = B * m * 12
-        ref = self.reference
-        ref_ends = np.stack([ref[:, self.cables[:, 0]], ref[:, self.cables[:, 1]]], axis=2)
-        ref_elements = np.broadcast_to(ref_ends[:, :, None, None], perturbed.shape).reshape(E, 2, 3)
-
-        def per_element(values: np.ndarray) -> np.ndarray:
-            return np.ascontiguousarray(np.broadcast_to(values[:, :, None, None], (B, m, 6, 2)).reshape(E, 1))
-
-        all_clusters = np.arange(B)
-        tension_taut_branch = self._evaluate(x, all_clusters, taut_branch=True)[1]
-        just_taut_N0 = self.N0 - np.minimum(tension_taut_branch, 0.0)
-        f_int = np.empty((E, 2, 3))
-        _kernels.evaluate_batch(
-            np.ascontiguousarray(perturbed.reshape(E, 2, 3)),
-            np.zeros((E, 2, 3)),
-            np.ascontiguousarray(ref_elements),
-            np.array([[0, 1]], dtype=np.int64),
-            per_element(self.stiffness),
-            per_element(self.L0),
-            per_element(just_taut_N0),
-            np.zeros((E, 1)),
-            per_element(self.inv_split_mass_sum),
-            np.ones((E, 1), dtype=np.bool_),
-            np.zeros((E, 3)),
-            self.elongation == "linearised",
-            True,
-            f_int,
-            np.empty((E, 1)),
-            np.empty(E),
-            np.empty(E, dtype=np.bool_),
-        )
-        f = f_int.reshape(B, m, 6, 2, 6)
-        columns = (f[:, :, :, 0] - f[:, :, :, 1]) / (2.0 * h[:, :, None, None])  # (B, m, j, i)
-        degree = np.bincount(self.cables.ravel(), minlength=self.num_nodes)
-        split = self.masses / degree  # (B, n)
-        dof_mass = np.repeat(
-            np.stack([split[:, self.cables[:, 0]], split[:, self.cables[:, 1]]], axis=2), 3, axis=2
-        )  # (B, m, 6)
-        scale = 1.0 / np.sqrt(dof_mass)
-        scaled = np.abs(columns) * scale[:, :, :, None] * scale[:, :, None, :]
-        omega2 = scaled.sum(axis=3).max(axis=2)
-        # Axial damping with lagged velocity shortens the stable step (see _kernels.cable_forces).
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xi = np.where(
-                self.axial_damping > 0.0, 0.5 * self.axial_damping * self.inv_split_mass_sum / np.sqrt(omega2), 0.0
-            )
-        omega2 = omega2 * (np.sqrt(1.0 + xi * xi) + xi) ** 2
-        omega2 = omega2 + np.abs(self.frame_tidal).max(axis=1)[:, None]
-        return np.where(self.intact, omega2, 0.0)
+        return element_omega2_finite_difference(self, relative_perturbation)
 
     def energy(self) -> EnergyReport:
         """Energy accounting of every cluster since its last reset (see :class:`EnergyReport`)."""
-        kinetic = 0.5 * np.einsum("bn,bnd,bnd->b", self.masses, self.velocities_, self.velocities_)
+        # Contiguous copies: einsum's summation order (and so its last bits) depends on the layout.
+        masses = np.ascontiguousarray(self.masses)
+        velocities = np.ascontiguousarray(self.velocities_)
+        kinetic = 0.5 * np.einsum("bn,bnd,bnd->b", masses, velocities, velocities)
         # With axial damping the tension holds a viscous part; the strain energy is elastic only.
         elastic = (
             self.tension
             if not self.axial_damping.any()
-            else self._evaluate(self.positions_, np.arange(self.num_clusters))[1]
+            else self.evaluate_at(self.positions_, np.arange(self.num_clusters))[1][:, :, _kernels.TENSION]
         )
         strain = (0.5 * elastic**2 / self.stiffness).sum(axis=1)
-        frame_potential = -0.5 * np.einsum("bn,bnd,bd->b", self.masses, self.positions_**2, self.frame_tidal)
-        residual = kinetic + strain + frame_potential - self._energy0 + self._dissipated - self._work
+        tidal = np.ascontiguousarray(self.frame_tidal)
+        frame_potential = -0.5 * np.einsum("bn,bnd,bd->b", masses, self.positions_**2, tidal)
+        row = self.cluster_table
+        initial, dissipated, work = (
+            row[:, c].copy() for c in (_kernels.INITIAL_ENERGY, _kernels.DISSIPATED, _kernels.WORK)
+        )
+        residual = kinetic + strain + frame_potential - initial + dissipated - work
         return EnergyReport(
             kinetic=kinetic,
             strain=strain,
             frame_potential=frame_potential,
-            dissipated=self._dissipated.copy(),
-            work=self._work.copy(),
-            initial=self._energy0.copy(),
+            dissipated=dissipated,
+            work=work,
+            initial=initial,
             residual=residual,
         )
 
@@ -853,4 +835,5 @@ class Simulator:
     def energy(self) -> EnergyReport:
         """Energy accounting since the last reset, as floats (see :class:`EnergyReport`)."""
         report = self.batch.energy()
-        return EnergyReport(**{k: float(getattr(report, k)[0]) for k in report.__dataclass_fields__})
+        values = {k: float(getattr(report, k)[0]) for k in report.__dataclass_fields__}
+        return EnergyReport(**values)  # type: ignore[arg-type]  # a single cluster's report holds floats

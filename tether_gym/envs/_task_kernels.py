@@ -1,7 +1,20 @@
-"""Compiled measurements of the damping task: rigid motion, vibration energy, observation.
+"""Compiled measurements of the damping task: commanded forces, rigid motion, vibration energy,
+observation, reward and end reason.
 
 Like the physics kernels they work one cluster at a time, so a cluster measured in a batch gives
-the same bits as measured alone.  Shapes: ``x, v`` (B, n, 3) in m and m/s, ``masses`` (B, n) kg.
+the same bits as measured alone.  They read the simulator's tables (columns named in
+:mod:`tether_gym._kernels`) and the task's own, named here:
+
+* the task's node table ``(B, n, TASK_NODE_COLUMNS)``, one row per satellite;
+* the task's cluster table ``(B, TASK_CLUSTER_COLUMNS + observation size)``, one row per
+  cluster: what the kernels read of the cluster's episode, the scalar results of the last
+  evaluation (reward terms, energies, ...) and its observation vector;
+* the task settings ``(TASK_SETTINGS,)`` float64, shared by the batch.
+
+The scalar results follow :class:`~tether_gym.envs.contract.Scalar`, the end reasons
+:class:`~tether_gym.envs.contract.EndReason` and the observation the offsets of the task's
+:class:`~tether_gym.envs.contract.ObservationLayout`, all defined in
+:mod:`tether_gym.envs.contract`.
 """
 
 from __future__ import annotations
@@ -11,13 +24,91 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from tether_gym._kernels import PARALLEL_CHUNKS
+from tether_gym import _kernels
+from tether_gym._kernels import (
+    APPLIED_FORCE,
+    BREAKING_LOAD,
+    FRAME_TIDAL,
+    INTACT,
+    MASS,
+    PARALLEL_CHUNKS,
+    PEAK_TENSION,
+    POSITION,
+    PRETENSION,
+    REST_LENGTH,
+    STATUS,
+    STIFFNESS,
+    TENSION,
+    VELOCITY,
+)
+from tether_gym.envs.contract import EndReason, Scalar
+
+# ---------------------------------------------------------------------------------------------
+# The task's node table, (B, n, TASK_NODE_COLUMNS).
+BIAS = 0  # N, 3 columns: the constant thrust holding the nominal shape
+NOMINAL = 3  # m, 3 columns: the nominal position
+THRUST = 6  # N, 3 columns: the agent's thrust of the interval, as commanded
+TASK_NODE_COLUMNS = 9
+
+# The task's cluster table, (B, TASK_CLUSTER_COLUMNS + observation size).
+NOMINAL_STRAIN_ENERGY = 0  # J, the cables' strain energy at the nominal shape
+IMPULSE = 1  # N*s, the thrust impulse of the last interval, sum_j |F_j| dt
+SCALAR_COLUMNS = 2  # the first of the scalar results, in the order of contract.Scalar
+NUM_SCALARS = len(Scalar)
+OBSERVATION_COLUMNS = SCALAR_COLUMNS + NUM_SCALARS  # the observation vector fills the rest of the row
+TASK_CLUSTER_COLUMNS = OBSERVATION_COLUMNS
+
+# The scalar columns and end reasons of the contract (tether_gym.envs.contract), as the plain ints
+# the compiled code reads: an IntEnum member in numba code makes every load of the cache take
+# seconds.
+REWARD = int(Scalar.REWARD)
+REWARD_VIBRATION = int(Scalar.REWARD_VIBRATION)
+REWARD_PROPELLANT = int(Scalar.REWARD_PROPELLANT)
+REWARD_SLACK = int(Scalar.REWARD_SLACK)
+REWARD_FAILURE = int(Scalar.REWARD_FAILURE)
+VIBRATION_ENERGY = int(Scalar.VIBRATION_ENERGY)
+MAX_DEVIATION = int(Scalar.MAX_DEVIATION)
+SLACK_FRACTION = int(Scalar.SLACK_FRACTION)
+KINETIC_ENERGY = int(Scalar.KINETIC_ENERGY)
+STRAIN_ENERGY = int(Scalar.STRAIN_ENERGY)
+FRAME_POTENTIAL = int(Scalar.FRAME_POTENTIAL)
+RUNNING = int(EndReason.RUNNING)
+FORMATION_LOST = int(EndReason.FORMATION_LOST)
+CABLE_BROKEN = int(EndReason.CABLE_BROKEN)
+NUMERICS_DIVERGED = int(EndReason.NUMERICS_DIVERGED)
+
+# The task settings, (TASK_SETTINGS,).
+CONTROL_INTERVAL = 0  # s
+MAGNITUDE_LIMIT = 1  # 1.0: a command longer than 1 is scaled back (thrust_limit="magnitude")
+LENGTH_SCALE = 2  # m, the unit of displacements and elongations in the observation
+SPEED_SCALE = 3  # m/s, the unit of velocities in the observation
+DEVIATION_LIMIT = 4  # m, a satellite farther from its nominal place loses the formation
+TERMINATE_ON_BREAK = 5  # 1.0: a cable past its breaking load ends the episode
+VIBRATION_WEIGHT = 6  # 1/J: the vibration weight over the energy scale
+PROPELLANT_WEIGHT = 7  # 1/(N*s): the propellant weight over the full impulse
+SLACK_WEIGHT = 8  # per fraction of slack cables
+FAILURE_PENALTY = 9  # the one-off cost of a failure
+# Where the parts of the observation vector start (from the task's contract.ObservationLayout).
+DISPLACEMENT_AT = 10
+VELOCITY_AT = 11
+ELONGATION_AT = 12
+TENSION_RATIO_AT = 13  # -1 when the tension ratios are not observed
+TASK_SETTINGS = 14
+
+#: Observations are clipped to +-this (it is reached only far beyond a lost formation).
+OBSERVATION_LIMIT = 1e4
+
+#: A step whose |reward| would exceed this (or be NaN) ends as ``numerics_diverged`` with a finite
+#: reward.  No accepted setting gets near it unless the state has run away, and it keeps every
+#: reward finite also in float32 (max 3.4e38), as Stable-Baselines3 stores them.
+REWARD_LIMIT = 1e30
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(inline="always", error_model="numpy")
 def _rigid_motion(x: np.ndarray, v: np.ndarray, masses: np.ndarray, out: np.ndarray) -> None:
     """Centre of mass, its velocity and the rigid angular velocity of one cluster, into ``out``
-    (3, 3) rows: com (m), v_com (m/s), omega (rad/s), with ``I omega = angular momentum``."""
+    (3, 3) rows: com (m), v_com (m/s), omega (rad/s), with ``I omega = angular momentum``; ``x, v``
+    (n, 3) in m and m/s, ``masses`` (n,) kg."""
     n = x.shape[0]
     total = 0.0
     for d in range(3):
@@ -72,7 +163,8 @@ def _rigid_motion(x: np.ndarray, v: np.ndarray, masses: np.ndarray, out: np.ndar
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def remove_rigid_velocity(x: np.ndarray, v: np.ndarray, masses: np.ndarray) -> None:
-    """Subtract from ``v`` (in place) each cluster's rigid translation and rotation."""
+    """Subtract from ``v`` (B, n, 3) m/s, in place, each cluster's rigid translation and rotation
+    at the positions ``x`` (B, n, 3) m, with the ``masses`` (B, n) kg."""
     motion = np.empty((3, 3))
     for b in range(x.shape[0]):
         _rigid_motion(x[b], v[b], masses[b], motion)
@@ -85,16 +177,7 @@ def remove_rigid_velocity(x: np.ndarray, v: np.ndarray, masses: np.ndarray) -> N
             v[b, i, 2] -= motion[1, 2] + motion[2, 0] * ry - motion[2, 1] * rx
 
 
-#: Observations are clipped to +-this (it is reached only far beyond a lost formation).
-OBSERVATION_LIMIT = 1e4
-
-#: A step whose |reward| would exceed this (or be NaN) ends as ``numerics_diverged`` with a finite
-#: reward.  No accepted setting gets near it unless the state has run away, and it keeps every
-#: reward finite also in float32 (max 3.4e38), as Stable-Baselines3 stores them.
-REWARD_LIMIT = 1e30
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(inline="always", error_model="numpy")
 def _bounded(value: float) -> float:
     """An observation entry: NaN as 0, clipped to +-OBSERVATION_LIMIT."""
     if value != value:
@@ -102,353 +185,404 @@ def _bounded(value: float) -> float:
     return min(max(value, -OBSERVATION_LIMIT), OBSERVATION_LIMIT)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def command_forces(
+@njit(inline="always", error_model="numpy")
+def _command_cluster(
+    settings: np.ndarray,
     actions: np.ndarray,
     thrusters: np.ndarray,
     max_thrust: np.ndarray,
-    magnitude_limit: bool,
-    bias: np.ndarray,
-    duration: float,
-    active: np.ndarray,
-    force: np.ndarray,
-    thrust: np.ndarray,
-    impulse: np.ndarray,
+    task_nodes: np.ndarray,
+    nodes: np.ndarray,
+    row: np.ndarray,
 ) -> None:
-    """Thruster forces from normalised actions (B, 3k): each command clipped to [-1, 1] (and, with
-    ``magnitude_limit``, scaled back to unit length when longer), times ``max_thrust`` (k,) N.
-    Writes the thrust (B, n, 3), the total external force ``bias + thrust`` and the thrust impulse
-    of the interval ``sum_j |F_j| duration`` (B,) in N*s, for active clusters only."""
-    for b in range(actions.shape[0]):
-        if not active[b]:
-            continue
-        thrust[b, :, :] = 0.0
-        total = 0.0
-        for k in range(thrusters.shape[0]):
-            a0 = min(max(actions[b, 3 * k], -1.0), 1.0)
-            a1 = min(max(actions[b, 3 * k + 1], -1.0), 1.0)
-            a2 = min(max(actions[b, 3 * k + 2], -1.0), 1.0)
-            norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-            scale = max_thrust[k]
-            if magnitude_limit and norm > 1.0:
-                scale /= norm
-            i = thrusters[k]
-            thrust[b, i, 0] = a0 * scale
-            thrust[b, i, 1] = a1 * scale
-            thrust[b, i, 2] = a2 * scale
-            total += norm * scale
-        impulse[b] = total * duration
-        for i in range(force.shape[1]):
-            for d in range(3):
-                force[b, i, d] = bias[b, i, d] + thrust[b, i, d]
+    """One cluster's thrust (``THRUST``), applied force ``BIAS + THRUST`` (the simulator's
+    ``APPLIED_FORCE``) and thrust impulse (``IMPULSE``) from its normalised actions (3k,)."""
+    magnitude_limit = settings[MAGNITUDE_LIMIT] != 0.0
+    for i in range(task_nodes.shape[0]):
+        for d in range(3):
+            task_nodes[i, THRUST + d] = 0.0
+    total = 0.0
+    for k in range(thrusters.shape[0]):
+        a0 = min(max(actions[3 * k], -1.0), 1.0)
+        a1 = min(max(actions[3 * k + 1], -1.0), 1.0)
+        a2 = min(max(actions[3 * k + 2], -1.0), 1.0)
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        scale = max_thrust[k]
+        if magnitude_limit and norm > 1.0:
+            scale /= norm
+        i = thrusters[k]
+        task_nodes[i, THRUST] = a0 * scale
+        task_nodes[i, THRUST + 1] = a1 * scale
+        task_nodes[i, THRUST + 2] = a2 * scale
+        total += norm * scale
+    row[IMPULSE] = total * settings[CONTROL_INTERVAL]
+    for i in range(nodes.shape[0]):
+        for d in range(3):
+            nodes[i, APPLIED_FORCE + d] = task_nodes[i, BIAS + d] + task_nodes[i, THRUST + d]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _evaluate_clusters(
-    first: int,
-    stop: int,
-    x: np.ndarray,
-    v: np.ndarray,
-    masses: np.ndarray,
-    tension: np.ndarray,
-    stiffness: np.ndarray,
-    L0: np.ndarray,
-    N0: np.ndarray,
-    intact: np.ndarray,
-    frame_tidal: np.ndarray,
-    breaking_load: np.ndarray,
-    bias: np.ndarray,
-    nominal: np.ndarray,
-    nominal_strain_energy: np.ndarray,
-    cables: np.ndarray,
+@njit(inline="always", error_model="numpy")
+def _nominal_centre(task_nodes: np.ndarray, nodes: np.ndarray, out: np.ndarray) -> None:
+    """The centre of mass of the nominal shape, m, into ``out`` (3,)."""
+    total = 0.0
+    out[:] = 0.0
+    for i in range(nodes.shape[0]):
+        total += nodes[i, MASS]
+        for d in range(3):
+            out[d] += nodes[i, MASS] * task_nodes[i, NOMINAL + d]
+    out /= total
+
+
+@njit(inline="always", error_model="numpy")
+def _deviation(
+    task_nodes: np.ndarray, nodes: np.ndarray, motion: np.ndarray, centre: np.ndarray, i: int, d: int
+) -> float:
+    """Satellite ``i``'s displacement from its nominal place along ``d`` in the cluster frame
+    (both about their centres of mass), m."""
+    return (nodes[i, POSITION + d] - motion[0, d]) - (task_nodes[i, NOMINAL + d] - centre[d])
+
+
+@njit(inline="always", error_model="numpy")
+def _node_energies(
+    task_nodes: np.ndarray, nodes: np.ndarray, cluster: np.ndarray, motion: np.ndarray, centre: np.ndarray
+) -> tuple[float, float, float, float, float, float]:
+    """``(kinetic_deformation, kinetic, bias_potential, frame_potential, shape_potential,
+    worst_deviation)`` of one cluster, J (the last in m): see :func:`evaluate_serial`."""
+    kinetic_deformation = 0.0
+    kinetic = 0.0
+    bias_potential = 0.0
+    frame_potential = 0.0
+    shape_potential = 0.0
+    worst = 0.0
+    t0, t1, t2 = cluster[FRAME_TIDAL], cluster[FRAME_TIDAL + 1], cluster[FRAME_TIDAL + 2]
+    for i in range(nodes.shape[0]):
+        m = nodes[i, MASS]
+        x0, x1, x2 = nodes[i, POSITION], nodes[i, POSITION + 1], nodes[i, POSITION + 2]
+        v0, v1, v2 = nodes[i, VELOCITY], nodes[i, VELOCITY + 1], nodes[i, VELOCITY + 2]
+        rx = x0 - motion[0, 0]
+        ry = x1 - motion[0, 1]
+        rz = x2 - motion[0, 2]
+        if t0 != 0.0 or t1 != 0.0 or t2 != 0.0:
+            nx = task_nodes[i, NOMINAL] - centre[0]
+            ny = task_nodes[i, NOMINAL + 1] - centre[1]
+            nz = task_nodes[i, NOMINAL + 2] - centre[2]
+            shape_potential -= (
+                0.5 * m * (t0 * (rx * rx - nx * nx) + t1 * (ry * ry - ny * ny) + t2 * (rz * rz - nz * nz))
+            )
+            frame_potential -= 0.5 * m * (t0 * x0 * x0 + t1 * x1 * x1 + t2 * x2 * x2)
+        ux = v0 - motion[1, 0] - (motion[2, 1] * rz - motion[2, 2] * ry)
+        uy = v1 - motion[1, 1] - (motion[2, 2] * rx - motion[2, 0] * rz)
+        uz = v2 - motion[1, 2] - (motion[2, 0] * ry - motion[2, 1] * rx)
+        kinetic_deformation += 0.5 * m * (ux * ux + uy * uy + uz * uz)
+        kinetic += 0.5 * m * (v0 * v0 + v1 * v1 + v2 * v2)
+        deviation2 = 0.0
+        for d in range(3):
+            bias_potential -= task_nodes[i, BIAS + d] * (nodes[i, POSITION + d] - task_nodes[i, NOMINAL + d])
+            deviation = _deviation(task_nodes, nodes, motion, centre, i, d)
+            deviation2 += deviation * deviation
+        deviation_norm = math.sqrt(deviation2)
+        if deviation_norm > worst or not math.isfinite(deviation_norm):
+            worst = deviation_norm
+    return kinetic_deformation, kinetic, bias_potential, frame_potential, shape_potential, worst
+
+
+@njit(inline="always", error_model="numpy")
+def _observe_satellites(
+    settings: np.ndarray,
     observed: np.ndarray,
-    length_scale: float,
-    speed_scale: float,
-    observe_tensions: bool,
-    status: np.ndarray,
-    peak_tension: np.ndarray,
-    impulse: np.ndarray,
-    deviation_limit: float,
-    terminate_on_break: bool,
-    weights: np.ndarray,
+    task_nodes: np.ndarray,
+    nodes: np.ndarray,
+    motion: np.ndarray,
+    centre: np.ndarray,
     observation: np.ndarray,
-    scalars: np.ndarray,
-    end_reason: np.ndarray,
 ) -> None:
-    """Everything the task reads off clusters ``first..stop-1`` after a step (or a reset), one pass
-    per cluster.  (The loop lives here, not in the drivers: a call per cluster with this many
-    array arguments would cost as much as the work.)
+    """The observed satellites' displacements and velocities (about the centre of mass), in units
+    of the length and speed scales, into ``observation``."""
+    displacement_at = np.int64(settings[DISPLACEMENT_AT])
+    velocity_at = np.int64(settings[VELOCITY_AT])
+    for k in range(observed.shape[0]):
+        i = observed[k]
+        for d in range(3):
+            deviation = _deviation(task_nodes, nodes, motion, centre, i, d)
+            observation[displacement_at + 3 * k + d] = _bounded(deviation / settings[LENGTH_SCALE])
+            observation[velocity_at + 3 * k + d] = _bounded(
+                (nodes[i, VELOCITY + d] - motion[1, d]) / settings[SPEED_SCALE]
+            )
 
-    Writes the observation row (NaN as 0, clipped to +-OBSERVATION_LIMIT; see :class:`~tether_gym.envs.TetherClusterEnv`), ``end_reason``
-    (0 running, 1 formation lost, 2 cable broken, 3 numerics diverged) and ``scalars[b]``:
-    ``[reward, reward_vibration, reward_propellant, reward_slack, reward_failure,
-    vibration_energy (J), max_deviation (m), slack_fraction, kinetic_energy (J),
-    strain_energy (J), frame_potential (J)]``.  ``weights`` = ``[vibration_weight / energy_scale,
-    propellant_weight / full_impulse, slack_weight, failure_penalty]``.  A cable past its
-    breaking load ends the episode only with ``terminate_on_break``.  A cluster whose reward
-    would pass ``REWARD_LIMIT`` (or be NaN), or whose energies would not be finite, ends as
-    numerics diverged (code 3), with the vibration term (and any non-finite term) set to 0: the
-    reward is always finite.
 
-    The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension may
-    hold a viscous part).  In a turning frame (``frame_tidal`` (B, 3), 1/s^2) the vibration energy
-    also holds the change of the frame potential of the shape about its centre of mass,
-    ``-1/2 sum_i m_i (r_i.T r_i - R_i.T R_i)`` (``r``, ``R``: current and nominal positions about
-    the centre of mass), so that it measures the deformation against the frame's effective
-    potential and is zero at the nominal equilibrium.
-    """
-    n = x.shape[1]
-    m = cables.shape[0]
-    scratch = np.empty((4, 3))
+@njit(inline="always", error_model="numpy")
+def _cable_terms(
+    settings: np.ndarray, topology: np.ndarray, nodes: np.ndarray, cables: np.ndarray, observation: np.ndarray
+) -> tuple[float, int, bool]:
+    """``(strain, slack, broken)``: the cables' elastic strain energy ``N_el^2 / 2k`` (intact
+    cables), J, the number of slack cables, and whether a cable passed its breaking load during
+    the interval (counted only when that ends the episode); observes each cable's elongation (and
+    tension ratio)."""
+    strain = 0.0
+    slack = 0
+    broken = False
+    terminate_on_break = settings[TERMINATE_ON_BREAK] != 0.0
+    elongation_at = np.int64(settings[ELONGATION_AT])
+    tension_ratio_at = np.int64(settings[TENSION_RATIO_AT])
+    for c in range(topology.shape[0]):
+        cable = cables[c]
+        i, j = topology[c, 0], topology[c, 1]
+        dx = nodes[j, POSITION] - nodes[i, POSITION]
+        dy = nodes[j, POSITION + 1] - nodes[i, POSITION + 1]
+        dz = nodes[j, POSITION + 2] - nodes[i, POSITION + 2]
+        elongation = math.sqrt(dx * dx + dy * dy + dz * dz) - cable[REST_LENGTH]
+        observation[elongation_at + c] = _bounded(elongation / settings[LENGTH_SCALE])
+        elastic = cable[PRETENSION] + cable[STIFFNESS] * elongation
+        if cable[INTACT] != 0.0 and elastic > 0.0:
+            strain += 0.5 * elastic * elastic / cable[STIFFNESS]
+        if cable[TENSION] <= 0.0:
+            slack += 1
+        if terminate_on_break and cable[PEAK_TENSION] > cable[BREAKING_LOAD]:
+            broken = True
+        if tension_ratio_at >= 0:
+            observation[tension_ratio_at + c] = _bounded(cable[TENSION] / cable[BREAKING_LOAD])
+    return strain, slack, broken
+
+
+@njit(inline="always", error_model="numpy")
+def _reward(
+    settings: np.ndarray,
+    status: int,
+    broken: bool,
+    worst: float,
+    energies: tuple[float, float, float, float],
+    slack_fraction: float,
+    impulse: float,
+    scalars: np.ndarray,
+) -> int:
+    """The end reason and the scalar results (reward and its terms, the energies) of one cluster,
+    from its ``energies = (vibration, kinetic, strain, frame_potential)``, J; see
+    :func:`evaluate_serial`."""
+    vibration, kinetic, strain, frame_potential = energies
+    if status != _kernels.STATUS_OK:
+        reason = NUMERICS_DIVERGED
+        vibration = 0.0
+    elif broken:
+        reason = CABLE_BROKEN
+    elif not worst <= settings[DEVIATION_LIMIT]:
+        reason = FORMATION_LOST
+    else:
+        reason = RUNNING
+    terms_vibration = -settings[VIBRATION_WEIGHT] * vibration
+    terms_propellant = -settings[PROPELLANT_WEIGHT] * impulse
+    terms_slack = -settings[SLACK_WEIGHT] * slack_fraction
+    running_reward = terms_vibration + terms_propellant + terms_slack
+    if not (
+        abs(running_reward) <= REWARD_LIMIT
+        and math.isfinite(kinetic)
+        and math.isfinite(strain)
+        and math.isfinite(frame_potential)
+    ):
+        # A state beyond the reward's arithmetic (an energy or a weighted term that overflows or
+        # passes REWARD_LIMIT; NaN fails the comparison too) is a divergence: the episode ends
+        # there with a finite reward, the vibration term dropped as for a frozen cluster, never a
+        # NaN or -inf while it runs on.
+        reason = NUMERICS_DIVERGED
+        vibration = 0.0
+        terms_vibration = 0.0
+        if not math.isfinite(terms_propellant):
+            terms_propellant = 0.0
+        if not math.isfinite(terms_slack):
+            terms_slack = 0.0
+    terms_failure = -settings[FAILURE_PENALTY] if reason != RUNNING else 0.0
+    scalars[REWARD] = terms_vibration + terms_propellant + terms_slack + terms_failure
+    scalars[REWARD_VIBRATION] = terms_vibration
+    scalars[REWARD_PROPELLANT] = terms_propellant
+    scalars[REWARD_SLACK] = terms_slack
+    scalars[REWARD_FAILURE] = terms_failure
+    scalars[VIBRATION_ENERGY] = vibration
+    scalars[MAX_DEVIATION] = worst
+    scalars[SLACK_FRACTION] = slack_fraction
+    scalars[KINETIC_ENERGY] = kinetic
+    scalars[STRAIN_ENERGY] = strain
+    scalars[FRAME_POTENTIAL] = frame_potential
+    return reason
+
+
+@njit(inline="always", error_model="numpy")
+def _evaluate_cluster(
+    settings: np.ndarray,
+    topology: np.ndarray,
+    observed: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    cluster: np.ndarray,
+    status: int,
+    task_nodes: np.ndarray,
+    row: np.ndarray,
+    scratch: np.ndarray,
+) -> int:
+    """Observation, scalar results and end reason (returned) of one cluster; ``scratch`` (4, 3)."""
     motion = scratch[:3]
-    nominal_com = scratch[3]
-    for b in range(first, stop):
-        xb, vb, mb = x[b], v[b], masses[b]
-        _rigid_motion(xb, vb, mb, motion)
-        total = 0.0
-        nominal_com[:] = 0.0
-        for i in range(n):
-            total += mb[i]
-            for d in range(3):
-                nominal_com[d] += mb[i] * nominal[b, i, d]
-        nominal_com /= total
-        kinetic_deformation = 0.0
-        kinetic = 0.0
-        bias_potential = 0.0
-        frame_potential = 0.0
-        shape_potential = 0.0
-        tidal = frame_tidal[b]
-        worst = 0.0
-        for i in range(n):
-            rx = xb[i, 0] - motion[0, 0]
-            ry = xb[i, 1] - motion[0, 1]
-            rz = xb[i, 2] - motion[0, 2]
-            if tidal[0] != 0.0 or tidal[1] != 0.0 or tidal[2] != 0.0:
-                nx = nominal[b, i, 0] - nominal_com[0]
-                ny = nominal[b, i, 1] - nominal_com[1]
-                nz = nominal[b, i, 2] - nominal_com[2]
-                shape_potential -= (
-                    0.5
-                    * mb[i]
-                    * (tidal[0] * (rx * rx - nx * nx) + tidal[1] * (ry * ry - ny * ny) + tidal[2] * (rz * rz - nz * nz))
-                )
-                frame_potential -= (
-                    0.5
-                    * mb[i]
-                    * (tidal[0] * xb[i, 0] * xb[i, 0] + tidal[1] * xb[i, 1] * xb[i, 1] + tidal[2] * xb[i, 2] * xb[i, 2])
-                )
-            ux = vb[i, 0] - motion[1, 0] - (motion[2, 1] * rz - motion[2, 2] * ry)
-            uy = vb[i, 1] - motion[1, 1] - (motion[2, 2] * rx - motion[2, 0] * rz)
-            uz = vb[i, 2] - motion[1, 2] - (motion[2, 0] * ry - motion[2, 1] * rx)
-            kinetic_deformation += 0.5 * mb[i] * (ux * ux + uy * uy + uz * uz)
-            kinetic += 0.5 * mb[i] * (vb[i, 0] * vb[i, 0] + vb[i, 1] * vb[i, 1] + vb[i, 2] * vb[i, 2])
-            deviation2 = 0.0
-            for d in range(3):
-                bias_potential -= bias[b, i, d] * (xb[i, d] - nominal[b, i, d])
-                deviation = (xb[i, d] - motion[0, d]) - (nominal[b, i, d] - nominal_com[d])
-                deviation2 += deviation * deviation
-            deviation_norm = math.sqrt(deviation2)
-            if deviation_norm > worst or not math.isfinite(deviation_norm):
-                worst = deviation_norm
-        for k in range(observed.shape[0]):
-            i = observed[k]
-            for d in range(3):
-                deviation = (xb[i, d] - motion[0, d]) - (nominal[b, i, d] - nominal_com[d])
-                observation[b, 3 * k + d] = _bounded(deviation / length_scale)
-                observation[b, 3 * (observed.shape[0] + k) + d] = _bounded((vb[i, d] - motion[1, d]) / speed_scale)
-        strain = 0.0
-        slack = 0
-        broken = False
-        offset = 6 * observed.shape[0]
-        for c in range(m):
-            i, j = cables[c, 0], cables[c, 1]
-            dx = xb[j, 0] - xb[i, 0]
-            dy = xb[j, 1] - xb[i, 1]
-            dz = xb[j, 2] - xb[i, 2]
-            elongation = math.sqrt(dx * dx + dy * dy + dz * dz) - L0[b, c]
-            observation[b, offset + c] = _bounded(elongation / length_scale)
-            elastic = N0[b, c] + stiffness[b, c] * elongation
-            if intact[b, c] and elastic > 0.0:
-                strain += 0.5 * elastic * elastic / stiffness[b, c]
-            if tension[b, c] <= 0.0:
-                slack += 1
-            if terminate_on_break and peak_tension[b, c] > breaking_load[b, c]:
-                broken = True
-            if observe_tensions:
-                observation[b, offset + m + c] = _bounded(tension[b, c] / breaking_load[b, c])
-        vibration = kinetic_deformation + strain - nominal_strain_energy[b] + bias_potential + shape_potential
-        if status[b] != 0:
-            reason = 3
-            vibration = 0.0
-        elif broken:
-            reason = 2
-        elif not worst <= deviation_limit:
-            reason = 1
-        else:
-            reason = 0
-        slack_fraction = slack / m
-        terms_vibration = -weights[0] * vibration
-        terms_propellant = -weights[1] * impulse[b]
-        terms_slack = -weights[2] * slack_fraction
-        running_reward = terms_vibration + terms_propellant + terms_slack
-        if not (
-            abs(running_reward) <= REWARD_LIMIT
-            and math.isfinite(kinetic)
-            and math.isfinite(strain)
-            and math.isfinite(frame_potential)
-        ):
-            # A state beyond the reward's arithmetic (an energy or a weighted term that overflows
-            # or passes REWARD_LIMIT; NaN fails the comparison too) is a divergence: the episode
-            # ends there with a finite reward, the vibration term dropped as for a frozen
-            # cluster, never a NaN or -inf while it runs on.
-            reason = 3
-            vibration = 0.0
-            terms_vibration = 0.0
-            if not math.isfinite(terms_propellant):
-                terms_propellant = 0.0
-            if not math.isfinite(terms_slack):
-                terms_slack = 0.0
-        end_reason[b] = reason
-        terms_failure = -weights[3] if reason > 0 else 0.0
-        scalars[b, 0] = terms_vibration + terms_propellant + terms_slack + terms_failure
-        scalars[b, 1] = terms_vibration
-        scalars[b, 2] = terms_propellant
-        scalars[b, 3] = terms_slack
-        scalars[b, 4] = terms_failure
-        scalars[b, 5] = vibration
-        scalars[b, 6] = worst
-        scalars[b, 7] = slack_fraction
-        scalars[b, 8] = kinetic
-        scalars[b, 9] = strain
-        scalars[b, 10] = frame_potential
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def evaluate_serial(
-    x,
-    v,
-    masses,
-    tension,
-    stiffness,
-    L0,
-    N0,
-    intact,
-    frame_tidal,
-    breaking_load,
-    bias,
-    nominal,
-    nominal_strain_energy,
-    cables,
-    observed,
-    length_scale,
-    speed_scale,
-    observe_tensions,
-    status,
-    peak_tension,
-    impulse,
-    deviation_limit,
-    terminate_on_break,
-    weights,
-    observation,
-    scalars,
-    end_reason,
-):  # pragma: no cover - compiled
-    """:func:`_evaluate_clusters` for every cluster of the batch, one thread."""
-    _evaluate_clusters(
-        0,
-        x.shape[0],
-        x,
-        v,
-        masses,
-        tension,
-        stiffness,
-        L0,
-        N0,
-        intact,
-        frame_tidal,
-        breaking_load,
-        bias,
-        nominal,
-        nominal_strain_energy,
-        cables,
-        observed,
-        length_scale,
-        speed_scale,
-        observe_tensions,
+    centre = scratch[3]
+    _rigid_motion(nodes[:, POSITION : POSITION + 3], nodes[:, VELOCITY : VELOCITY + 3], nodes[:, MASS], motion)
+    _nominal_centre(task_nodes, nodes, centre)
+    kinetic_deformation, kinetic, bias_potential, frame_potential, shape_potential, worst = _node_energies(
+        task_nodes, nodes, cluster, motion, centre
+    )
+    observation = row[OBSERVATION_COLUMNS:]
+    _observe_satellites(settings, observed, task_nodes, nodes, motion, centre, observation)
+    strain, slack, broken = _cable_terms(settings, topology, nodes, cables, observation)
+    vibration = kinetic_deformation + strain - row[NOMINAL_STRAIN_ENERGY] + bias_potential + shape_potential
+    return _reward(
+        settings,
         status,
-        peak_tension,
-        impulse,
-        deviation_limit,
-        terminate_on_break,
-        weights,
-        observation,
-        scalars,
-        end_reason,
+        broken,
+        worst,
+        (vibration, kinetic, strain, frame_potential),
+        slack / topology.shape[0],
+        row[IMPULSE],
+        row[SCALAR_COLUMNS:OBSERVATION_COLUMNS],
     )
 
 
-@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def evaluate_parallel(
-    x,
-    v,
-    masses,
-    tension,
-    stiffness,
-    L0,
-    N0,
-    intact,
-    frame_tidal,
-    breaking_load,
-    bias,
-    nominal,
-    nominal_strain_energy,
-    cables,
-    observed,
-    length_scale,
-    speed_scale,
-    observe_tensions,
-    status,
-    peak_tension,
-    impulse,
-    deviation_limit,
-    terminate_on_break,
-    weights,
-    observation,
-    scalars,
-    end_reason,
-):  # pragma: no cover - compiled
-    """:func:`_evaluate_clusters` for every cluster of the batch, on all threads (same bits)."""
-    batch = x.shape[0]
-    chunks = min(batch, PARALLEL_CHUNKS)
-    for k in prange(chunks):
-        _evaluate_clusters(
-            k * batch // chunks,
-            (k + 1) * batch // chunks,
-            x,
-            v,
-            masses,
-            tension,
-            stiffness,
-            L0,
-            N0,
-            intact,
-            frame_tidal,
-            breaking_load,
-            bias,
-            nominal,
-            nominal_strain_energy,
-            cables,
-            observed,
-            length_scale,
-            speed_scale,
-            observe_tensions,
-            status,
-            peak_tension,
-            impulse,
-            deviation_limit,
-            terminate_on_break,
-            weights,
-            observation,
-            scalars,
-            end_reason,
-        )
+#: The numbers of other files the kernels below are compiled with (see :func:`_compile_command_forces`).
+FOREIGN_LAYOUT = (
+    _kernels.LAYOUT,
+    PARALLEL_CHUNKS,
+    _kernels.STATUS_OK,
+    tuple((column.name, int(column)) for column in Scalar),
+    tuple((reason.name, int(reason)) for reason in EndReason),
+)
+
+
+def _compile_cluster_evaluation(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+    """Compile the evaluation of every cluster of some tables: the one-thread driver, which the
+    parallel one calls on chunks (inlined into it, it made that take seconds longer to compile;
+    a call per cluster cost as much as the evaluation itself).
+    ``foreign_layout`` is part of its cache key (see :func:`_compile_command_forces`)."""
+
+    @njit(cache=True, nogil=True, error_model="numpy")
+    def evaluate_clusters(
+        settings: np.ndarray,
+        topology: np.ndarray,
+        observed: np.ndarray,
+        nodes: np.ndarray,
+        cables: np.ndarray,
+        clusters: np.ndarray,
+        counters: np.ndarray,
+        task_nodes: np.ndarray,
+        task_clusters: np.ndarray,
+        end_reason: np.ndarray,
+    ) -> None:
+        """Everything the task reads off each cluster of the given tables (a batch, or a chunk of one)
+        after a step (or a reset); the one-thread driver, which the parallel one calls on chunks.
+
+        Writes the observation (NaN as 0, clipped to +-OBSERVATION_LIMIT; see
+        :class:`~tether_gym.envs.TetherClusterEnv`), ``end_reason`` and the scalar results:
+        the reward and its terms, with the weights of the settings, the vibration energy (J), the
+        largest deviation (m), the slack fraction, and the kinetic, strain and frame energies (J).
+        A cable past its breaking load ends the episode only with ``TERMINATE_ON_BREAK``.  A
+        cluster whose reward would pass ``REWARD_LIMIT`` (or be NaN), or whose energies would not
+        be finite, ends as numerics diverged, with the vibration term (and any non-finite term)
+        set to 0: the reward is always finite.
+
+        The strain energy is the elastic part ``N_el^2 / 2k`` of the intact cables (the tension
+        may hold a viscous part).  In a turning frame (``FRAME_TIDAL``, 1/s^2) the vibration energy
+        also holds the change of the frame potential of the shape about its centre of mass,
+        ``-1/2 sum_i m_i (r_i.T r_i - R_i.T R_i)`` (``r``, ``R``: current and nominal positions
+        about the centre of mass), so that it measures the deformation against the frame's
+        effective potential and is zero at the nominal equilibrium.
+        """
+        foreign_layout  # noqa: B018 - part of the cache key
+        scratch = np.empty((4, 3))
+        for b in range(nodes.shape[0]):
+            end_reason[b] = _evaluate_cluster(
+                settings,
+                topology,
+                observed,
+                nodes[b],
+                cables[b],
+                clusters[b],
+                counters[b, STATUS],
+                task_nodes[b],
+                task_clusters[b],
+                scratch,
+            )
+
+    return evaluate_clusters
+
+
+_evaluate_clusters = _compile_cluster_evaluation(FOREIGN_LAYOUT)
+
+
+def _compile_command_forces(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+    """Compile :func:`command_forces`.  It writes the simulator's table, whose columns are named in
+    another file: numba's cache watches only this one, so the kernel holds those numbers
+    (``foreign_layout``) in its closure, which numba hashes into the cache key; an edit there then
+    recompiles it instead of loading stale code.  (Nothing else may be in such a closure: numba
+    pickles it into the key, and a compiled function pickles differently in every process.)"""
+
+    @njit(cache=True, nogil=True, error_model="numpy")
+    def command_forces(
+        settings: np.ndarray,
+        actions: np.ndarray,
+        thrusters: np.ndarray,
+        max_thrust: np.ndarray,
+        active: np.ndarray,
+        task_nodes: np.ndarray,
+        nodes: np.ndarray,
+        task_clusters: np.ndarray,
+    ) -> None:
+        """Thruster forces from normalised actions (B, 3k): each command clipped to [-1, 1] (and,
+        with the magnitude limit, scaled back to unit length when longer), times ``max_thrust``
+        (k,) N on the satellites ``thrusters`` (k,).  Writes the thrust, the simulator's applied
+        force ``bias + thrust`` and the interval's thrust impulse ``sum_j |F_j| dt``, N*s, of the
+        active clusters only."""
+        foreign_layout  # noqa: B018 - part of the cache key
+        for b in range(actions.shape[0]):
+            if active[b]:
+                _command_cluster(settings, actions[b], thrusters, max_thrust, task_nodes[b], nodes[b], task_clusters[b])
+
+    return command_forces
+
+
+def _compile_parallel_evaluation(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+    """Compile :func:`evaluate_serial` on all threads, a chunk of clusters each (the same bits).
+    ``foreign_layout`` as for :func:`_compile_command_forces`."""
+
+    @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+    def evaluate_parallel(
+        settings: np.ndarray,
+        topology: np.ndarray,
+        observed: np.ndarray,
+        nodes: np.ndarray,
+        cables: np.ndarray,
+        clusters: np.ndarray,
+        counters: np.ndarray,
+        task_nodes: np.ndarray,
+        task_clusters: np.ndarray,
+        end_reason: np.ndarray,
+    ) -> None:  # pragma: no cover - compiled
+        """:func:`evaluate_serial` on all threads, a chunk of clusters each (the same bits)."""
+        foreign_layout  # noqa: B018 - part of the cache key
+        batch = nodes.shape[0]
+        chunks = min(batch, PARALLEL_CHUNKS)
+        for k in prange(chunks):
+            lo, hi = k * batch // chunks, (k + 1) * batch // chunks
+            _evaluate_clusters(
+                settings,
+                topology,
+                observed,
+                nodes[lo:hi],
+                cables[lo:hi],
+                clusters[lo:hi],
+                counters[lo:hi],
+                task_nodes[lo:hi],
+                task_clusters[lo:hi],
+                end_reason[lo:hi],
+            )
+
+    return evaluate_parallel
+
+
+command_forces = _compile_command_forces(FOREIGN_LAYOUT)
+#: The task's evaluation on one thread, for small batches (its start-up cost is lower).
+evaluate_serial = _evaluate_clusters
+#: The task's evaluation on all threads.
+evaluate_parallel = _compile_parallel_evaluation(FOREIGN_LAYOUT)

@@ -11,16 +11,16 @@ import numpy as np
 from gymnasium import spaces
 
 from tether_gym.cluster import Cluster
-from tether_gym.envs.task import (
+from tether_gym.envs.arguments import (
     MAX_RENDER_EXAGGERATION,
     OBSERVATION_LIMIT,
-    RESET_OPTION_KEYS,
     EnvArgumentError,
     as_real_array,
     check_number,
     check_seed,
-    task_from_arguments,
 )
+from tether_gym.envs.contract import ObservationLayout
+from tether_gym.envs.task import RESET_OPTION_KEYS, task_from_arguments
 
 __all__ = ["RESET_OPTION_KEYS", "TetherClusterEnv"]
 
@@ -61,12 +61,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     in which the nominal shape is at rest. ``D`` is
     ``initial_displacement`` and ``V`` is ``initial_velocity``.
 
-    | index | observation | unit |
-    |---|---|---|
-    | 0 .. 3s-1 | displacement of each observed satellite from its nominal place | D |
-    | 3s .. 6s-1 | velocity of each observed satellite relative to the centre of mass | V |
-    | 6s .. 6s+c-1 | cable elongation ``L - L0`` | D |
-    | 6s+c .. 6s+2c-1 | cable tension / breaking load (only with ``observe_tensions``) | 1 |
+    OBSERVATION_TABLE
 
     At reset every entry is of order 1; values are clipped to +-1e4. ``observation_noise`` adds Gaussian noise with that
     standard deviation, in these units.
@@ -151,12 +146,19 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     | ``cluster`` | ``None`` | a :class:`~tether_gym.Cluster` to use instead of a preset |
     | ``render_mode`` | ``None`` | ``"rgb_array"`` or ``"human"`` |
     | ``render_exaggeration`` | 100 | displacements from nominal are drawn this many times larger |
-    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field: ``control_interval`` (0.1 s), ``thrusters`` (all), ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m), ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1), ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``, ``safety_factor``, and the disturbance, fault and ``difficulty`` options above |
+    | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field (listed below) |
+
+    The task fields and their defaults: ``control_interval`` (0.1 s), ``thrusters`` (all),
+    ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m),
+    ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1),
+    ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest
+    cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``,
+    ``safety_factor``, and the disturbance, fault and ``difficulty`` options above.
 
     Every argument is checked before anything is built, and a bad one raises
     :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``; ``TypeError`` for an unknown
     argument) naming it, the allowed range and the fix. The ranges are named constants in
-    :mod:`tether_gym.envs.task`, generous but physical: e.g. ``control_interval`` in
+    :mod:`tether_gym.envs.arguments`, generous but physical: e.g. ``control_interval`` in
     [1e-4, 3600] s and within the simulator's sub-step budget at the cluster's critical step,
     ``max_thrust`` in [1e-9, 1e6] N, weights and ``failure_penalty`` up to 1e6,
     ``initial_displacement`` up to 10 % of the shortest cable, ``initial_velocity`` up to that
@@ -235,7 +237,7 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         info = self.task.info(0)
         if self.render_mode == "human":
             self.render()
-        return observation, float(self.task.scalars[0, 0]), bool(self.task.end_reason[0] > 0), False, info
+        return observation, float(self.task.rewards()[0]), bool(self.task.terminated()[0]), False, info
 
     def set_difficulty(self, difficulty: float) -> None:
         """Scale initial conditions, randomisation and disturbances by ``difficulty`` in [0, 1]
@@ -275,3 +277,10 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         for key, value in self.__getstate__().items():
             setattr(clone, key, copy.deepcopy(value, memo))
         return clone
+
+
+# The observation table is written once, in tether_gym.envs.contract (docstrings are absent under -OO).
+if TetherClusterEnv.__doc__:
+    TetherClusterEnv.__doc__ = TetherClusterEnv.__doc__.replace(
+        "OBSERVATION_TABLE", ObservationLayout.symbolic_table().replace("\n", "\n    ")
+    )

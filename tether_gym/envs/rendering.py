@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from tether_gym.cluster import Cluster
@@ -76,7 +78,8 @@ class ClusterRenderer:
         if self.human:
             self._plt.pause(1e-3)
             return None
-        return np.asarray(self.figure.canvas.buffer_rgba())[..., :3].copy()
+        canvas: Any = self.figure.canvas  # an Agg canvas (off screen), which the base class does not declare
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
     def close(self) -> None:
         if self.human:

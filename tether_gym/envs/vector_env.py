@@ -12,32 +12,22 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from tether_gym.cluster import Cluster
-from tether_gym.envs.task import (
-    END_REASONS,
+from tether_gym.envs.arguments import (
     MAX_NUM_ENVS,
     OBSERVATION_LIMIT,
     EnvArgumentError,
     as_real_array,
     check_seed,
     check_whole,
-    task_from_arguments,
 )
+from tether_gym.envs.contract import END_REASONS, REWARD_TERM_KEYS
+from tether_gym.envs.task import task_from_arguments
 from tether_gym.limits import is_whole_number
 
 __all__ = ["TetherClusterVectorEnv"]
 
 #: Info keys that exist only after a step (a reset's info lacks them, as in the single env).
-STEP_KEYS = (
-    "substeps",
-    "step_min",
-    "step_max",
-    "peak_tension",
-    "reward_vibration",
-    "reward_propellant",
-    "reward_slack",
-    "reward_failure",
-    "end_reason",
-)
+STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", *REWARD_TERM_KEYS, "end_reason")
 
 
 class TetherClusterVectorEnv(VectorEnv):
@@ -145,6 +135,7 @@ class TetherClusterVectorEnv(VectorEnv):
             return [None] * self.num_envs
         if is_whole_number(seed):
             first = check_seed("seed", seed)
+            assert first is not None  # a whole number gives an int (or an error)
             return [first + i for i in range(self.num_envs)]
         if not isinstance(seed, (list, tuple, np.ndarray)) or (isinstance(seed, np.ndarray) and seed.ndim != 1):
             raise EnvArgumentError(
@@ -167,8 +158,8 @@ class TetherClusterVectorEnv(VectorEnv):
         task = self.task
         task.step(np.ascontiguousarray(a), rngs=self._rngs)
         self._episode_steps += 1
-        rewards = task.scalars[:, 0].copy()
-        terminated = task.end_reason > 0
+        rewards = task.rewards()
+        terminated = task.terminated()
         truncated = (
             self._episode_steps >= self._max_episode_steps
             if self._max_episode_steps is not None

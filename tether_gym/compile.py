@@ -1,0 +1,99 @@
+"""Compile tether-gym's numba kernels ahead of time: ``python -m tether_gym.compile``.
+
+Without it, the first ``gym.make(...).step`` of a fresh install compiles the kernels the single
+env needs, and the first step of a vector env the multi-threaded ones, tens of seconds each.
+This command compiles all of them once, with a line per kernel, into numba's cache (next to the
+package, or in ``NUMBA_CACHE_DIR``), from which every later process loads them.  Run it after
+installing, or in a container image build.  Exit status 0 when every kernel is in the cache.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+import tether_gym
+from tether_gym import _kernels
+from tether_gym._compilation import COMPILATIONS
+from tether_gym.envs import _task_kernels
+from tether_gym.envs.config import TaskConfig
+from tether_gym.envs.task import DampingTask
+from tether_gym.presets import make_cluster
+from tether_gym.simulator import PARALLEL_MIN_BATCH, BatchSimulator
+
+__all__ = ["KERNELS", "main", "warm"]
+
+#: A small cluster whose kernels' signatures are those of every cluster (the topology is data).
+_CLUSTER = "tetrahedron"
+
+
+def _queries() -> None:
+    BatchSimulator(make_cluster(_CLUSTER), 1)
+
+
+def _advance(batch: int) -> Callable[[], None]:
+    def advance() -> None:
+        BatchSimulator(make_cluster(_CLUSTER), batch).advance(1e-3)
+
+    return advance
+
+
+def _initial_states() -> None:
+    x = np.zeros((1, 4, 3))
+    _task_kernels.remove_rigid_velocity(x, np.zeros((1, 4, 3)), np.ones((1, 4)))
+
+
+def _task(batch: int, step: bool) -> Callable[[], None]:
+    def build() -> None:
+        task = DampingTask(make_cluster(_CLUSTER), batch, TaskConfig())
+        if step:
+            task.step(np.zeros((batch, task.action_size)))
+
+    return build
+
+
+#: What to compile, in order: (kernel, what it does, a call that needs it and little else).
+KERNELS: tuple[tuple[str, str, Callable[[], None]], ...] = (
+    ("evaluate_forces", "cable forces of resets and queries", _queries),
+    ("advance_serial", "the integrator, one thread", _advance(1)),
+    ("advance_parallel", "the integrator, all threads (vector envs)", _advance(PARALLEL_MIN_BATCH)),
+    ("remove_rigid_velocity", "the task's initial states", _initial_states),
+    ("evaluate_serial", "the task's observation and reward, one thread", _task(1, step=False)),
+    ("command_forces", "the task's thrust commands", _task(1, step=True)),
+    ("evaluate_parallel", "the task's observation and reward, all threads", _task(PARALLEL_MIN_BATCH, step=False)),
+)
+
+
+def warm(report: Callable[[str], None] = print) -> list[tuple[str, int, float]]:
+    """Compile (or load from numba's cache) every kernel of :data:`KERNELS`, reporting a line per
+    kernel through ``report``; returns ``(kernel, functions compiled, seconds)`` per kernel."""
+    COMPILATIONS.announced = True  # this command reports its own progress
+    results = []
+    for index, (name, what, call) in enumerate(KERNELS, start=1):
+        before = len(COMPILATIONS.compiled)
+        start = time.perf_counter()
+        call()
+        seconds = time.perf_counter() - start
+        compiled = len(COMPILATIONS.compiled) - before
+        how = f"compiled ({compiled} function{'s' if compiled != 1 else ''})" if compiled else "loaded from the cache"
+        report(f"[{index}/{len(KERNELS)}] {name:<22} {what:<48} {how} in {seconds:.1f} s")
+        results.append((name, compiled, seconds))
+    return results
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m tether_gym.compile", description=(__doc__ or "").split("\n\n")[0])
+    parser.parse_args(argv)
+    cache = _kernels.advance_serial.stats.cache_path
+    print(f"tether-gym {tether_gym.__version__}: compiling {len(KERNELS)} kernels into numba's cache ({cache})")
+    start = time.perf_counter()
+    results = warm()
+    compiled = sum(1 for _, count, _ in results if count)
+    print(f"done in {time.perf_counter() - start:.1f} s: {compiled} compiled, {len(results) - compiled} already cached")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,213 @@
+"""The named contract between the task kernels, the task, the environments and the controllers.
+
+Everything a reader of a task's results needs by name is defined here, once:
+
+* :class:`Scalar`: the columns of :attr:`DampingTask.scalars <tether_gym.envs.DampingTask.scalars>`
+  (the reward, its terms and the energies), also the keys of ``info``;
+* :class:`EndReason`: the codes of ``DampingTask.end_reason``, whose lower-case names are
+  ``info["end_reason"]``;
+* :class:`RewardWeights`: the reward's weights as the kernels apply them;
+* :class:`ObservationLayout`: the named slices of the observation vector, for a cluster's number
+  of observed satellites and cables.
+
+The compiled kernels read the same definitions (as plain ints); no other module writes a column
+number, a reason code or an observation offset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+
+import numpy as np
+
+__all__ = [
+    "END_REASONS",
+    "OBSERVATION_BLOCKS",
+    "SCALARS",
+    "EndReason",
+    "ObservationBlock",
+    "ObservationLayout",
+    "RewardWeights",
+    "Scalar",
+]
+
+
+class Scalar(enum.IntEnum):
+    """Columns of the task's per-cluster scalar results, ``DampingTask.scalars[:, Scalar.X]``.
+
+    The lower-case names are the keys of ``info``: ``reward = reward_vibration +
+    reward_propellant + reward_slack + reward_failure``; energies in J, ``max_deviation`` in m,
+    ``slack_fraction`` in [0, 1].
+    """
+
+    REWARD = 0
+    REWARD_VIBRATION = 1
+    REWARD_PROPELLANT = 2
+    REWARD_SLACK = 3
+    REWARD_FAILURE = 4
+    VIBRATION_ENERGY = 5
+    MAX_DEVIATION = 6
+    SLACK_FRACTION = 7
+    KINETIC_ENERGY = 8
+    STRAIN_ENERGY = 9
+    FRAME_POTENTIAL = 10
+
+    @property
+    def key(self) -> str:
+        """The ``info`` key of this quantity (its lower-case name)."""
+        return self.name.lower()
+
+
+#: The scalar columns' names, in column order.
+SCALARS: tuple[str, ...] = tuple(column.key for column in Scalar)
+
+#: The reward terms that add up to the reward, in column order.
+REWARD_TERMS: tuple[Scalar, ...] = (
+    Scalar.REWARD_VIBRATION,
+    Scalar.REWARD_PROPELLANT,
+    Scalar.REWARD_SLACK,
+    Scalar.REWARD_FAILURE,
+)
+#: Their ``info`` keys (computed once: an enum property costs a microsecond, per step).
+REWARD_TERM_KEYS: tuple[str, ...] = tuple(term.key for term in REWARD_TERMS)
+
+
+class EndReason(enum.IntEnum):
+    """Why a cluster's episode ended (``DampingTask.end_reason``); anything but ``RUNNING``
+    terminates it.  ``info["end_reason"]`` is the lower-case name."""
+
+    RUNNING = 0
+    FORMATION_LOST = 1  # a satellite farther than max_deviation from its nominal place
+    CABLE_BROKEN = 2  # a cable's tension passed its breaking load (with cable_failure="terminate")
+    NUMERICS_DIVERGED = 3  # a non-finite state, the sub-step budget ran out, or the reward ran away
+
+    @property
+    def label(self) -> str:
+        """The name reported in ``info["end_reason"]``."""
+        return self.name.lower()
+
+
+#: ``info["end_reason"]`` names, indexed by the codes of :class:`EndReason`.
+END_REASONS: tuple[str, ...] = tuple(reason.label for reason in EndReason)
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardWeights:
+    """The reward's weights as the kernels apply them (SI units).
+
+    ``reward_vibration = -vibration * E_vib``, ``reward_propellant = -propellant * impulse``,
+    ``reward_slack = -slack * slack_fraction`` and ``reward_failure = -failure`` on a failure.
+
+    Attributes:
+        vibration: per J: the configured ``vibration_weight`` over the task's energy scale.
+        propellant: per N*s: ``propellant_weight`` over the impulse of full thrust on every
+            thruster for one control interval.
+        slack: per fraction of slack cables.
+        failure: the one-off penalty of a failure.
+    """
+
+    vibration: float
+    propellant: float
+    slack: float
+    failure: float
+
+
+@dataclasses.dataclass(frozen=True)
+class ObservationBlock:
+    """One named part of the observation vector.
+
+    Attributes:
+        name: the :class:`ObservationLayout` attribute holding its slice.
+        per: ``"satellite"`` (three entries, x y z, per observed satellite) or ``"cable"`` (one
+            entry per cable).
+        meaning: what the entries are.
+        unit: their unit: ``D`` the initial displacement, ``V`` the initial velocity, ``1`` none.
+    """
+
+    name: str
+    per: str
+    meaning: str
+    unit: str
+
+    def width(self, satellites: int, cables: int) -> int:
+        """Entries of this block for ``satellites`` observed satellites and ``cables`` cables."""
+        return 3 * satellites if self.per == "satellite" else cables
+
+
+#: The observation vector, in order.  The last block is present only with ``observe_tensions``.
+OBSERVATION_BLOCKS: tuple[ObservationBlock, ...] = (
+    ObservationBlock(
+        "displacement", "satellite", "displacement of each observed satellite from its nominal place", "D"
+    ),
+    ObservationBlock(
+        "velocity", "satellite", "velocity of each observed satellite relative to the centre of mass", "V"
+    ),
+    ObservationBlock("elongation", "cable", "cable elongation ``L - L0``", "D"),
+    ObservationBlock("tension_ratio", "cable", "cable tension / breaking load (only with ``observe_tensions``)", "1"),
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class ObservationLayout:
+    """Where each part of the observation vector lies, for ``satellites`` observed satellites and
+    ``cables`` cables (see :data:`OBSERVATION_BLOCKS`); everything is in the cluster frame
+    (origin at the centre of mass), in units of the task's length and speed scales.
+
+    Attributes:
+        satellites: s, the number of observed satellites.
+        cables: c, the number of cables.
+        tensions: whether the tension ratios are observed.
+        displacement, velocity: slices of 3 s entries each, satellite k's x, y, z at 3 k + d.
+        elongation: slice of c entries, one per cable.
+        tension_ratio: slice of c entries, or an empty slice at the end without tensions.
+        size: the observation's length.
+    """
+
+    satellites: int
+    cables: int
+    tensions: bool
+    displacement: slice = dataclasses.field(init=False)
+    velocity: slice = dataclasses.field(init=False)
+    elongation: slice = dataclasses.field(init=False)
+    tension_ratio: slice = dataclasses.field(init=False)
+    size: int = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        start = 0
+        for block in OBSERVATION_BLOCKS:
+            present = block.name != "tension_ratio" or self.tensions
+            stop = start + (block.width(self.satellites, self.cables) if present else 0)
+            object.__setattr__(self, block.name, slice(start, stop))
+            start = stop
+        object.__setattr__(self, "size", start)
+
+    def satellite_values(self, observation: np.ndarray, block: str) -> np.ndarray:
+        """The ``"displacement"`` or ``"velocity"`` entries of (..., size) observations, as
+        (..., s, 3) (in observation units)."""
+        part = observation[..., getattr(self, block)]
+        return part.reshape(part.shape[:-1] + (self.satellites, 3))
+
+    @staticmethod
+    def symbolic_table() -> str:
+        """The layout as a Markdown table of index ranges in s (observed satellites) and c
+        (cables): the env docstrings' Observation Space table."""
+        rows = ["| index | observation | unit |", "|---|---|---|"]
+        satellites = cables = 0  # the start of each block, as multiples of s and c
+        for block in OBSERVATION_BLOCKS:
+            width = (3, 0) if block.per == "satellite" else (0, 1)
+            end = (satellites + width[0], cables + width[1])
+            rows.append(
+                f"| {_symbolic(satellites, cables, 0)} .. {_symbolic(*end, -1)} | {block.meaning} | {block.unit} |"
+            )
+            satellites, cables = end
+        return "\n".join(rows)
+
+
+def _symbolic(satellites: int, cables: int, constant: int) -> str:
+    """``a s + b c + k`` written compactly, e.g. ``6s+c-1``."""
+    terms = [f"{'' if a == 1 else a}{name}" for a, name in ((satellites, "s"), (cables, "c")) if a]
+    text = "+".join(terms)
+    if constant or not text:
+        text += f"{constant:+d}" if text else str(constant)
+    return text
