@@ -329,8 +329,8 @@ class VelocityFeedbackController(Controller):
     too high a gain overshoots because the thrust is held for a whole interval. (Maximising the
     slowest decay rate instead would tune the gain to the slowest mode: for the orbital chain,
     whose lateral modes are 300 times slower than its axial ones, it gives a 240 times smaller
-    gain and 40 times more vibration energy.) The rule ignores the thrust limit. With large initial conditions the commands saturate, and the law becomes
-    bang-bang in the saturated axes.
+    gain and 40 times more vibration energy.) The rule ignores the thrust limit. With large
+    initial conditions the commands saturate, and the law becomes bang-bang in the saturated axes.
 
     Args:
         env: a tether-gym env.
@@ -358,7 +358,10 @@ class VelocityFeedbackController(Controller):
 
     def best_gain(self) -> float:
         """The gain rate (1/s) minimising :meth:`LinearModel.expected_vibration_energy`."""
-        cost = lambda log_gain: self.model.expected_vibration_energy(self.feedback_matrix(math.exp(log_gain)))
+
+        def cost(log_gain: float) -> float:
+            return float(self.model.expected_vibration_energy(self.feedback_matrix(math.exp(log_gain))))
+
         grid = np.linspace(math.log(1e-3), math.log(10.0 / self.control_interval), 60)
         values = [cost(x) for x in grid]
         best = int(np.argmin(values))

@@ -18,6 +18,7 @@ import numpy as np
 import scipy.stats
 
 import tether_gym  # noqa: F401 - registers the ids
+from tether_gym.envs.contract import Scalar
 from tether_gym.limits import is_whole_number
 
 __all__ = ["EpisodeRecord", "METRICS", "rollout", "summarise"]
@@ -104,7 +105,7 @@ def rollout(
     end_reason = np.full(count, "running", dtype=object)
     alive = np.ones(count, dtype=bool)
     dev_index = slice(3 * satellite, 3 * satellite + 3)
-    energy[:, 0] = task.scalars[:, 5]
+    energy[:, 0] = task.scalars[:, Scalar.VIBRATION_ENERGY]
     displacement[:, 0] = task.observation[:, dev_index] * task.length_scale
     for k in range(steps):
         actions, _ = controller.predict(observation, deterministic=True)

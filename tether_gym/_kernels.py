@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
+from typing import Any
 
 import numba
 import numpy as np
@@ -137,7 +139,7 @@ PARALLEL_CHUNKS = 64
 
 # ---------------------------------------------------------------------------------------------
 # Cable forces
-def _make_cable_forces(viscous: bool):  # noqa: ANN202 - returns a compiled function
+def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatcher
     """Compile :func:`cable_forces` with the Kelvin-Voigt term (``viscous=True``: the general
     kernel) or without it.  ``viscous`` is frozen into the compiled code: merely having the
     viscous term in the loop made the common, undamped case 30 % slower, even when skipped."""

@@ -24,6 +24,7 @@ from agents.baselines import (
 from agents.compare import compare
 from agents.policies import TrainedPolicy, make_controller
 from agents.train import load_hyperparameters, make_training_env, train
+from tether_gym.envs.contract import Scalar
 
 
 @pytest.mark.parametrize("env_id", tether_gym.ENV_IDS)
@@ -70,7 +71,7 @@ def small_perturbation_energy(controller_class: type, steps: int = 30) -> np.nda
     envs = gym.make_vec("TetherTetrahedron-v0", num_envs=8, initial_displacement=1e-4, initial_velocity=1e-4)
     controller = controller_class(envs)
     obs, _ = envs.reset(seed=3)
-    start = envs.unwrapped.task.scalars[:, 5].copy()
+    start = envs.unwrapped.task.scalars[:, Scalar.VIBRATION_ENERGY].copy()
     for _ in range(steps):
         obs, _, terminated, _, infos = envs.step(controller.predict(obs)[0])
         assert not terminated.any()

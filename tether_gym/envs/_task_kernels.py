@@ -20,6 +20,8 @@ The scalar results follow :class:`~tether_gym.envs.contract.Scalar`, the end rea
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numba import njit, prange
@@ -451,7 +453,7 @@ FOREIGN_LAYOUT = (
 )
 
 
-def _compile_cluster_evaluation(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+def _compile_cluster_evaluation(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
     """Compile the evaluation of every cluster of some tables: the one-thread driver, which the
     parallel one calls on chunks (inlined into it, it made that take seconds longer to compile;
     a call per cluster cost as much as the evaluation itself).
@@ -511,7 +513,7 @@ def _compile_cluster_evaluation(foreign_layout: tuple):  # noqa: ANN202 - return
 _evaluate_clusters = _compile_cluster_evaluation(FOREIGN_LAYOUT)
 
 
-def _compile_command_forces(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+def _compile_command_forces(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
     """Compile :func:`command_forces`.  It writes the simulator's table, whose columns are named in
     another file: numba's cache watches only this one, so the kernel holds those numbers
     (``foreign_layout``) in its closure, which numba hashes into the cache key; an edit there then
@@ -542,7 +544,7 @@ def _compile_command_forces(foreign_layout: tuple):  # noqa: ANN202 - returns a 
     return command_forces
 
 
-def _compile_parallel_evaluation(foreign_layout: tuple):  # noqa: ANN202 - returns a compiled function
+def _compile_parallel_evaluation(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
     """Compile :func:`evaluate_serial` on all threads, a chunk of clusters each (the same bits).
     ``foreign_layout`` as for :func:`_compile_command_forces`."""
 

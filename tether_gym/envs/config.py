@@ -340,22 +340,22 @@ class TaskConfig:
     @property
     def reward(self) -> RewardConfig:
         """The reward's weights."""
-        return self._reward  # type: ignore[attr-defined, no-any-return]
+        return self._reward  # type: ignore[attr-defined]
 
     @property
     def initial_state(self) -> InitialStateConfig:
         """The initial conditions and the domain randomisation."""
-        return self._initial_state  # type: ignore[attr-defined, no-any-return]
+        return self._initial_state  # type: ignore[attr-defined]
 
     @property
     def disturbances(self) -> DisturbanceConfig:
         """The disturbances of every episode."""
-        return self._disturbances  # type: ignore[attr-defined, no-any-return]
+        return self._disturbances  # type: ignore[attr-defined]
 
     @property
     def faults(self) -> FaultConfig:
         """The faults an episode may suffer."""
-        return self._faults  # type: ignore[attr-defined, no-any-return]
+        return self._faults  # type: ignore[attr-defined]
 
     def _checked_thrust(self) -> float | tuple[float, ...]:
         """``max_thrust`` as a float or a tuple of floats, each within ``THRUST_RANGE``."""

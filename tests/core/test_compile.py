@@ -11,9 +11,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tether_gym._compilation import MESSAGE
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: The start of the one-time message, which holds a path after it.
 ANNOUNCEMENT = MESSAGE.split("(")[0]
 
@@ -44,6 +46,7 @@ def test_the_first_compilation_of_a_process_is_announced_once(tmp_path: Path) ->
     assert cached.returncode == 0 and ANNOUNCEMENT not in cached.stderr, cached.stderr
 
 
+@pytest.mark.slow  # compiles every kernel from an empty cache: about 30 s
 def test_the_compile_command_warms_the_cache_for_every_env(tmp_path: Path) -> None:
     """After the command, neither a single nor a vector env compiles anything on first use."""
     warm = run_python(["-m", "tether_gym.compile"], tmp_path)
