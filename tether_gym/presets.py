@@ -22,9 +22,10 @@ import functools
 import inspect
 import math
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from tether_gym.cluster import Cluster, ClusterError
 from tether_gym.frames import LEO_ORBIT_RATE, Frame, FrameError
@@ -85,6 +86,33 @@ def _preset(builder: PresetBuilder) -> PresetBuilder:
     return checked  # type: ignore[return-value]
 
 
+def _uniform_cluster(
+    name: str,
+    positions: ArrayLike,
+    cables: ArrayLike,
+    masses: float | np.ndarray,
+    EA: float,
+    N0: ArrayLike,
+    damping_rate: float,
+    breaking_load: float,
+    **options: Any,
+) -> Cluster:
+    """A preset's cluster: every cable of stiffness ``EA`` (N) and breaking load (N), damping
+    ``damping_rate`` (1/s) times each satellite's mass (kg); ``options`` are further
+    :class:`Cluster` fields (``axial_damping``, ``frame``)."""
+    return Cluster(
+        positions=positions,
+        masses=masses,
+        cables=cables,
+        EA=EA,
+        N0=N0,
+        damping=damping_rate * masses,
+        breaking_load=breaking_load,
+        name=name,
+        **options,
+    )
+
+
 @_preset
 def tetrahedron(
     edge: float = 100.0,
@@ -116,15 +144,15 @@ def tetrahedron(
     )
     positions -= positions.mean(axis=0)
     cables = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    return Cluster(
-        positions=positions,
-        masses=mass,
-        cables=cables,
-        EA=EA,
-        N0=N0,
-        damping=damping_rate * mass,
-        breaking_load=breaking_load,
-        name="tetrahedron",
+    return _uniform_cluster(
+        "tetrahedron",
+        positions,
+        cables,
+        mass,
+        EA,
+        N0,
+        damping_rate,
+        breaking_load,
     )
 
 
@@ -154,15 +182,15 @@ def chain(
     positions = np.zeros((n, 3))
     positions[:, 0] = spacing * (np.arange(n) - (n - 1) / 2.0)
     cables = [(i, i + 1) for i in range(n - 1)]
-    return Cluster(
-        positions=positions,
-        masses=mass,
-        cables=cables,
-        EA=EA,
-        N0=N0,
-        damping=damping_rate * mass,
-        breaking_load=breaking_load,
-        name="chain",
+    return _uniform_cluster(
+        "chain",
+        positions,
+        cables,
+        mass,
+        EA,
+        N0,
+        damping_rate,
+        breaking_load,
     )
 
 
@@ -188,15 +216,15 @@ def triangle(
     radius = edge / math.sqrt(3.0)
     angles = np.array([0.0, 2 * math.pi / 3, 4 * math.pi / 3])
     positions = np.stack([radius * np.cos(angles), radius * np.sin(angles), np.zeros(3)], axis=1)
-    return Cluster(
-        positions=positions,
-        masses=mass,
-        cables=[(0, 1), (1, 2), (0, 2)],
-        EA=EA,
-        N0=N0,
-        damping=damping_rate * mass,
-        breaking_load=breaking_load,
-        name="triangle",
+    return _uniform_cluster(
+        "triangle",
+        positions,
+        [(0, 1), (1, 2), (0, 2)],
+        mass,
+        EA,
+        N0,
+        damping_rate,
+        breaking_load,
     )
 
 
@@ -222,15 +250,15 @@ def octahedron(
     half = edge / math.sqrt(2.0)
     positions = half * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
     cables = [(i, j) for i in range(6) for j in range(i + 1, 6) if not np.allclose(positions[i], -positions[j])]
-    return Cluster(
-        positions=positions,
-        masses=mass,
-        cables=cables,
-        EA=EA,
-        N0=N0,
-        damping=damping_rate * mass,
-        breaking_load=breaking_load,
-        name="octahedron",
+    return _uniform_cluster(
+        "octahedron",
+        positions,
+        cables,
+        mass,
+        EA,
+        N0,
+        damping_rate,
+        breaking_load,
     )
 
 
@@ -271,15 +299,15 @@ def hub(
     if rim:
         cables += [(k + 1, (k + 1) % spokes + 1) for k in range(spokes)]
     masses = np.concatenate([[hub_mass], np.full(spokes, mass)])
-    return Cluster(
-        positions=positions,
-        masses=masses,
-        cables=cables,
-        EA=EA,
-        N0=N0,
-        damping=damping_rate * masses,
-        breaking_load=breaking_load,
-        name="hub",
+    return _uniform_cluster(
+        "hub",
+        positions,
+        cables,
+        masses,
+        EA,
+        N0,
+        damping_rate,
+        breaking_load,
     )
 
 
@@ -342,17 +370,17 @@ def radial_chain(
     tension = np.array([tidal_force[k + 1 :].sum() for k in range(n - 1)])
     cables = np.array([(k, k + 1) for k in range(n - 1)])
     stiffness = _positive("EA", EA, "N") / spacing
-    return Cluster(
-        positions=positions,
-        masses=masses,
-        cables=cables,
-        EA=EA,
-        N0=tension,
-        damping=damping_rate * masses,
-        breaking_load=breaking_load,
+    return _uniform_cluster(
+        "radial_chain",
+        positions,
+        cables,
+        masses,
+        EA,
+        tension,
+        damping_rate,
+        breaking_load,
         axial_damping=_axial_damping(cables, masses, np.full(n - 1, stiffness), axial_damping_ratio),
         frame=frame,
-        name="radial_chain",
     )
 
 
@@ -390,17 +418,17 @@ def spinning_triangle(
     cables = np.array([(0, 1), (1, 2), (0, 2)])
     masses = np.full(3, mass)
     stiffness = np.full(3, _positive("EA", EA, "N") / edge)
-    return Cluster(
-        positions=positions,
-        masses=masses,
-        cables=cables,
-        EA=EA,
-        N0=mass * frame.rate**2 * edge / 3.0,
-        damping=damping_rate * masses,
-        breaking_load=breaking_load,
+    return _uniform_cluster(
+        "spinning_triangle",
+        positions,
+        cables,
+        masses,
+        EA,
+        mass * frame.rate**2 * edge / 3.0,
+        damping_rate,
+        breaking_load,
         axial_damping=_axial_damping(cables, masses, stiffness, axial_damping_ratio),
         frame=frame,
-        name="spinning_triangle",
     )
 
 
@@ -452,17 +480,17 @@ def spinning_hub(
     rim_tension = rim_share * centripetal / (2.0 * math.sin(math.pi / spokes))
     tension = np.concatenate([np.full(spokes, (1.0 - rim_share) * centripetal), np.full(spokes, rim_tension)])
     lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
-    return Cluster(
-        positions=positions,
-        masses=masses,
-        cables=cables,
-        EA=EA,
-        N0=tension,
-        damping=damping_rate * masses,
-        breaking_load=breaking_load,
+    return _uniform_cluster(
+        "spinning_hub",
+        positions,
+        cables,
+        masses,
+        EA,
+        tension,
+        damping_rate,
+        breaking_load,
         axial_damping=_axial_damping(cables, masses, _positive("EA", EA, "N") / lengths, axial_damping_ratio),
         frame=frame,
-        name="spinning_hub",
     )
 
 
