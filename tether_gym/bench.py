@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 import tether_gym
+from tether_gym._cli import program
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 
@@ -156,7 +157,9 @@ ALL_FAULTS = {
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog=program("tether_gym.bench", "tether-gym-bench"), description=__doc__.split("\n\n")[0]
+    )
     parser.add_argument("--steps", type=int, default=30_000, help="timed steps per measurement")
     parser.add_argument("--repeats", type=int, default=3, help="measurements per case (the best is shown)")
     parser.add_argument("--all-ids", action="store_true", help="every registered id, not only the default")

@@ -17,6 +17,7 @@ import numpy as np
 
 import tether_gym
 from tether_gym import _kernels
+from tether_gym._cli import program
 from tether_gym._compilation import COMPILATIONS
 from tether_gym.envs import _task_kernels
 from tether_gym.envs.config import TaskConfig
@@ -85,7 +86,9 @@ def warm(report: Callable[[str], None] = print) -> list[tuple[str, int, float]]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m tether_gym.compile", description=(__doc__ or "").split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog=program("tether_gym.compile", "tether-gym-compile"), description=(__doc__ or "").split("\n\n")[0]
+    )
     parser.parse_args(argv)
     cache = _kernels.advance_serial.stats.cache_path
     print(f"tether-gym {tether_gym.__version__}: compiling {len(KERNELS)} kernels into numba's cache ({cache})")

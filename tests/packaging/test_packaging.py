@@ -5,6 +5,7 @@ check the same contracts from the checkout, in seconds."""
 from __future__ import annotations
 
 import ast
+import importlib
 import os
 import re
 import shutil
@@ -223,3 +224,20 @@ def test_the_agents_work_under_their_installed_name(tmp_path: Path) -> None:
     assert first_line == f"modules {len(_agents_modules()) - 1}"  # all but __init__
     assert help_text.startswith("usage: python -m tether_gym_agents.compare ")
     assert "python -m tether_gym_agents.convert makes a safe copy" in " ".join(help_text.split())
+
+
+@pytest.mark.parametrize(
+    ("module", "script"), [("tether_gym.bench", "tether-gym-bench"), ("tether_gym.compile", "tether-gym-compile")]
+)
+def test_the_core_commands_name_themselves_as_the_user_ran_them(
+    module: str, script: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    command = importlib.import_module(module)
+    for argv0, usage in (
+        (f"/venv/bin/{script}", f"usage: {script} "),
+        (f"/x/{module.split('.')[1]}.py", f"usage: python -m {module} "),
+    ):
+        monkeypatch.setattr(sys, "argv", [argv0, "--help"])
+        with pytest.raises(SystemExit) as exit_info:
+            command.main(["--help"])
+        assert exit_info.value.code == 0 and capsys.readouterr().out.startswith(usage)
