@@ -40,6 +40,7 @@ from typing import Any
 import numba
 import numpy as np
 from numba import njit, prange
+from numpy.typing import ArrayLike
 
 from tether_gym import _compilation  # noqa: F401 - announces the first compilation of a process
 
@@ -135,6 +136,16 @@ STATUS_TOO_MANY_SUBSTEPS = 2
 #: Chunks the parallel drivers split a batch into: enough to even out clusters that sub-step more
 #: over any likely number of threads, few enough that the per-chunk call costs nothing.
 PARALLEL_CHUNKS = 64
+
+
+def kernel_operand(values: ArrayLike, dtype: type | None = None) -> np.ndarray:
+    """``values`` as the kernels' one compiled variant takes an array: C-contiguous and writable
+    (and of ``dtype`` if given), copied only when it is not so already.  Three flag checks cost
+    about 0.2 us against about 3 us for ``np.require``, which matters on the single env's step."""
+    array = np.asarray(values)
+    if (dtype is None or array.dtype == dtype) and array.flags.c_contiguous and array.flags.writeable:
+        return array
+    return np.array(array, dtype=dtype, order="C")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -617,7 +617,7 @@ class BatchSimulator:
         if active is None:
             mask = self._all_active
         else:
-            mask = np.require(active, requirements=["C", "W"])  # the kernels' one compiled variant
+            mask = _kernels.kernel_operand(active)
             if mask.shape != (self.num_clusters,) or mask.dtype != np.bool_:
                 raise ValueError(f"active must be a boolean array of shape ({self.num_clusters},); got {active!r}")
         self.applied_force[...] = p

@@ -690,12 +690,9 @@ class DampingTask:
         disturbances = self.disturbances
         if disturbances.alters_actions:
             actions = disturbances.acting_actions(actions, mask, self.sim.time)
-        if not (actions.dtype == np.float64 and actions.flags.c_contiguous and actions.flags.writeable):
-            # The kernel's one compiled variant; np.require costs ~3 us a step, these checks ~0.2 us.
-            actions = np.array(actions, dtype=np.float64, order="C")
         _task_kernels.command_forces(
             self.task_settings,
-            actions,
+            _kernels.kernel_operand(actions, np.float64),
             self.thrusters,
             self.max_thrust,
             mask,
@@ -767,6 +764,7 @@ class DampingTask:
         sim = self.sim
         k = _kernels
         tk = _task_kernels
+        episode = self.disturbances  # once: each task attribute of it is a descriptor lookup
         task_row = self.task_cluster_table[index]
         values = dict(zip(SCALARS, task_row[tk.SCALAR_COLUMNS : tk.OBSERVATION_COLUMNS].tolist(), strict=True))
         cluster = sim.cluster_table[index].tolist()
@@ -787,8 +785,8 @@ class DampingTask:
             "max_deviation": values["max_deviation"],
             "propellant_used": float(self.propellant[index]),
             "thrust": self.task_node_table[index, :, tk.THRUST : tk.THRUST + 3].copy(),
-            "disturbance": self.disturbance[index].copy(),
-            "thruster_ok": self.thruster_ok[index].copy(),
+            "disturbance": episode.disturbance[index].copy(),
+            "thruster_ok": episode.thruster_ok[index].copy(),
             "broken_cables": cables[:, k.INTACT] == 0.0,
         }
         if stepped:
