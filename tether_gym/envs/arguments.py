@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from tether_gym._kernels import all_finite
 from tether_gym.envs._task_kernels import OBSERVATION_LIMIT, REWARD_LIMIT
 from tether_gym.limits import is_real_number, is_whole_number, real_array, short_repr, to_float
 
@@ -42,6 +43,7 @@ __all__ = [
     "THRUST_RANGE",
     "EnvArgumentError",
     "as_real_array",
+    "check_actions",
     "check_bool",
     "check_choice",
     "check_difficulty",
@@ -258,6 +260,19 @@ def as_real_array(name: str, value: Any, what: str) -> np.ndarray:
     if isinstance(value, (str, bytes, Mapping)):
         raise EnvArgumentError(f"{name} must be {what}; got {short_repr(value)}")
     return real_array(name, value, EnvArgumentError, allow_inf=True)
+
+
+def check_actions(name: str, value: Any, shape: tuple[int, ...], axes: str) -> np.ndarray:
+    """``value``, the thrust commands of an env step, as a float64 array of ``shape``, or an
+    :class:`EnvArgumentError` naming ``name``: not real numbers, a shape other than ``shape``
+    (whose ``axes`` the message spells out), or NaN or inf."""
+    array = as_real_array(name, value, f"a {shape} array of thrust commands in [-1, 1]")
+    if array.shape != shape:
+        raise EnvArgumentError(f"{name} must have shape {shape} ({axes}); got shape {array.shape}")
+    if not all_finite(array):
+        verb = "contain" if name.endswith("s") else "contains"
+        raise EnvArgumentError(f"{name} {verb} NaN or inf; thrust commands must be finite numbers in [-1, 1]")
+    return array
 
 
 def check_difficulty(difficulty: Any) -> float:

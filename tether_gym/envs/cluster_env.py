@@ -15,7 +15,7 @@ from tether_gym.envs.arguments import (
     MAX_RENDER_EXAGGERATION,
     OBSERVATION_LIMIT,
     EnvArgumentError,
-    as_real_array,
+    check_actions,
     check_number,
     check_seed,
 )
@@ -225,19 +225,15 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
         return self.task.observe([self.np_random])[0], self.task.info(0, stepped=False)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
-        a = as_real_array("action", action, f"a ({self.task.action_size},) array of thrust commands in [-1, 1]")
-        if a.shape != self._action_shape:
-            raise EnvArgumentError(
-                f"action must have shape ({self.task.action_size},) (3 per thruster); got shape {a.shape}"
-            )
-        if not np.isfinite(a).all():
-            raise EnvArgumentError("action contains NaN or inf; thrust commands must be finite numbers in [-1, 1]")
-        self.task.step(a.reshape(1, -1), rngs=[self.np_random])
-        observation = self.task.observe([self.np_random])[0]
-        info = self.task.info(0)
+        a = check_actions("action", action, self._action_shape, "3 per thruster")
+        task = self.task
+        rngs = [self.np_random]
+        task.step(a.reshape(1, -1), rngs=rngs)
+        observation = task.observe(rngs)[0]
+        reward, terminated, info = task.outcome(0)
         if self.render_mode == "human":
             self.render()
-        return observation, float(self.task.rewards()[0]), bool(self.task.terminated()[0]), False, info
+        return observation, reward, terminated, False, info
 
     def set_difficulty(self, difficulty: float) -> None:
         """Scale initial conditions, randomisation and disturbances by ``difficulty`` in [0, 1]

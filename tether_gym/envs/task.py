@@ -427,6 +427,7 @@ class DampingTask:
         )
         self.end_reason = np.zeros(B, dtype=np.int64)
         self._all = np.ones(B, dtype=np.bool_)
+        self._num_cables = m  # a Cluster property costs 0.4 us, read on every step's info
         self.evaluate()
 
     # ------------------------------------------------------------------ nominal state
@@ -699,20 +700,23 @@ class DampingTask:
             self.task_node_table,
             self.sim.node_table,
             self.task_cluster_table,
+            self.propellant,
         )
         if disturbances.draws:
             if rngs is None:
                 raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
             disturbances.apply(mask, rngs, self.sim.time, self.difficulty, self.force, self.thrust)
         self.sim.advance_unchecked(self.config.control_interval, mask)
-        self.propellant[mask] += self.task_cluster_table[mask, _task_kernels.IMPULSE]
         self.evaluate()
 
     # ------------------------------------------------------------------ results
     def observe(self, rngs: Sequence[np.random.Generator], indices: np.ndarray | None = None) -> np.ndarray:
         """(k, observation_size) float32 observation of clusters ``indices`` (default all B);
         with noise configured, the noise of ``indices[k]`` comes from ``rngs[k]``."""
-        observation = self.observation if indices is None else self.observation[indices]
+        # The table itself, not the ``observation`` descriptor: a view fewer on every step.
+        start = _task_kernels.OBSERVATION_COLUMNS
+        table = self.task_cluster_table
+        observation = table[:, start:] if indices is None else table[indices, start:]
         if self.config.observation_noise == 0:
             return observation.astype(np.float32)
         noise = np.stack([rng.standard_normal(self.observation_size) for rng in rngs])
@@ -761,6 +765,16 @@ class DampingTask:
         as Python scalars and array copies, with ``end_reason`` as its name.  Built directly
         (not through info_arrays) because the single env's step rate depends on it; a test keeps
         the two identical."""
+        return self._info(index, stepped)[2]
+
+    def outcome(self, index: int) -> tuple[float, bool, dict[str, Any]]:
+        """``(reward, terminated, info)`` of cluster ``index`` after a step: what a single env's
+        ``step`` returns beside the observation, read from the tables in one pass (the same
+        values as ``rewards()[index]``, ``terminated()[index]`` and ``info(index)``)."""
+        return self._info(index, stepped=True)
+
+    def _info(self, index: int, stepped: bool) -> tuple[float, bool, dict[str, Any]]:
+        """``(reward, terminated, info)`` of cluster ``index``; see :meth:`info`."""
         sim = self.sim
         k = _kernels
         tk = _task_kernels
@@ -781,7 +795,7 @@ class DampingTask:
             "frame_potential": frame_potential,
             "energy_residual": kinetic + strain + frame_potential - cluster[k.INITIAL_ENERGY] + dissipated - work,
             "tensions": cables[:, k.TENSION].copy(),
-            "slack_count": round(values["slack_fraction"] * self.cluster.num_cables),
+            "slack_count": round(values["slack_fraction"] * self._num_cables),
             "max_deviation": values["max_deviation"],
             "propellant_used": float(self.propellant[index]),
             "thrust": self.task_node_table[index, :, tk.THRUST : tk.THRUST + 3].copy(),
@@ -794,7 +808,9 @@ class DampingTask:
             info["step_min"] = cluster[k.STEP_MIN]
             info["step_max"] = cluster[k.STEP_MAX]
             info["peak_tension"] = cables[:, k.PEAK_TENSION].copy()
+        reason = self.end_reason[index].item()
+        if stepped:
             for key in REWARD_TERM_KEYS:
                 info[key] = values[key]
-            info["end_reason"] = END_REASONS[self.end_reason[index]]
-        return info
+            info["end_reason"] = END_REASONS[reason]
+        return values["reward"], reason != _task_kernels.RUNNING, info

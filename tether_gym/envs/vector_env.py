@@ -16,7 +16,7 @@ from tether_gym.envs.arguments import (
     MAX_NUM_ENVS,
     OBSERVATION_LIMIT,
     EnvArgumentError,
-    as_real_array,
+    check_actions,
     check_seed,
     check_whole,
 )
@@ -148,13 +148,7 @@ class TetherClusterVectorEnv(VectorEnv):
         return [check_seed(f"seed[{i}]", value) for i, value in enumerate(seeds)]
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        a = as_real_array("actions", actions, f"a {self._action_shape} array of thrust commands in [-1, 1]")
-        if a.shape != self._action_shape:
-            raise EnvArgumentError(
-                f"actions must have shape {self._action_shape} (num_envs, 3 per thruster); got {a.shape}"
-            )
-        if not np.isfinite(a).all():
-            raise EnvArgumentError("actions contain NaN or inf; thrust commands must be finite numbers in [-1, 1]")
+        a = check_actions("actions", actions, self._action_shape, "num_envs, 3 per thruster")
         task = self.task
         task.step(np.ascontiguousarray(a), rngs=self._rngs)
         self._episode_steps += 1
