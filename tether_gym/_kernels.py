@@ -151,7 +151,7 @@ def kernel_operand(values: ArrayLike, dtype: type | None = None) -> np.ndarray:
 @njit(cache=True, nogil=True)
 def all_finite(values: np.ndarray) -> bool:
     """Whether every entry of the float64 array ``values`` (any shape) is finite.  Compiled
-    because the envs check every action: about 0.3 us against 1.3 us for
+    because the single env checks every action: about 0.2 us against 1.3 us for
     ``np.isfinite(values).all()`` on a 12-number action."""
     for value in values.flat:
         if not math.isfinite(value):

@@ -56,6 +56,11 @@ def _task(batch: int, step: bool) -> Callable[[], None]:
     return build
 
 
+def _action_checks() -> None:
+    for shape in ((3,), (1, 3)):  # a single env's action and a vector env's
+        _kernels.all_finite(np.zeros(shape))
+
+
 #: What to compile, in order: (kernel, what it does, a call that needs it and little else).
 KERNELS: tuple[tuple[str, str, Callable[[], None]], ...] = (
     ("evaluate_forces", "cable forces of resets and queries", _queries),
@@ -65,6 +70,8 @@ KERNELS: tuple[tuple[str, str, Callable[[], None]], ...] = (
     ("evaluate_serial", "the task's observation and reward, one thread", _task(1, step=False)),
     ("command_forces", "the task's thrust commands", _task(1, step=True)),
     ("evaluate_parallel", "the task's observation and reward, all threads", _task(PARALLEL_MIN_BATCH, step=False)),
+    ("command_forces_parallel", "the task's thrust commands, all threads", _task(PARALLEL_MIN_BATCH, step=True)),
+    ("all_finite", "the envs' check of the actions", _action_checks),
 )
 
 

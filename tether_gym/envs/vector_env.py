@@ -98,6 +98,7 @@ class TetherClusterVectorEnv(VectorEnv):
         self._episode_steps = np.zeros(self.num_envs, dtype=np.int64)
         self._action_shape = (self.num_envs, self.task.action_size)
         self._reason_names = np.array(END_REASONS)
+        self._running_names = self._reason_names[np.zeros(self.num_envs, dtype=np.int64)]
 
     @property
     def max_episode_steps(self) -> int | None:
@@ -191,22 +192,29 @@ class TetherClusterVectorEnv(VectorEnv):
         ``stepped`` marks the sub-envs whose info includes the per-step keys (None: a reset, no
         step keys at all); ``rows`` restricts every key to those sub-envs (for ``final_info``);
         entries outside a mask are zero, as Gymnasium's vector envs leave them."""
-        arrays = self.task.info_arrays(stepped is not None)
-        present_all = np.ones(self.num_envs, dtype=np.bool_) if rows is None else rows
-        present_step = present_all if stepped is None or stepped.all() else present_all & stepped
+        arrays = self.task.info_arrays(stepped is not None, copy=True)
+        if "end_reason" in arrays:
+            codes = arrays["end_reason"]
+            # Most steps end no episode: a copy of the all-running names is 3 us cheaper than a lookup.
+            arrays["end_reason"] = self._running_names.copy() if not codes.any() else self._reason_names[codes]
         # One allocation for all the masks (each key gets its own row, so they stay independent).
         masks = np.empty((len(arrays), self.num_envs), dtype=np.bool_)
         infos: dict[str, Any] = {}
+        if rows is None and (stepped is None or stepped.all()):  # every step without an episode end
+            masks[:] = True
+            for row, (key, array) in enumerate(arrays.items()):
+                infos[key] = array
+                infos["_" + key] = masks[row]
+            return infos
+        present_all = np.ones(self.num_envs, dtype=np.bool_) if rows is None else rows
+        present_step = present_all if stepped is None else present_all & stepped
         for row, (key, array) in enumerate(arrays.items()):
             present = present_step if key in STEP_KEYS else present_all
             masks[row] = present
-            if key == "end_reason":
-                array = self._reason_names[array]
             if rows is None and present is present_all:
-                values = array.copy()
+                infos[key] = array
             else:
                 mask = present.reshape((-1,) + (1,) * (array.ndim - 1))
-                values = np.where(mask, array, np.zeros((), dtype=array.dtype))
-            infos[key] = values
+                infos[key] = np.where(mask, array, np.zeros((), dtype=array.dtype))
             infos["_" + key] = masks[row]
         return infos
