@@ -70,7 +70,6 @@ KERNELS: tuple[tuple[str, str, Callable[[], None]], ...] = (
     ("evaluate_serial", "the task's observation and reward, one thread", _task(1, step=False)),
     ("command_forces", "the task's thrust commands", _task(1, step=True)),
     ("evaluate_parallel", "the task's observation and reward, all threads", _task(PARALLEL_MIN_BATCH, step=False)),
-    ("command_forces_parallel", "the task's thrust commands, all threads", _task(PARALLEL_MIN_BATCH, step=True)),
     ("all_finite", "the envs' check of the actions", _action_checks),
 )
 

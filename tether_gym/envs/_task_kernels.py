@@ -586,37 +586,9 @@ def _compile_parallel_evaluation(foreign_layout: tuple) -> Callable[..., Any]:  
     return evaluate_parallel
 
 
-def _compile_parallel_command_forces(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
-    """Compile :func:`command_forces` on all threads (the same bits): one thread spent 25 us of
-    an N=1024 vector step on it.  ``foreign_layout`` as for :func:`_compile_command_forces` (the
-    serial dispatcher itself may not be in the closure, so the loop is written out again)."""
-
-    @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-    def command_forces_parallel(
-        settings: np.ndarray,
-        actions: np.ndarray,
-        thrusters: np.ndarray,
-        max_thrust: np.ndarray,
-        active: np.ndarray,
-        task_nodes: np.ndarray,
-        nodes: np.ndarray,
-        task_clusters: np.ndarray,
-        propellant: np.ndarray,
-    ) -> None:  # pragma: no cover - compiled
-        """:func:`command_forces` on all threads (the same bits)."""
-        foreign_layout  # noqa: B018 - part of the cache key
-        for b in prange(actions.shape[0]):
-            if active[b]:
-                _command_cluster(settings, actions[b], thrusters, max_thrust, task_nodes[b], nodes[b], task_clusters[b])
-                propellant[b] += task_clusters[b, IMPULSE]
-
-    return command_forces_parallel
-
-
-#: The task's thrust commands on one thread, for small batches.
+#: The task's thrust commands, on one thread: a parallel version measured slower at N = 1024, as
+#: each parallel region wakes the worker threads, which the default GOMP_SPINCOUNT lets sleep.
 command_forces = _compile_command_forces(FOREIGN_LAYOUT)
-#: The task's thrust commands on all threads.
-command_forces_parallel = _compile_parallel_command_forces(FOREIGN_LAYOUT)
 #: The task's evaluation on one thread, for small batches (its start-up cost is lower).
 evaluate_serial = _evaluate_clusters
 #: The task's evaluation on all threads.

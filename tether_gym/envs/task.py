@@ -695,12 +695,7 @@ class DampingTask:
         disturbances = self.disturbances
         if disturbances.alters_actions:
             actions = disturbances.acting_actions(actions, mask, self.sim.time)
-        command = (
-            _task_kernels.command_forces_parallel
-            if self.num_clusters >= PARALLEL_MIN_BATCH
-            else _task_kernels.command_forces
-        )
-        command(
+        _task_kernels.command_forces(
             self.task_settings,
             _kernels.kernel_operand(actions, np.float64),
             self.thrusters,
