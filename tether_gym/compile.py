@@ -47,11 +47,11 @@ def _initial_states() -> None:
     _task_kernels.remove_rigid_velocity(x, np.zeros((1, 4, 3)), np.ones((1, 4)))
 
 
-def _task(batch: int, step: bool) -> Callable[[], None]:
+def _task(batch: int, step: bool, thrust_noise: float = 0.0) -> Callable[[], None]:
     def build() -> None:
-        task = DampingTask(make_cluster(_CLUSTER), batch, TaskConfig())
+        task = DampingTask(make_cluster(_CLUSTER), batch, TaskConfig(thrust_noise=thrust_noise))
         if step:
-            task.step(np.zeros((batch, task.action_size)))
+            task.step(np.zeros((batch, task.action_size)), rngs=[np.random.default_rng(0) for _ in range(batch)])
 
     return build
 
@@ -68,8 +68,10 @@ KERNELS: tuple[tuple[str, str, Callable[[], None]], ...] = (
     ("advance_parallel", "the integrator, all threads (vector envs)", _advance(PARALLEL_MIN_BATCH)),
     ("remove_rigid_velocity", "the task's initial states", _initial_states),
     ("evaluate_serial", "the task's observation and reward, one thread", _task(1, step=False)),
-    ("command_forces", "the task's thrust commands", _task(1, step=True)),
     ("evaluate_parallel", "the task's observation and reward, all threads", _task(PARALLEL_MIN_BATCH, step=False)),
+    ("step_serial", "a whole task step, one thread", _task(1, step=True)),
+    ("step_parallel", "a whole task step, all threads", _task(PARALLEL_MIN_BATCH, step=True)),
+    ("command_forces", "the thrust commands of steps with disturbances", _task(1, step=True, thrust_noise=0.1)),
     ("all_finite", "the envs' check of the actions", _action_checks),
 )
 

@@ -586,9 +586,95 @@ def _compile_parallel_evaluation(foreign_layout: tuple) -> Callable[..., Any]:  
     return evaluate_parallel
 
 
+def _compile_step(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
+    """Compile one whole task step of every cluster of some tables: the thrust commands, the
+    advance and the evaluation, on one thread (the parallel driver calls it on chunks).  The same
+    bits as the three kernels called one after the other (each cluster's arithmetic is unchanged
+    and clusters do not interact), in one call, while a chunk's tables are in cache: on one
+    thread it ran an N = 1 024 step in 1.56 ms against 1.94 ms for the three kernels.
+    ``foreign_layout`` as for :func:`_compile_command_forces`."""
+
+    @njit(cache=True, nogil=True, error_model="numpy")
+    def step_clusters(
+        duration: float,
+        actions: np.ndarray,
+        active: np.ndarray,
+        settings: tuple,
+        indices: tuple,
+        simulator_tables: tuple,
+        task_tables: tuple,
+        step_record: np.ndarray,
+    ) -> None:
+        """Step clusters by ``duration`` s under ``actions`` (B, 3k): ``settings`` is (the
+        simulator's kernel settings, the task settings), ``indices`` (the cable topology (m, 2),
+        the thrusters (k,), their ``max_thrust`` (k,) N, the observed satellites),
+        ``simulator_tables`` (node, cable, cluster and counter tables), ``task_tables`` (task node
+        table, task cluster table, propellant (B,) N*s, end reasons (B,)), ``step_record``
+        (B, R) as for :func:`~tether_gym._kernels.advance_serial`."""
+        foreign_layout  # noqa: B018 - part of the cache key
+        simulator_settings, task_settings = settings
+        topology, thrusters, max_thrust, observed = indices
+        nodes, cables, clusters, counters = simulator_tables
+        task_nodes, task_clusters, propellant, end_reason = task_tables
+        command_forces(
+            task_settings, actions, thrusters, max_thrust, active, task_nodes, nodes, task_clusters, propellant
+        )
+        _kernels._advance_clusters(
+            duration, active, simulator_settings, topology, nodes, cables, clusters, counters, step_record
+        )
+        _evaluate_clusters(
+            task_settings, topology, observed, nodes, cables, clusters, counters, task_nodes, task_clusters, end_reason
+        )
+
+    return step_clusters
+
+
+def _compile_parallel_step(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
+    """Compile :data:`step_serial` on all threads, a chunk of clusters each (the same bits): one
+    parallel region per step, where the three kernels made two.  Each region wakes the worker
+    threads, which tether-gym's ``GOMP_SPINCOUNT`` lets sleep between regions so that they do not
+    starve other jobs.  ``foreign_layout`` as for :func:`_compile_command_forces`."""
+
+    @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+    def step_parallel(
+        duration: float,
+        actions: np.ndarray,
+        active: np.ndarray,
+        settings: tuple,
+        indices: tuple,
+        simulator_tables: tuple,
+        task_tables: tuple,
+        step_record: np.ndarray,
+    ) -> None:  # pragma: no cover - compiled
+        """:data:`step_serial` on all threads, a chunk of clusters each (the same bits)."""
+        foreign_layout  # noqa: B018 - part of the cache key
+        nodes, cables, clusters, counters = simulator_tables
+        task_nodes, task_clusters, propellant, end_reason = task_tables
+        batch = nodes.shape[0]
+        chunks = min(batch, PARALLEL_CHUNKS)
+        for k in prange(chunks):
+            lo, hi = k * batch // chunks, (k + 1) * batch // chunks
+            step_serial(
+                duration,
+                actions[lo:hi],
+                active[lo:hi],
+                settings,
+                indices,
+                (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi]),
+                (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi]),
+                step_record[lo:hi],
+            )
+
+    return step_parallel
+
+
 #: The task's thrust commands, on one thread: a parallel version measured slower at N = 1024, as
 #: each parallel region wakes the worker threads, which the default GOMP_SPINCOUNT lets sleep.
 command_forces = _compile_command_forces(FOREIGN_LAYOUT)
+#: A whole task step (commands, advance, evaluation) without disturbances, on one thread.
+step_serial = _compile_step(FOREIGN_LAYOUT)
+#: The same on all threads, one parallel region per step.
+step_parallel = _compile_parallel_step(FOREIGN_LAYOUT)
 #: The task's evaluation on one thread, for small batches (its start-up cost is lower).
 evaluate_serial = _evaluate_clusters
 #: The task's evaluation on all threads.

@@ -432,6 +432,7 @@ class DampingTask:
         self.end_reason = np.zeros(B, dtype=np.int64)
         self._all = np.ones(B, dtype=np.bool_)
         self._num_cables = m  # a Cluster property costs 0.4 us, read on every step's info
+        self._no_record = np.zeros((B, 0))  # the fused step records no sub-step sizes
         self.evaluate()
 
     # ------------------------------------------------------------------ nominal state
@@ -695,22 +696,39 @@ class DampingTask:
         disturbances = self.disturbances
         if disturbances.alters_actions:
             actions = disturbances.acting_actions(actions, mask, self.sim.time)
+        actions = _kernels.kernel_operand(actions, np.float64)
+        sim = self.sim
+        if not disturbances.draws:
+            # The whole step in one compiled call (one parallel region for a large batch).
+            kernel = (
+                _task_kernels.step_parallel if self.num_clusters >= PARALLEL_MIN_BATCH else _task_kernels.step_serial
+            )
+            kernel(
+                self.config.control_interval,
+                actions,
+                mask,
+                (sim.kernel_settings, self.task_settings),
+                (sim.cables, self.thrusters, self.max_thrust, self.observed),
+                (sim.node_table, sim.cable_table, sim.cluster_table, sim.counter_table),
+                (self.task_node_table, self.task_cluster_table, self.propellant, self.end_reason),
+                self._no_record,
+            )
+            return
+        if rngs is None:
+            raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
         _task_kernels.command_forces(
             self.task_settings,
-            _kernels.kernel_operand(actions, np.float64),
+            actions,
             self.thrusters,
             self.max_thrust,
             mask,
             self.task_node_table,
-            self.sim.node_table,
+            sim.node_table,
             self.task_cluster_table,
             self.propellant,
         )
-        if disturbances.draws:
-            if rngs is None:
-                raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
-            disturbances.apply(mask, rngs, self.sim.time, self.difficulty, self.force, self.thrust)
-        self.sim.advance_unchecked(self.config.control_interval, mask)
+        disturbances.apply(mask, rngs, sim.time, self.difficulty, self.force, self.thrust)
+        sim.advance_unchecked(self.config.control_interval, mask)
         self.evaluate()
 
     # ------------------------------------------------------------------ results
