@@ -57,7 +57,7 @@ import tether_gym
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
-from .cli import int_at_least
+from .cli import add_env_argument, int_at_least
 from .commands import command_line, description, program
 from .files import (
     OutputError,
@@ -1026,13 +1026,7 @@ def build_parser() -> argparse.ArgumentParser:
         "it needs --trust-pickle.",
     )
     parser.add_argument("--algo", default="ppo", choices=sorted(ALGORITHMS))
-    parser.add_argument(
-        "--env",
-        default=DEFAULT_ENV_ID,
-        choices=list(ENV_IDS),
-        metavar="ID",
-        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})",
-    )
+    add_env_argument(parser)
     parser.add_argument("--seed", type=int_at_least(0), default=0)
     parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/<algo>_seed<seed>")
     parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps")

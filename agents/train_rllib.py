@@ -48,7 +48,7 @@ import tether_gym
 from tether_gym.envs.arguments import MAX_NUM_ENVS
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from .cli import int_at_least
+from .cli import add_env_argument, int_at_least
 from .commands import command_line, description, program
 from .files import OutputError, atomic_write_text
 from .pickled import PickleNotTrustedError
@@ -651,13 +651,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Needs the rllib extra. The policy is exported as JSON + safetensors, which load without running "
         "code; RLlib's checkpoints hold pickles, so --resume needs --trust-pickle.",
     )
-    parser.add_argument(
-        "--env",
-        default=DEFAULT_ENV_ID,
-        choices=list(ENV_IDS),
-        metavar="ID",
-        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})",
-    )
+    add_env_argument(parser)
     parser.add_argument("--seed", type=int_at_least(0), default=0)
     parser.add_argument("--out", default="runs", help=f"parent of the run directory <out>/<env>/{ALGO}_seed<seed>")
     parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps (total env steps)")

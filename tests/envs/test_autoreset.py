@@ -13,25 +13,14 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from tether_gym.envs import EnvArgumentError, TetherClusterVectorEnv
 from tether_gym.sb3 import SB3VecEnv
 
+from .test_vector_env import FAULTY as FAULTY_CASE
+
 #: Short episodes (many truncations), observation noise and randomised masses (each sub-env's
 #: generator must draw exactly as a single env's does around every reset).
 NOISY = dict(max_episode_steps=7, observation_noise=0.01, randomize={"masses": 0.1}, max_deviation=1.0)
-#: Every disturbance and fault, cables that break and a tight deviation limit: terminations too.
-FAULTY = dict(
-    max_episode_steps=9,
-    impulse_magnitude=2.0,
-    impulse_rate=0.5,
-    periodic_amplitude=0.3,
-    thrust_noise=0.2,
-    thrust_delay=2,
-    thruster_failure_probability=0.7,
-    thruster_failure_window=(0.1, 0.5),
-    cable_failure="continue",
-    preset_kwargs={"breaking_load": 8.0},
-    randomize={"axial_damping": 0.3},
-    difficulty=0.8,
-    max_deviation=0.1,
-)
+#: test_vector_env's faulty case (every disturbance and fault, cables that break), with shorter
+#: episodes, faults early and a tight deviation limit: truncations and terminations.
+FAULTY = dict(FAULTY_CASE, max_episode_steps=9, thruster_failure_window=(0.1, 0.5), max_deviation=0.1)
 CASES = [
     ("TetherTetrahedron-v0", 3, NOISY),
     ("TetherTetrahedron-v0", 20, NOISY),  # 20 uses the multi-threaded kernels
@@ -52,14 +41,23 @@ def _assert_info_row(infos: dict[str, Any], i: int, single_info: dict[str, Any])
         assert np.array_equal(infos[key][i], value), key
 
 
-@pytest.mark.parametrize(("env_id", "num_envs", "kwargs"), CASES)
-def test_same_step_equals_single_envs(env_id: str, num_envs: int, kwargs: dict) -> None:
-    envs = gym.make_vec(env_id, num_envs=num_envs, autoreset_mode="same_step", **kwargs)
-    assert envs.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+def _vector_and_singles(
+    env_id: str, num_envs: int, kwargs: dict, mode: Any, expected: AutoresetMode
+) -> tuple[gym.vector.VectorEnv, list[gym.Env]]:
+    """The vector env in ``mode`` and N single envs, reset with seed 10 (sub-env i: 10 + i) and
+    checked equal at the start."""
+    envs = gym.make_vec(env_id, num_envs=num_envs, autoreset_mode=mode, **kwargs)
+    assert envs.metadata["autoreset_mode"] is expected
     singles = [gym.make(env_id, **kwargs) for _ in range(num_envs)]
     obs, _ = envs.reset(seed=10)
     for i, env in enumerate(singles):
         assert np.array_equal(obs[i], env.reset(seed=10 + i)[0])
+    return envs, singles
+
+
+@pytest.mark.parametrize(("env_id", "num_envs", "kwargs"), CASES)
+def test_same_step_equals_single_envs(env_id: str, num_envs: int, kwargs: dict) -> None:
+    envs, singles = _vector_and_singles(env_id, num_envs, kwargs, "same_step", AutoresetMode.SAME_STEP)
     rng = np.random.default_rng(0)
     ended = 0
     for _ in range(STEPS):
@@ -80,12 +78,7 @@ def test_same_step_equals_single_envs(env_id: str, num_envs: int, kwargs: dict) 
 
 @pytest.mark.parametrize(("env_id", "num_envs", "kwargs"), CASES)
 def test_next_step_equals_single_envs(env_id: str, num_envs: int, kwargs: dict) -> None:
-    envs = gym.make_vec(env_id, num_envs=num_envs, autoreset_mode=AutoresetMode.NEXT_STEP, **kwargs)
-    assert envs.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
-    singles = [gym.make(env_id, **kwargs) for _ in range(num_envs)]
-    obs, _ = envs.reset(seed=10)
-    for i, env in enumerate(singles):
-        assert np.array_equal(obs[i], env.reset(seed=10 + i)[0])
+    envs, singles = _vector_and_singles(env_id, num_envs, kwargs, AutoresetMode.NEXT_STEP, AutoresetMode.NEXT_STEP)
     rng = np.random.default_rng(0)
     ended_last = np.zeros(num_envs, dtype=bool)
     resets = terminations = 0

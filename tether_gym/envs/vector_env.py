@@ -208,11 +208,7 @@ class TetherClusterVectorEnv(VectorEnv):
         self._episode_steps += 1
         rewards = task.rewards()
         terminated = task.terminated()
-        truncated = (
-            self._episode_steps >= self._max_episode_steps
-            if self._max_episode_steps is not None
-            else np.zeros(self.num_envs, dtype=np.bool_)
-        )
+        truncated = self._truncated()
         observation = task.observe(self._rngs)
         done = terminated | truncated
         if not done.any():
@@ -228,6 +224,12 @@ class TetherClusterVectorEnv(VectorEnv):
         infos = self._infos(stepped=~done)
         infos.update(final_obs=final_obs, _final_obs=done.copy(), final_info=final_info, _final_info=done.copy())
         return observation, rewards, terminated, truncated, infos
+
+    def _truncated(self) -> np.ndarray:
+        """(N,) bool: the sub-envs whose episode has reached ``max_episode_steps``."""
+        if self._max_episode_steps is None:
+            return np.zeros(self.num_envs, dtype=np.bool_)
+        return self._episode_steps >= self._max_episode_steps
 
     def _step_next_step(
         self, a: np.ndarray, pending: np.ndarray
@@ -245,11 +247,7 @@ class TetherClusterVectorEnv(VectorEnv):
         self._episode_steps[stepped] += 1
         rewards = task.rewards()
         terminated = task.terminated()
-        truncated = (
-            self._episode_steps >= self._max_episode_steps
-            if self._max_episode_steps is not None
-            else np.zeros(self.num_envs, dtype=np.bool_)
-        )
+        truncated = self._truncated()
         if not any_pending:
             observation = task.observe(self._rngs)
         else:
