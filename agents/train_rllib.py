@@ -209,12 +209,12 @@ def connect(address: str | None, num_cpus: int | None) -> bool:
     if ray.is_initialized():
         return False
     if address is None:
-        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        ray.init(num_cpus=num_cpus, include_dashboard=False, configure_logging=False)
         return True
     if address != "auto":
         _check_reachable(address)
     try:
-        ray.init(address=address, log_to_driver=False, configure_logging=False)
+        ray.init(address=address, configure_logging=False)
     except (ConnectionError, RuntimeError, ValueError) as error:
         raise RayUnavailableError(
             f"--address {address}: could not join the Ray cluster ({error}). Start its head node with "
@@ -607,9 +607,10 @@ def _train_loop(
         speed = (steps - before) / max(time.perf_counter() - tick, 1e-9)
         _record_iteration(vessel.logger, result, speed)
         returns = result.get("env_runners", {}).get("episode_return_mean", float("nan"))
+        ended = f"episode return {returns:.2f}" if np.isfinite(returns) else "no episode ended"
         print(
             f"iteration {algo.iteration}: {steps:,} / {total:,} env steps, {speed:,.0f} steps/s, "
-            f"episode return {returns:.2f}",
+            f"{ended}",
             flush=True,
         )
         if steps >= next_eval or steps >= total:
