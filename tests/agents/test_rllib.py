@@ -38,7 +38,7 @@ from agents.train_rllib import (  # noqa: E402
 from tether_gym.envs import TetherClusterVectorEnv  # noqa: E402
 from tether_gym.registration import ENV_IDS  # noqa: E402
 
-pytestmark = pytest.mark.rllib
+pytestmark = [pytest.mark.rllib, pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV_ID = "TetherTetrahedron-v0"
