@@ -609,8 +609,7 @@ def _train_loop(
         returns = result.get("env_runners", {}).get("episode_return_mean", float("nan"))
         ended = f"episode return {returns:.2f}" if np.isfinite(returns) else "no episode ended"
         print(
-            f"iteration {algo.iteration}: {steps:,} / {total:,} env steps, {speed:,.0f} steps/s, "
-            f"{ended}",
+            f"iteration {algo.iteration}: {steps:,} / {total:,} env steps, {speed:,.0f} steps/s, {ended}",
             flush=True,
         )
         if steps >= next_eval or steps >= total:
