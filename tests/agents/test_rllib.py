@@ -214,6 +214,18 @@ def test_an_unreachable_address_fails_fast(tmp_path: Path) -> None:
     assert time.perf_counter() - started < 60
 
 
+def test_the_command_joins_a_running_cluster_by_address(ray_instance: object, small_file: Path, tmp_path: Path) -> None:
+    """This session's Ray instance stands in for a cluster: the command joins it as a second driver."""
+    address = ray.get_runtime_context().gcs_address
+    result = _command(
+        "--address", address, "--hyperparams", str(small_file), "--out", str(tmp_path), "--eval-episodes", "2"
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    run = tmp_path / ENV_ID / f"{ALGO}_seed0"
+    assert yaml.safe_load((run / "config.yml").read_text())["address"] == address
+    assert TrainedPolicy(run).metadata["num_timesteps"] == 800
+
+
 def test_the_command_line_rejects_bad_counts_and_ids(tmp_path: Path) -> None:
     for arguments, message in (
         (["--num-env-runners", "-1"], "--num-env-runners"),
