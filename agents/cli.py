@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["int_at_least"]
+__all__ = ["add_env_argument", "int_at_least"]
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:
@@ -22,3 +22,16 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
         return value
 
     return parse
+
+
+def add_env_argument(parser: argparse.ArgumentParser) -> None:
+    """``--env ID``: one of the registered ids, the default id by default."""
+    from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
+
+    parser.add_argument(
+        "--env",
+        default=DEFAULT_ENV_ID,
+        choices=list(ENV_IDS),
+        metavar="ID",
+        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})",
+    )

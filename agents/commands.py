@@ -7,9 +7,9 @@ command line they print or record is built here from ``__package__``, so it is o
 run under either name.
 
 The console scripts of ``pyproject.toml`` (``tether-gym-train``, ``tether-gym-compare``,
-``tether-gym-benchmark``, ``tether-gym-ship``, ``tether-gym-convert``) run their module exactly as
-``python -m`` does, ``__main__`` block and its error handling included, so the two ways to run a
-command cannot drift apart.
+``tether-gym-benchmark``, ``tether-gym-ship``, ``tether-gym-convert``, ``tether-gym-train-rllib``)
+run their module exactly as ``python -m`` does, ``__main__`` block and its error handling
+included, so the two ways to run a command cannot drift apart.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ __all__ = [
     "program",
     "ship",
     "train",
+    "train_rllib",
 ]
 
 #: The command modules of this package and the console script that runs each.
@@ -37,6 +38,7 @@ SCRIPTS: dict[str, str] = {
     "benchmark": "tether-gym-benchmark",
     "ship": "tether-gym-ship",
     "convert": "tether-gym-convert",
+    "train_rllib": "tether-gym-train-rllib",
 }
 
 # The console script running now (set by its entry point before the module runs), or None under
@@ -101,3 +103,8 @@ def ship() -> None:
 def convert() -> None:
     """``tether-gym-convert``: ``python -m tether_gym_agents.convert``."""
     _run("convert")
+
+
+def train_rllib() -> None:
+    """``tether-gym-train-rllib``: ``python -m tether_gym_agents.train_rllib`` (needs the rllib extra)."""
+    _run("train_rllib")

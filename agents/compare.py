@@ -36,7 +36,7 @@ from tether_gym.limits import is_whole_number
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 from .baselines import BASELINES
-from .cli import int_at_least
+from .cli import add_env_argument, int_at_least
 from .commands import description, program
 from .evaluate import METRICS, EpisodeRecord, rollout, summarise
 from .files import (
@@ -240,13 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
         "A pickle-based SB3 model (.zip + vecnormalize.pkl) runs any code a crafted file contains when "
         f"loaded: it is refused unless --trust-pickle is given ({program('convert')} makes a safe copy).",
     )
-    parser.add_argument(
-        "--env",
-        default=DEFAULT_ENV_ID,
-        choices=list(ENV_IDS),
-        metavar="ID",
-        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})",
-    )
+    add_env_argument(parser)
     parser.add_argument(
         "--controllers",
         nargs="+",

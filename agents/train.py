@@ -57,7 +57,7 @@ import tether_gym
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
-from .cli import int_at_least
+from .cli import add_env_argument, int_at_least
 from .commands import command_line, description, program
 from .files import (
     OutputError,
@@ -150,6 +150,14 @@ def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None)
     if algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
     file = Path(path) if path is not None else HYPERPARAMS_DIR / f"{algo}.yml"
+    entry, where = read_hyperparameter_entry(file, env_id, algo)
+    return validate_hyperparameters(algo, entry, where=where)
+
+
+def read_hyperparameter_entry(file: Path, env_id: str, algo: str) -> tuple[dict[str, Any], str]:
+    """The unchecked entry of ``env_id`` (or ``default``) in the hyperparameter file ``file``, or
+    the hyperparameters a run's ``config.yml`` recorded (which must be an ``algo`` run on
+    ``env_id``), and where it was found, for messages. Raises as :func:`load_hyperparameters`."""
     if not file.is_file():
         raise FileNotFoundError(f"hyperparameter file {file} does not exist")
     try:
@@ -174,10 +182,12 @@ def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None)
     entry = table[name]
     if not isinstance(entry, dict):
         raise HyperparameterError(f"{file}, entry {name!r}: must be a mapping of hyperparameters; got {entry!r}")
-    return validate_hyperparameters(algo, entry, where=f"{file}, entry {name!r}")
+    return entry, f"{file}, entry {name!r}"
 
 
-def _run_config_hyperparameters(algo: str, env_id: str, file: Path, config: dict[str, Any]) -> dict[str, Any]:
+def _run_config_hyperparameters(
+    algo: str, env_id: str, file: Path, config: dict[str, Any]
+) -> tuple[dict[str, Any], str]:
     """The hyperparameters recorded in a run's (or a shipped model's) ``config.yml``: training with
     them reproduces that run whatever ``agents/hyperparams`` says today."""
     for key, wanted in (("algo", algo), ("env_id", env_id)):
@@ -189,7 +199,7 @@ def _run_config_hyperparameters(algo: str, env_id: str, file: Path, config: dict
             )
     if not isinstance(config["hyperparams"], dict):
         raise HyperparameterError(f"{file}: 'hyperparams' must be a mapping; got {config['hyperparams']!r}")
-    return validate_hyperparameters(algo, config["hyperparams"], where=f"{file}, 'hyperparams'")
+    return config["hyperparams"], f"{file}, 'hyperparams'"
 
 
 def _components(annotation: Any) -> tuple[Any, ...]:
@@ -631,10 +641,13 @@ class SafePolicySaver(BaseCallback):
         every: int | None = None,
         prefix: str = "",
         residual_on: str | None = None,
+        training_state: bool = True,
     ) -> None:
         super().__init__()
         self.directory, self.env_id, self.provenance = directory, env_id, dict(provenance)
         self.every, self.prefix, self.residual_on = every, prefix, residual_on
+        #: Whether to save the optimizer state (False where the model only carries the weights).
+        self.training_state = training_state
 
     def _on_step(self) -> bool:
         if self.every is None:
@@ -650,7 +663,7 @@ class SafePolicySaver(BaseCallback):
             self.model.get_vec_normalize_env(),
             self.env_id,
             self.provenance,
-            training_state=True,
+            training_state=self.training_state,
             residual_on=self.residual_on,
         )
 
@@ -932,19 +945,25 @@ def train(
         f"trained {algo} on {env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
         f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}"
     )
-    if evaluation.history:
-        beat = evaluation.first_beat.get(evaluation.bar)
-        print(
-            f"best evaluation return {evaluation.best_mean:.2f} against {evaluation.bar} "
-            f"{evaluation.baseline_returns[evaluation.bar].mean():.2f} on the evaluation seeds; "
-            + (
-                f"first beat it at {beat['timesteps']:,} steps, {beat['wall_time_s']:.0f} s after the command started"
-                if beat
-                else "never beat it"
-            )
-        )
+    print_evaluation_summary(evaluation)
     venv.close()
     return run
+
+
+def print_evaluation_summary(evaluation: SeededEvaluation) -> None:
+    """One line: the best evaluation return against the bar, and when training first beat it."""
+    if not evaluation.history:
+        return
+    beat = evaluation.first_beat.get(evaluation.bar)
+    print(
+        f"best evaluation return {evaluation.best_mean:.2f} against {evaluation.bar} "
+        f"{evaluation.baseline_returns[evaluation.bar].mean():.2f} on the evaluation seeds; "
+        + (
+            f"first beat it at {beat['timesteps']:,} steps, {beat['wall_time_s']:.0f} s after the command started"
+            if beat
+            else "never beat it"
+        )
+    )
 
 
 def _build_model(
@@ -1007,13 +1026,7 @@ def build_parser() -> argparse.ArgumentParser:
         "it needs --trust-pickle.",
     )
     parser.add_argument("--algo", default="ppo", choices=sorted(ALGORITHMS))
-    parser.add_argument(
-        "--env",
-        default=DEFAULT_ENV_ID,
-        choices=list(ENV_IDS),
-        metavar="ID",
-        help=f"env id (default {DEFAULT_ENV_ID}; one of {', '.join(ENV_IDS)})",
-    )
+    add_env_argument(parser)
     parser.add_argument("--seed", type=int_at_least(0), default=0)
     parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/<algo>_seed<seed>")
     parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps")

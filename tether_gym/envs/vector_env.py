@@ -29,6 +29,29 @@ __all__ = ["TetherClusterVectorEnv"]
 #: Info keys that exist only after a step (a reset's info lacks them, as in the single env).
 STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", *REWARD_TERM_KEYS, "end_reason")
 
+#: The autoreset modes the native vector env implements (Gymnasium's ``DISABLED`` is not one).
+AUTORESET_MODES = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
+
+
+def parse_autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:
+    """``mode`` as an :class:`~gymnasium.vector.AutoresetMode`: the enum itself, its value
+    (``"SameStep"``, ``"NextStep"``, as Gymnasium's ``SyncVectorEnv`` accepts) or its name in
+    any case (``"same_step"``, ``"NEXT_STEP"``). Anything else, and ``DISABLED``, raises
+    :class:`~tether_gym.envs.EnvArgumentError`."""
+    names = {m.value.lower(): m for m in AutoresetMode} | {m.name.lower(): m for m in AutoresetMode}
+    parsed = mode if isinstance(mode, AutoresetMode) else names.get(mode.lower()) if isinstance(mode, str) else None
+    if parsed is AutoresetMode.DISABLED:
+        raise EnvArgumentError(
+            "autoreset_mode DISABLED is not supported by the native vector env (a sub-env would have to be reset "
+            "through reset(options={'reset_mask': ...})); use AutoresetMode.NEXT_STEP or AutoresetMode.SAME_STEP"
+        )
+    if parsed is None:
+        raise EnvArgumentError(
+            f"autoreset_mode must be a gymnasium.vector.AutoresetMode or one of "
+            f"{[m.value for m in AUTORESET_MODES] + [m.name.lower() for m in AUTORESET_MODES]}; got {mode!r}"
+        )
+    return parsed
+
 
 class TetherClusterVectorEnv(VectorEnv):
     """N independent :class:`~tether_gym.envs.TetherClusterEnv` tasks, stepped as one batch.
@@ -40,12 +63,24 @@ class TetherClusterVectorEnv(VectorEnv):
     - **Sub-steps.** Each sub-env sub-steps at its own critical step.
     - **Divergence.** A sub-env that diverges or ends leaves the others untouched.
 
-    **Autoreset** is same-step (``metadata["autoreset_mode"]``). When a sub-env terminates or is
-    truncated, it is reset within the same ``step``:
+    **Autoreset** follows the ``autoreset_mode`` argument; ``metadata["autoreset_mode"]`` says
+    which mode is in force. With ``SAME_STEP`` (the default), a sub-env that terminates or is
+    truncated is reset within the same ``step``:
     - the returned observation is the new episode's first observation;
     - ``infos["final_obs"]`` (an object array) holds the last observation of the old episode;
     - ``infos["final_info"]`` (a dict of arrays) holds its last info;
     - ``infos["_final_obs"]`` and ``infos["_final_info"]`` mark which sub-envs ended.
+
+    With ``NEXT_STEP`` (Gymnasium's ``SyncVectorEnv`` default, and what RLlib's env runners
+    expect), ``step`` returns the ended sub-env's last observation and info as they are; the
+    *next* ``step`` ignores that sub-env's action and resets it, returning the new episode's
+    first observation, reward 0, ``terminated = truncated = False`` and the info of a reset.
+
+    Same-step stays the default: the SB3 adapter (:mod:`tether_gym.sb3`), the evaluation code
+    and every user's ``gym.make_vec(id, num_envs=N)`` were written against it, and it wastes no
+    step of the batch on resets. Gymnasium's own vector envs default to next-step, so code that
+    wants their semantics (RLlib, ``agents.train_rllib``) asks for it:
+    ``gym.make_vec(id, num_envs=N, autoreset_mode=AutoresetMode.NEXT_STEP)``.
 
     Infos follow Gymnasium's vector layout: every key holds an (N, ...) array, and a boolean
     ``"_key"`` array marks the sub-envs that have it. A sub-env that was just reset has only the
@@ -56,6 +91,9 @@ class TetherClusterVectorEnv(VectorEnv):
         max_episode_steps: truncation after this many steps (``gym.make_vec`` passes the id's);
             None: never. Checked whenever it is set (also through SB3's ``set_attr``).
         render_mode: must be None (the native vector env does not render).
+        autoreset_mode: ``AutoresetMode.SAME_STEP`` (default) or ``AutoresetMode.NEXT_STEP``, or
+            their string values (``"SameStep"``, ``"NextStep"``) or names (``"same_step"``).
+            ``DISABLED`` is not supported.
         preset, preset_kwargs, cluster, **task: as for :class:`~tether_gym.envs.TetherClusterEnv`.
     """
 
@@ -69,8 +107,10 @@ class TetherClusterVectorEnv(VectorEnv):
         cluster: Cluster | None = None,
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **task: Any,
     ) -> None:
+        mode = parse_autoreset_mode(autoreset_mode)
         if render_mode is not None:
             raise EnvArgumentError(
                 f"render_mode must be None: the native vector env does not render (got {render_mode!r}); render "
@@ -99,6 +139,10 @@ class TetherClusterVectorEnv(VectorEnv):
         self._action_shape = (self.num_envs, self.task.action_size)
         self._reason_names = np.array(END_REASONS)
         self._running_names = self._reason_names[np.zeros(self.num_envs, dtype=np.int64)]
+        # Per instance: the class attribute is only the default mode.
+        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
+        #: Next-step mode: the sub-envs whose episode ended in the last step, reset by the next one.
+        self._autoreset = np.zeros(self.num_envs, dtype=np.bool_) if mode is AutoresetMode.NEXT_STEP else None
 
     @property
     def max_episode_steps(self) -> int | None:
@@ -127,6 +171,8 @@ class TetherClusterVectorEnv(VectorEnv):
                 self._rngs[i] = seeding.np_random(value)[0]
         self.task.reset(self._rngs, self._all, positions, velocities)
         self._episode_steps[:] = 0
+        if self._autoreset is not None:
+            self._autoreset[:] = False
         observation = self.task.observe(self._rngs)
         return observation, self._infos(stepped=None)
 
@@ -150,16 +196,14 @@ class TetherClusterVectorEnv(VectorEnv):
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         a = check_actions("actions", actions, self._action_shape, "num_envs, 3 per thruster")
+        if self._autoreset is not None:
+            return self._step_next_step(a, self._autoreset)
         task = self.task
         task.step(np.ascontiguousarray(a), rngs=self._rngs)
         self._episode_steps += 1
         rewards = task.rewards()
         terminated = task.terminated()
-        truncated = (
-            self._episode_steps >= self._max_episode_steps
-            if self._max_episode_steps is not None
-            else np.zeros(self.num_envs, dtype=np.bool_)
-        )
+        truncated = self._truncated()
         observation = task.observe(self._rngs)
         done = terminated | truncated
         if not done.any():
@@ -174,6 +218,50 @@ class TetherClusterVectorEnv(VectorEnv):
         observation[ended] = task.observe([self._rngs[i] for i in ended], ended)
         infos = self._infos(stepped=~done)
         infos.update(final_obs=final_obs, _final_obs=done.copy(), final_info=final_info, _final_info=done.copy())
+        return observation, rewards, terminated, truncated, infos
+
+    def _truncated(self) -> np.ndarray:
+        """(N,) bool: the sub-envs whose episode has reached ``max_episode_steps``."""
+        if self._max_episode_steps is None:
+            return np.zeros(self.num_envs, dtype=np.bool_)
+        return self._episode_steps >= self._max_episode_steps
+
+    def _step_next_step(
+        self, a: np.ndarray, pending: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """:meth:`step` in next-step autoreset mode, on checked actions ``a``: the sub-envs in
+        ``pending`` (whose episode ended in the last step) are reset instead of stepped, the
+        others step; the sub-envs that end now are pending for the next call.
+
+        The order of work per sub-env is that of a single env (step, observe; or reset, observe),
+        each drawing only from its own generator, so every sub-env gives a single env's bits."""
+        task = self.task
+        stepped = ~pending
+        any_pending = bool(pending.any())
+        task.step(np.ascontiguousarray(a), active=stepped if any_pending else None, rngs=self._rngs)
+        self._episode_steps[stepped] += 1
+        rewards = task.rewards()
+        terminated = task.terminated()
+        truncated = self._truncated()
+        if not any_pending:
+            observation = task.observe(self._rngs)
+        else:
+            # A pending sub-env's generator must not draw observation noise for the old episode.
+            observation = np.empty((self.num_envs, task.observation_size), dtype=np.float32)
+            kept = np.flatnonzero(stepped)
+            if kept.size:
+                observation[kept] = task.observe([self._rngs[i] for i in kept], kept)
+            ended = np.flatnonzero(pending)
+            ended_rngs = [self._rngs[i] for i in ended]
+            task.reset(ended_rngs, ended)
+            self._episode_steps[ended] = 0
+            observation[ended] = task.observe(ended_rngs, ended)
+            rewards[ended] = 0.0
+            terminated[ended] = False
+            truncated[ended] = False
+        np.logical_or(terminated, truncated, out=pending)
+        # All reset, none stepped: a reset's infos, without the step keys (as Gymnasium's).
+        infos = self._infos(stepped=stepped if stepped.any() else None)
         return observation, rewards, terminated, truncated, infos
 
     def set_difficulty(self, difficulty: float) -> None:

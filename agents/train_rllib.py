@@ -1,0 +1,712 @@
+"""Train PPO on Ray RLlib, on one machine or a cluster: ``python -m agents.train_rllib --env TetherTetrahedron-v0``.
+
+RLlib's new API stack runs the env in its env runners, and each runner steps tether-gym's native
+vector env (``gym_env_vectorize_mode="vector_entry_point"``, in next-step autoreset mode as RLlib
+expects): ``--envs-per-runner`` sub-envs per runner, ``--num-env-runners`` runner processes (0:
+the driver samples itself). ``--address`` joins a running Ray cluster (``ray start --head`` on one
+node, ``ray start --address HEAD:6379`` on the others; docs/rllib.md); without it a local Ray
+instance is started, and stopped at the end. It needs the ``rllib`` extra
+(``pip install 'tether-gym[rllib]'``).
+
+Hyperparameters come from ``agents/hyperparams/rllib_ppo.yml``, keyed by env id as the SB3 files
+are, with RLlib's names; every entry is checked before Ray starts. A run directory
+``<out>/<env>/rllib_ppo_seed<seed>/`` receives:
+
+* ``config.yml``: the resolved hyperparameters, env id, seed, runners, Ray version and the command line;
+* ``tensorboard/``: TensorBoard logs (``tensorboard --logdir <run>/tensorboard``): returns, losses,
+  env steps/s and the evaluations;
+* ``checkpoints/iter_<iteration>/``: RLlib checkpoints every ``--checkpoint-freq`` env steps and
+  at the end. They are RLlib's own format, which holds pickles: ``--resume`` from one needs
+  ``--trust-pickle`` (only resume checkpoints you wrote yourself);
+* ``best/``: the best policy on the fixed evaluation seeds and ``evaluations.json`` (the paired
+  comparison with the best scripted baseline and when training first beat it), as ``agents.train``
+  writes them (:mod:`agents.selection`);
+* ``policy.json``, ``policy.safetensors``, ``normalization.json``, ``MANIFEST.sha256``: the final
+  policy in the project's safe format, which ``agents.compare``, ``agents.benchmark`` and
+  :class:`agents.policies.TrainedPolicy` load like any SB3-trained policy.
+
+The policy format is SB3's ``MlpPolicy``: RLlib's default PPO module with separate policy and value
+networks, no head layers and a free log std has the same structure, and its weights are mapped
+onto it (:func:`export_policy`); RLlib's ``MeanStdFilter`` statistics become the normalisation
+statistics, so the exported policy's deterministic actions are the RLlib module's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+import tether_gym
+from tether_gym.envs.arguments import MAX_NUM_ENVS
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
+
+from .cli import add_env_argument, int_at_least
+from .commands import command_line, description, program
+from .files import OutputError, atomic_write_text
+from .pickled import PickleNotTrustedError
+from .safe_format import PolicyFormatError
+from .train import (
+    HYPERPARAMS_DIR,
+    HyperparameterError,
+    _check_value,
+    _clear_earlier_run,
+    _positive_int,
+    _prepare_run_dir,
+    _schedule,
+    _unknown_key,
+    print_evaluation_summary,
+    read_hyperparameter_entry,
+)
+
+__all__ = [
+    "ALGO",
+    "RayUnavailableError",
+    "export_policy",
+    "load_rllib_hyperparameters",
+    "rllib_actions",
+    "train_rllib",
+]
+
+#: The run's algorithm name: the run directory's prefix and ``config.yml``'s ``algo``.
+ALGO = "rllib_ppo"
+#: RLlib's checkpoints mark themselves with this file.
+CHECKPOINT_MARKER = "rllib_checkpoint.json"
+#: Seconds to wait for a cluster's head node to answer on ``--address`` before giving up.
+CONNECT_TIMEOUT_S = 5.0
+
+#: Hyperparameter keys and their types (the values are checked as ``agents.train`` checks SB3's).
+KEYS: dict[str, Any] = {
+    "n_timesteps": int,
+    "num_envs_per_env_runner": int,
+    "train_batch_size_per_learner": int,
+    "minibatch_size": int,
+    "num_epochs": int,
+    "gamma": float,
+    "lambda": float,
+    "lr": float | str,
+    "clip_param": float,
+    "vf_clip_param": float,
+    "vf_loss_coeff": float,
+    "entropy_coeff": float,
+    "use_kl_loss": bool,
+    "grad_clip": float | None,
+    "fcnet_hiddens": list,
+    "fcnet_activation": str,
+    "normalize_obs": bool,
+    "env_kwargs": dict | None,
+}
+#: RLlib's activation names that SB3's ``MlpPolicy`` (the export format) has too.
+ACTIVATIONS = ("tanh", "relu")
+#: Keys in (0, 1].
+FRACTIONS = ("gamma", "lambda")
+
+
+class RayUnavailableError(RuntimeError):
+    """Ray is not installed, or the cluster on ``--address`` cannot be reached or cannot run the job."""
+
+
+def _ray() -> Any:
+    """The ``ray`` module, or a :class:`RayUnavailableError` saying how to install it."""
+    try:
+        import ray
+    except ModuleNotFoundError as error:
+        raise RayUnavailableError(
+            "agents.train_rllib needs Ray RLlib: pip install 'tether-gym[rllib]' (or bash scripts/test_rllib.sh, "
+            "which builds .venv-rllib with it)"
+        ) from error
+    return ray
+
+
+# ---------------------------------------------------------------------------------------------
+# Hyperparameters
+# ---------------------------------------------------------------------------------------------
+
+
+def load_rllib_hyperparameters(env_id: str, path: str | Path | None = None) -> dict[str, Any]:
+    """The checked hyperparameters for ``env_id`` from ``agents/hyperparams/rllib_ppo.yml`` (or
+    ``path``: another file of that form, or an RLlib run's ``config.yml``). Raises
+    :class:`~agents.train.HyperparameterError` naming the file, entry and key."""
+    file = Path(path) if path is not None else HYPERPARAMS_DIR / f"{ALGO}.yml"
+    entry, where = read_hyperparameter_entry(file, env_id, ALGO)
+    return validate_rllib_hyperparameters(entry, where)
+
+
+def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyperparameters") -> dict[str, Any]:
+    """``entry`` checked: known keys, values of the right type and range, ``n_timesteps`` given."""
+    checked: dict[str, Any] = {}
+    for key, value in entry.items():
+        if key not in KEYS:
+            raise _unknown_key(str(key), list(KEYS), where, "agents.train_rllib")
+        if key == "fcnet_hiddens":
+            if not (isinstance(value, list) and value and all(_is_count(size) for size in value)):
+                raise HyperparameterError(f"{where}: 'fcnet_hiddens' must be a list of layer sizes >= 1; got {value!r}")
+            checked[key] = [int(size) for size in value]
+            continue
+        checked[key] = _check_value(str(key), value, KEYS[key], where)
+    if "n_timesteps" not in checked:
+        raise HyperparameterError(f"{where}: 'n_timesteps' is missing (the total env steps to train)")
+    for key in (
+        "n_timesteps",
+        "num_envs_per_env_runner",
+        "train_batch_size_per_learner",
+        "minibatch_size",
+        "num_epochs",
+    ):
+        if key in checked and checked[key] < 1:
+            raise HyperparameterError(f"{where}: {key!r} must be >= 1; got {checked[key]}")
+    for key in FRACTIONS:
+        if key in checked and not 0 < checked[key] <= 1:
+            raise HyperparameterError(f"{where}: {key!r} must be in (0, 1]; got {checked[key]}")
+    for key in ("clip_param", "vf_clip_param", "grad_clip"):
+        if checked.get(key) is not None and not checked[key] > 0:
+            raise HyperparameterError(f"{where}: {key!r} must be > 0; got {checked[key]}")
+    if "lr" in checked:
+        _schedule(checked["lr"], "lr", where)  # a positive number or lin_<number>, or an error
+    if checked.get("fcnet_activation", "tanh") not in ACTIVATIONS:
+        raise HyperparameterError(
+            f"{where}: 'fcnet_activation' must be one of {list(ACTIVATIONS)} (the activations the policy format "
+            f"has); got {checked['fcnet_activation']!r}"
+        )
+    if checked.get("minibatch_size", 0) > checked.get("train_batch_size_per_learner", 4000):
+        raise HyperparameterError(f"{where}: 'minibatch_size' must not exceed 'train_batch_size_per_learner'")
+    return checked
+
+
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
+
+
+def _learning_rate(value: float | str, total: int) -> float | list[list[float]]:
+    """RLlib's ``lr``: a number, or for ``lin_<x>`` the piecewise schedule from x at step 0 to 0
+    at ``total`` env steps (what ``lin_`` means for SB3)."""
+    if isinstance(value, str):
+        return [[0, float(value[4:])], [total, 0.0]]
+    return float(value)
+
+
+# ---------------------------------------------------------------------------------------------
+# Ray and the algorithm
+# ---------------------------------------------------------------------------------------------
+
+
+def connect(address: str | None, num_cpus: int | None) -> bool:
+    """Start a local Ray instance (``address`` None; ``num_cpus`` caps it) or join the cluster at
+    ``address`` (``host:port`` of its head node, ``auto`` for the one on this machine); nothing if
+    Ray is already initialised in this process (e.g. by a test). Returns whether this call
+    started Ray (then :func:`train_rllib` shuts it down at the end).
+
+    A ``host:port`` that does not answer within :data:`CONNECT_TIMEOUT_S` raises
+    :class:`RayUnavailableError` at once, rather than letting Ray retry for minutes."""
+    ray = _ray()
+    if ray.is_initialized():
+        return False
+    if address is None:
+        ray.init(num_cpus=num_cpus, include_dashboard=False, configure_logging=False)
+        return True
+    if address != "auto":
+        _check_reachable(address)
+    try:
+        ray.init(address=address, configure_logging=False)
+    except (ConnectionError, RuntimeError, ValueError) as error:
+        raise RayUnavailableError(
+            f"--address {address}: could not join the Ray cluster ({error}). Start its head node with "
+            f"`ray start --head --port 6379` and pass --address HEAD_IP:6379, or leave --address out to start a "
+            f"local instance"
+        ) from error
+    return True
+
+
+def _check_reachable(address: str) -> None:
+    """Raise :class:`RayUnavailableError` unless ``address`` (``[ray://]host:port``) accepts a TCP
+    connection within :data:`CONNECT_TIMEOUT_S`."""
+    target = address.removeprefix("ray://")
+    host, _, port = target.rpartition(":")
+    if not host or not port.isdigit():
+        raise RayUnavailableError(
+            f"--address must be HOST:PORT of a Ray head node (e.g. 10.0.0.1:6379) or 'auto'; got {address!r}"
+        )
+    try:
+        with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S):
+            pass
+    except OSError as error:
+        raise RayUnavailableError(
+            f"--address {address}: no Ray head node answers there ({error}; waited at most {CONNECT_TIMEOUT_S:.0f} s). "
+            f"Start one with `ray start --head --port {port}` on {host}, check the host, port and firewall, or leave "
+            f"--address out to start a local Ray instance"
+        ) from error
+
+
+def _check_resources(num_env_runners: int) -> None:
+    """Refuse more env runners than the cluster has CPUs for: Ray would wait for them forever."""
+    cpus = int(_ray().cluster_resources().get("CPU", 0))
+    if num_env_runners > cpus:
+        raise RayUnavailableError(
+            f"--num-env-runners {num_env_runners} needs {num_env_runners} CPUs (one per runner), but the Ray "
+            f"cluster has {cpus}: pass --num-env-runners {cpus} or fewer (0 samples in the driver), or add nodes"
+        )
+
+
+def build_config(
+    env_id: str, hyperparams: Mapping[str, Any], num_env_runners: int, envs_per_runner: int, seed: int
+) -> Any:
+    """The ``PPOConfig`` of a run: RLlib's new API stack, the native vector env (next-step
+    autoreset) in every env runner, and a model the policy format can hold."""
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.connectors.env_to_module import MeanStdFilter
+    from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+
+    env_config = {**dict(hyperparams.get("env_kwargs") or {}), "autoreset_mode": "NextStep"}
+    training = {
+        key: hyperparams[key]
+        for key in (
+            "train_batch_size_per_learner",
+            "minibatch_size",
+            "num_epochs",
+            "gamma",
+            "clip_param",
+            "vf_clip_param",
+            "vf_loss_coeff",
+            "entropy_coeff",
+            "use_kl_loss",
+            "grad_clip",
+        )
+        if key in hyperparams
+    }
+    if "lambda" in hyperparams:
+        training["lambda_"] = hyperparams["lambda"]
+    if "lr" in hyperparams:
+        training["lr"] = _learning_rate(hyperparams["lr"], int(hyperparams["n_timesteps"]))
+    connector = (lambda env, spaces, device: MeanStdFilter()) if hyperparams.get("normalize_obs", False) else None
+    return (
+        PPOConfig()
+        # "tether_gym:<id>": gymnasium imports tether_gym (registering the ids) in every runner process.
+        .environment(f"tether_gym:{env_id}", env_config=env_config, normalize_actions=False, clip_actions=True)
+        .env_runners(
+            num_env_runners=num_env_runners,
+            num_envs_per_env_runner=envs_per_runner,
+            gym_env_vectorize_mode="vector_entry_point",
+            env_to_module_connector=connector,
+        )
+        .training(**training)
+        .rl_module(
+            model_config=DefaultModelConfig(
+                fcnet_hiddens=list(hyperparams.get("fcnet_hiddens", [128, 128])),
+                fcnet_activation=hyperparams.get("fcnet_activation", "tanh"),
+                head_fcnet_hiddens=[],
+                free_log_std=True,
+                vf_share_layers=False,
+            )
+        )
+        .debugging(seed=seed)
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Export to the policy format
+# ---------------------------------------------------------------------------------------------
+
+
+def module_weights(algo: Any) -> dict[str, np.ndarray]:
+    """The learner's RLModule weights (policy and value networks), as numpy arrays by name."""
+    from ray.rllib.core import DEFAULT_MODULE_ID
+
+    state = algo.learner_group.get_state(components=f"learner/rl_module/{DEFAULT_MODULE_ID}")
+    return {name: np.asarray(value) for name, value in state["learner"]["rl_module"][DEFAULT_MODULE_ID].items()}
+
+
+def observation_filter(algo: Any) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """RLlib's ``MeanStdFilter`` of the run as ``(mean, divisor, clip)``: the filter computes
+    ``clip((obs - mean) / divisor)``, divisor = float32(std + 1e-8); None without the filter."""
+    from ray.rllib.utils.filter import RunningStat
+
+    state = algo.get_state(components="env_runner")["env_runner"].get("env_to_module_connector", {})
+    if "MeanStdFilter" not in state:
+        return None
+    agent = state["MeanStdFilter"][None]
+    stats = RunningStat.from_state(agent["running_stats"][0])
+    divisor = stats.std + 1e-8  # float32, as the filter computes it
+    return np.asarray(stats.mean, dtype=np.float64), divisor.astype(np.float64), float(agent["clip_by_value"])
+
+
+def make_vessel(env_id: str, hyperparams: Mapping[str, Any], seed: int) -> Any:
+    """An SB3 PPO model whose ``MlpPolicy`` has the structure of the run's RLlib module (and a
+    ``VecNormalize`` when the run normalises observations): the container the RLlib weights are
+    copied into, for evaluation and export. Its own optimizer and rollout buffer are never used."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from tether_gym.sb3 import make_sb3_vec_env
+
+    hidden = list(hyperparams.get("fcnet_hiddens", [128, 128]))
+    activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[hyperparams.get("fcnet_activation", "tanh")]
+    venv: Any = make_sb3_vec_env(env_id, 1, seed=seed, **dict(hyperparams.get("env_kwargs") or {}))
+    if hyperparams.get("normalize_obs", False):
+        # epsilon 0: the divisor is set to RLlib's exactly (see export_policy).
+        venv = VecNormalize(venv, training=False, norm_obs=True, norm_reward=False, epsilon=0.0)
+    return PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=8,
+        batch_size=8,
+        seed=seed,
+        device="cpu",
+        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}, "activation_fn": activation},
+    )
+
+
+def _sb3_name(rllib_name: str) -> str | None:
+    """The SB3 ``MlpPolicy`` parameter that RLlib's default PPO module parameter maps onto (None
+    for RLlib's constants)."""
+    prefixes = {
+        "encoder.actor_encoder.net.mlp.": "mlp_extractor.policy_net.",
+        "encoder.critic_encoder.net.mlp.": "mlp_extractor.value_net.",
+        "pi.net.mlp.0.": "action_net.",
+        "vf.net.mlp.0.": "value_net.",
+    }
+    if rllib_name == "pi.log_std":
+        return "log_std"
+    for prefix, target in prefixes.items():
+        if rllib_name.startswith(prefix):
+            return target + rllib_name[len(prefix) :]
+    return None
+
+
+def export_policy(algo: Any, vessel: Any, timesteps: int) -> None:
+    """Copy ``algo``'s module weights and observation filter into ``vessel`` (from
+    :func:`make_vessel`), so that its policy acts as RLlib's module does deterministically.
+
+    Raises PolicyFormatError if the module's parameters do not map one to one onto the vessel's
+    (another RLlib model than :func:`build_config` builds)."""
+    import torch
+
+    weights = module_weights(algo)
+    target = vessel.policy.state_dict()
+    mapped = {}
+    for name, value in weights.items():
+        sb3_name = _sb3_name(name)
+        if sb3_name is None:
+            continue
+        if sb3_name not in target or tuple(target[sb3_name].shape) != value.shape:
+            raise PolicyFormatError(f"RLlib parameter {name} {value.shape} has no counterpart in the policy format")
+        mapped[sb3_name] = torch.as_tensor(value, dtype=target[sb3_name].dtype)
+    if set(mapped) != set(target):
+        raise PolicyFormatError(f"the policy format's parameters {sorted(set(target) - set(mapped))} got no weights")
+    vessel.policy.load_state_dict(mapped)
+    vessel.num_timesteps = int(timesteps)
+    normalizer = vessel.get_vec_normalize_env()
+    statistics = observation_filter(algo)
+    if (normalizer is None) != (statistics is None):
+        raise PolicyFormatError("the run's observation filter and the vessel's normaliser do not match")
+    if normalizer is not None and statistics is not None:
+        mean, divisor, clip = statistics
+        # sqrt(divisor**2 + 0) == divisor exactly, so VecNormalize divides by what the filter does.
+        normalizer.obs_rms.mean, normalizer.obs_rms.var = mean, divisor * divisor
+        normalizer.clip_obs = clip
+
+
+def rllib_actions(algo: Any, observations: np.ndarray) -> np.ndarray:
+    """(B, act_dim) the deterministic actions of ``algo``'s module for (B, obs_dim) raw
+    ``observations``: through the run's observation filter (without updating it), the module's
+    mean action, clipped to [-1, 1] as the env runners clip them. For tests of the export."""
+    import torch
+
+    obs = np.asarray(observations, dtype=np.float32)
+    statistics = observation_filter(algo)
+    if statistics is not None:
+        mean, divisor, clip = statistics
+        obs = np.clip((obs - mean) / divisor.astype(np.float32), -clip, clip).astype(np.float32)
+    module = algo.get_module()
+    with torch.no_grad():
+        out = module.forward_inference({"obs": torch.as_tensor(obs)})
+    distribution = module.get_inference_action_dist_cls().from_logits(out["action_dist_inputs"])
+    return np.clip(distribution.to_deterministic().sample().numpy(), -1.0, 1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Training
+# ---------------------------------------------------------------------------------------------
+
+
+def _resume_checkpoint(resume: str | Path, trust_pickle: bool) -> Path:
+    """The RLlib checkpoint ``resume`` names (a checkpoint or a run directory: its latest), checked."""
+    path = Path(resume)
+    if not path.exists():
+        raise FileNotFoundError(f"--resume {path} does not exist: pass <run>/checkpoints/iter_<n> or a run directory")
+    if not (path / CHECKPOINT_MARKER).is_file():
+        found = sorted((path / "checkpoints").glob(f"iter_*/{CHECKPOINT_MARKER}"))
+        if not found:
+            raise FileNotFoundError(f"--resume {path} holds no RLlib checkpoint (no {CHECKPOINT_MARKER})")
+        path = found[-1].parent
+    if not trust_pickle:
+        raise PickleNotTrustedError(
+            f"--resume {path}: RLlib checkpoints hold pickles, and a crafted one runs arbitrary code when it is "
+            f"loaded. Pass --trust-pickle to resume from a checkpoint you wrote yourself"
+        )
+    return path
+
+
+def _tensorboard_logger(run: Path) -> Any:
+    """An SB3 logger writing TensorBoard events to ``<run>/tensorboard/rllib_ppo_<n>`` (a new n per
+    run, as SB3 numbers its runs)."""
+    from stable_baselines3.common.logger import configure
+
+    number = 1
+    while (run / "tensorboard" / f"{ALGO}_{number}").exists():
+        number += 1
+    return configure(str(run / "tensorboard" / f"{ALGO}_{number}"), ["tensorboard"])
+
+
+def _record_iteration(logger: Any, result: Mapping[str, Any], steps_per_s: float) -> None:
+    """The iteration's returns, losses and speed into the TensorBoard logger."""
+    runners = result.get("env_runners", {})
+    for key, name in (("episode_return_mean", "rollout/ep_rew_mean"), ("episode_len_mean", "rollout/ep_len_mean")):
+        if key in runners:
+            logger.record(name, float(runners[key]))
+    learner = result.get("learners", {}).get("default_policy", {})
+    for key in ("policy_loss", "vf_loss", "entropy", "mean_kl_loss", "vf_explained_var"):
+        if key in learner:
+            logger.record(f"train/{key}", float(learner[key]))
+    logger.record("time/env_steps_per_s", steps_per_s)
+    logger.record("time/iterations", int(result.get("training_iteration", 0)))
+
+
+def train_rllib(
+    env_id: str = DEFAULT_ENV_ID,
+    seed: int = 0,
+    out: str | Path = "runs",
+    timesteps: int | None = None,
+    num_env_runners: int = 0,
+    envs_per_runner: int | None = None,
+    address: str | None = None,
+    num_cpus: int | None = None,
+    hyperparams_file: str | Path | None = None,
+    resume: str | Path | None = None,
+    trust_pickle: bool = False,
+    eval_freq: int = 50_000,
+    eval_episodes: int = 32,
+    checkpoint_freq: int = 250_000,
+    force: bool = False,
+    command: str | None = None,
+) -> Path:
+    """Train PPO with RLlib on ``env_id`` and return the run directory (see the module docstring).
+
+    ``timesteps`` and ``envs_per_runner`` override the file's ``n_timesteps`` and
+    ``num_envs_per_env_runner``; ``eval_freq`` and ``checkpoint_freq`` count env steps over all
+    runners (each is acted on at the first iteration that reaches it). ``num_cpus`` caps a local
+    Ray instance. Everything is checked before Ray starts, the cluster's CPUs against the runners
+    after: errors name the argument and the fix."""
+    started = time.perf_counter()
+    if env_id not in ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; tether-gym ids are {list(ENV_IDS)}")
+    _positive_int("seed", seed, minimum=0)
+    _positive_int("num_env_runners", num_env_runners, minimum=0)
+    _positive_int("eval_freq", eval_freq)
+    _positive_int("eval_episodes", eval_episodes)
+    _positive_int("checkpoint_freq", checkpoint_freq)
+    if num_cpus is not None:
+        _positive_int("num_cpus", num_cpus)
+        if address is not None:
+            raise ValueError(
+                "num_cpus sets the size of a local Ray instance; with --address the cluster's nodes set it"
+            )
+    hyperparams = load_rllib_hyperparameters(env_id, hyperparams_file)
+    if timesteps is not None:
+        hyperparams["n_timesteps"] = _positive_int("timesteps", timesteps)
+    if envs_per_runner is not None:
+        hyperparams["num_envs_per_env_runner"] = _positive_int("envs_per_runner", envs_per_runner)
+    hyperparams = validate_rllib_hyperparameters(hyperparams, where="hyperparameters (with overrides)")
+    envs = int(hyperparams.get("num_envs_per_env_runner", 1))
+    if envs > MAX_NUM_ENVS:
+        raise ValueError(f"envs_per_runner must be at most {MAX_NUM_ENVS} (use more runners); got {envs}")
+    total = int(hyperparams["n_timesteps"])
+    checkpoint = _resume_checkpoint(resume, trust_pickle) if resume is not None else None
+    ray = _ray()
+    run = _prepare_run_dir(out, env_id, ALGO, seed, force)
+    owns_ray = connect(address, num_cpus)
+    try:
+        _check_resources(num_env_runners)
+        algo = build_config(env_id, hyperparams, num_env_runners, envs, seed).build_algo()
+        if checkpoint is not None:
+            algo.restore_from_path(str(checkpoint.resolve()))
+        if force:
+            _clear_earlier_run(run, ALGO, {checkpoint} if checkpoint else set())
+        record = {
+            "algo": ALGO,
+            "env_id": env_id,
+            "seed": seed,
+            "hyperparams": hyperparams,
+            "num_env_runners": num_env_runners,
+            "envs_per_runner": envs,
+            "address": address,
+            "command": command,
+            "resumed_from": str(checkpoint) if checkpoint else None,
+            "tether_gym_version": tether_gym.__version__,
+            "ray_version": ray.__version__,
+        }
+        atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
+        _train_loop(
+            algo, run, env_id, hyperparams, seed, total, eval_freq, eval_episodes, checkpoint_freq, command, started
+        )
+        algo.stop()
+    finally:
+        if owns_ray:
+            ray.shutdown()
+    return run
+
+
+def _train_loop(
+    algo: Any,
+    run: Path,
+    env_id: str,
+    hyperparams: Mapping[str, Any],
+    seed: int,
+    total: int,
+    eval_freq: int,
+    eval_episodes: int,
+    checkpoint_freq: int,
+    command: str | None,
+    started: float,
+) -> None:
+    """Train until ``total`` env steps, evaluating, checkpointing and logging on the way; export
+    the final policy into ``run``."""
+    from .safe_format import save_policy
+    from .selection import SeededEvaluation
+    from .train import SafePolicySaver
+
+    vessel = make_vessel(env_id, hyperparams, seed)
+    vessel.set_logger(_tensorboard_logger(run))
+    provenance = {"seed": seed, "command": command, "config": "config.yml of the run directory", "trainer": "rllib"}
+    evaluation = SeededEvaluation(
+        env_id,
+        eval_episodes,
+        every=1,
+        log_dir=run / "best",
+        on_new_best=SafePolicySaver(run / "best", env_id, provenance, training_state=False),
+        started=started,
+        env_kwargs=hyperparams.get("env_kwargs"),
+    )
+    evaluation.init_callback(vessel)
+    evaluation.on_training_start({}, {})
+    steps = _lifetime_steps(algo)
+    next_eval, next_checkpoint = steps + eval_freq, steps + checkpoint_freq
+    first = steps
+    start = time.perf_counter()
+    while steps < total:
+        tick = time.perf_counter()
+        result = algo.train()
+        before, steps = steps, _lifetime_steps(algo)
+        speed = (steps - before) / max(time.perf_counter() - tick, 1e-9)
+        _record_iteration(vessel.logger, result, speed)
+        returns = result.get("env_runners", {}).get("episode_return_mean", float("nan"))
+        ended = f"episode return {returns:.2f}" if np.isfinite(returns) else "no episode ended"
+        print(
+            f"iteration {algo.iteration}: {steps:,} / {total:,} env steps, {speed:,.0f} steps/s, {ended}",
+            flush=True,
+        )
+        if steps >= next_eval or steps >= total:
+            export_policy(algo, vessel, steps)
+            evaluation.on_step()
+            next_eval = steps + eval_freq
+        if steps >= next_checkpoint or steps >= total:
+            algo.save_to_path(str((run / "checkpoints" / f"iter_{algo.iteration:06d}").resolve()))
+            next_checkpoint = steps + checkpoint_freq
+        vessel.logger.dump(steps)
+    export_policy(algo, vessel, steps)
+    save_policy(run, vessel, vessel.get_vec_normalize_env(), env_id, provenance, extra_files=["config.yml"])
+    evaluation.finish(steps)
+    elapsed = time.perf_counter() - start
+    print(
+        f"trained rllib ppo on {env_id} for {steps - first:,} steps in {elapsed / 60:.1f} min "
+        f"({(steps - first) / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}"
+    )
+    print_evaluation_summary(evaluation)
+
+
+def _lifetime_steps(algo: Any) -> int:
+    """Env steps sampled since the run began (kept across a resume)."""
+    from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+    value = algo.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
+    return int(value)
+
+
+# ---------------------------------------------------------------------------------------------
+# Command line
+# ---------------------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=program("train_rllib"),
+        description=description(__doc__),
+        epilog="Needs the rllib extra. The policy is exported as JSON + safetensors, which load without running "
+        "code; RLlib's checkpoints hold pickles, so --resume needs --trust-pickle.",
+    )
+    add_env_argument(parser)
+    parser.add_argument("--seed", type=int_at_least(0), default=0)
+    parser.add_argument("--out", default="runs", help=f"parent of the run directory <out>/<env>/{ALGO}_seed<seed>")
+    parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps (total env steps)")
+    parser.add_argument(
+        "--num-env-runners", type=int_at_least(0), default=0, help="env runner processes (0: sample in the driver)"
+    )
+    parser.add_argument("--envs-per-runner", type=int_at_least(1), help="override num_envs_per_env_runner")
+    parser.add_argument(
+        "--address", help="join the Ray cluster at HOST:PORT (or 'auto'); default: start a local Ray instance"
+    )
+    parser.add_argument("--num-cpus", type=int_at_least(1), help="CPUs of the local Ray instance (default: all)")
+    parser.add_argument(
+        "--hyperparams", help=f"YAML file instead of agents/hyperparams/{ALGO}.yml, or a run's config.yml"
+    )
+    parser.add_argument("--resume", help="RLlib checkpoint (<run>/checkpoints/iter_<n>) or run directory (its latest)")
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow --resume (RLlib checkpoints hold pickles, which can run code)",
+    )
+    parser.add_argument("--force", action="store_true", help="replace an earlier run with the same --out, env and seed")
+    parser.add_argument("--eval-freq", type=int_at_least(1), default=50_000, help="env steps between evaluations")
+    parser.add_argument(
+        "--eval-episodes", type=int_at_least(1), default=32, help="evaluation episodes (seeds 1 000 000 up)"
+    )
+    parser.add_argument(
+        "--checkpoint-freq", type=int_at_least(1), default=250_000, help="env steps between checkpoints"
+    )
+    return parser
+
+
+def main(argv: list[str] | None = None) -> Path:
+    args = build_parser().parse_args(argv)
+    return train_rllib(
+        env_id=args.env,
+        seed=args.seed,
+        out=args.out,
+        timesteps=args.timesteps,
+        num_env_runners=args.num_env_runners,
+        envs_per_runner=args.envs_per_runner,
+        address=args.address,
+        num_cpus=args.num_cpus,
+        hyperparams_file=args.hyperparams,
+        resume=args.resume,
+        trust_pickle=args.trust_pickle,
+        eval_freq=args.eval_freq,
+        eval_episodes=args.eval_episodes,
+        checkpoint_freq=args.checkpoint_freq,
+        force=args.force,
+        command=command_line("train_rllib", sys.argv[1:] if argv is None else argv),
+    )
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except (RayUnavailableError, PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError) as error:
+        sys.exit(f"{program('train_rllib')}: error: {error}")
