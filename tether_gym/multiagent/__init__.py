@@ -24,7 +24,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from tether_gym.multiagent.engine import CABLE_FIELDS, REWARD_MODES, AgentBatch, Communication, LocalLayout
+from tether_gym.multiagent.engine import (
+    CABLE_FIELDS,
+    REWARD_MODES,
+    AgentBatch,
+    Communication,
+    LocalLayout,
+    LocalSensors,
+)
 from tether_gym.multiagent.parallel import TetherParallelEnv
 
 __all__ = [
@@ -33,13 +40,16 @@ __all__ = [
     "AgentBatch",
     "Communication",
     "LocalLayout",
+    "LocalSensors",
     "TetherParallelEnv",
     "env_arguments",
     "parallel_env",
 ]
 
 
-def env_arguments(env_id: str, max_episode_steps: int | None = None, **kwargs: Any) -> tuple[dict[str, Any], int | None]:
+def env_arguments(
+    env_id: str, max_episode_steps: int | None = None, **kwargs: Any
+) -> tuple[dict[str, Any], int | None]:
     """The env's keyword arguments as ``gym.make(env_id, **kwargs)`` builds them (the id's
     registered ones, overridden by ``kwargs``) and its episode limit (``max_episode_steps``,
     or the id's; -1 means none, as for ``gym.make``).

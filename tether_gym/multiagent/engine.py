@@ -47,6 +47,7 @@ from tether_gym.envs.arguments import (
     EnvArgumentError,
     check_choice,
     check_number,
+    check_seed,
     check_whole,
 )
 from tether_gym.envs.contract import REWARD_TERMS, Scalar
@@ -60,6 +61,7 @@ __all__ = [
     "AgentGraph",
     "Communication",
     "LocalLayout",
+    "LocalSensors",
     "agent_name",
 ]
 
@@ -124,13 +126,18 @@ class Communication:
             return value
         example = "{'hops': 1} or {'range': 50.0, 'delay': 2}"
         if not isinstance(value, Mapping):
-            raise EnvArgumentError(f"communication must be None (off) or a dict such as {example}; got {short_repr(value)}")
+            raise EnvArgumentError(
+                f"communication must be None (off) or a dict such as {example}; got {short_repr(value)}"
+            )
         unknown = sorted(set(value) - {"hops", "range", "delay"}, key=repr)
         if unknown:
-            raise EnvArgumentError(f"unknown communication key(s) {unknown}; the keys are 'hops' or 'range', and 'delay'")
+            raise EnvArgumentError(
+                f"unknown communication key(s) {unknown}; the keys are 'hops' or 'range', and 'delay'"
+            )
         if ("hops" in value) == ("range" in value):
             raise EnvArgumentError(
-                f"communication needs exactly one of 'hops' (cables) or 'range' (m), e.g. {example}; got {short_repr(value)}"
+                f"communication needs exactly one of 'hops' (cables) or 'range' (m), e.g. {example}; "
+                f"got {short_repr(value)}"
             )
         hops = check_whole("communication['hops']", value["hops"], 1, 1000, "cables") if "hops" in value else None
         distance = (
@@ -176,7 +183,10 @@ class AgentGraph:
         heard: list[list[int]] = [[] for _ in nodes]
         if communication.hops is not None:
             hops = _hop_counts(cluster.num_nodes, ends)
-            heard = [[b for b, j in enumerate(nodes) if b != a and hops[i, j] <= communication.hops] for a, i in enumerate(nodes)]
+            heard = [
+                [b for b, j in enumerate(nodes) if b != a and hops[i, j] <= communication.hops]
+                for a, i in enumerate(nodes)
+            ]
         elif communication.range is not None:
             distance = np.linalg.norm(cluster.positions[:, None] - cluster.positions[None], axis=-1)
             heard = [
@@ -255,6 +265,120 @@ class LocalLayout:
         return observation[..., start], observation[..., start + 1 : start + width]
 
 
+class LocalSensors:
+    """What the agents of a task measure, hear and are paid: local observations and reward shares
+    from any :class:`DampingTask`'s public state (an :class:`AgentBatch`'s, or a single-agent
+    vector env's, for decentralised controllers evaluated there).
+
+    Args:
+        task: the batched task.
+        communication: who hears whom (:class:`Communication`).
+        local_observation_noise: std of the noise on measured entries (observation units).
+
+    Attributes:
+        graph: the :class:`AgentGraph`; ``layout``: the :class:`LocalLayout`; ``num_agents``: A.
+    """
+
+    def __init__(self, task: DampingTask, communication: Communication, local_observation_noise: float = 0.0) -> None:
+        self.task = task
+        self.communication = communication
+        self.local_observation_noise = local_observation_noise
+        self.graph = graph = AgentGraph.build(task, communication)
+        self.num_agents = A = graph.nodes.size
+        self.layout = LocalLayout(graph.cables.shape[1], graph.partners.shape[1])
+        present = graph.cables >= 0
+        self._present = present
+        self._cable = np.where(present, graph.cables, 0)
+        self._neighbour = np.where(present, graph.neighbours, 0)
+        # Which entries are measured (get noise): not the present flags, not the padding.
+        slots = np.repeat(present[:, :, None].astype(np.float64), CABLE_SLOT, axis=2)
+        slots[:, :, _FIELD_AT["present"]] = 0.0
+        self._measured = np.concatenate([slots.reshape(A, -1), np.ones((A, 3))], axis=1)
+        self._partner = np.where(graph.partners >= 0, graph.partners, 0)
+        self._heard = (graph.partners >= 0).astype(np.float64)
+        # Reward shares: a cable's share is split equally between its agent ends.
+        incidence = np.zeros((A, task.cluster.num_cables))
+        for a in range(A):
+            incidence[a, graph.cables[a, present[a]]] = 1.0
+        ends = incidence.sum(axis=0)
+        self._incidence = np.divide(incidence, ends, out=np.zeros_like(incidence), where=ends > 0)
+
+    def measure(self, indices: np.ndarray, noise_rngs: Sequence[np.random.Generator] | None = None) -> np.ndarray:
+        """(k, A, own size) float64: the agents' own measurements in clusters ``indices`` now;
+        with noise configured, cluster ``indices[j]``'s drawn from ``noise_rngs[j]``."""
+        task, sim, layout = self.task, self.task.sim, self.layout
+        nodes = self.graph.nodes
+        positions = sim.positions[indices]  # (k, n, 3) m
+        velocities = sim.velocities[indices]
+        offset = positions[:, self._neighbour] - positions[:, nodes][:, :, None]  # (k, A, D, 3) m
+        length = np.linalg.norm(offset, axis=-1)
+        direction = offset / np.maximum(length, 1e-300)[..., None]
+        relative = (velocities[:, self._neighbour] - velocities[:, nodes][:, :, None]) / task.speed_scale
+        rest = sim.L0[indices][:, self._cable]
+        elongation = (length - rest) / task.length_scale
+        tension = sim.tension[indices][:, self._cable] / sim.breaking_load[indices][:, self._cable]
+        k, A, D = positions.shape[0], nodes.size, layout.slots
+        slots = np.empty((k, A, D, CABLE_SLOT))
+        slots[..., _FIELD_AT["present"]] = 1.0
+        slots[..., _FIELD_AT["direction"]] = direction
+        slots[..., _FIELD_AT["relative_velocity"]] = relative
+        slots[..., _FIELD_AT["elongation"]] = elongation[..., None]
+        slots[..., _FIELD_AT["tension_ratio"]] = tension[..., None]
+        slots *= self._present[None, :, :, None]  # padding slots: exactly 0
+        thrust = task.thrust[indices][:, nodes] / task.max_thrust[None, :, None]
+        measured = np.concatenate([slots.reshape(k, A, D * CABLE_SLOT), thrust], axis=-1)
+        if self.local_observation_noise:
+            if noise_rngs is None:
+                raise ValueError("local_observation_noise is set: measure() needs one noise generator per cluster")
+            noise = np.stack([rng.standard_normal(measured.shape[1:]) for rng in noise_rngs])
+            measured += self.local_observation_noise * noise * self._measured
+        return np.clip(np.nan_to_num(measured, nan=0.0), -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
+
+    def assemble(self, own: np.ndarray, delayed: np.ndarray) -> np.ndarray:
+        """(k, A, size) float32 observations from (k, A, own size) measurements now and the
+        (k, A, own size) measurements the partners' messages carry (``delay`` steps old)."""
+        if not self.layout.partners:
+            return own.astype(np.float32)
+        messages = delayed[:, self._partner] * self._heard[None, :, :, None]  # (k, A, C, own)
+        present = np.broadcast_to(self._heard[None, :, :, None], messages.shape[:-1] + (1,))
+        parts = np.concatenate([present, messages], axis=-1).reshape(own.shape[:2] + (-1,))
+        return np.concatenate([own, parts], axis=-1).astype(np.float32)
+
+    def shares(self) -> np.ndarray:
+        """(B, A) the task's last rewards split between the agents: each reward term (the
+        ``Scalar`` columns ``REWARD_*``) by non-negative weights that sum to 1, so that the shares
+        add up to the team reward (to round-off):
+
+        * vibration: in proportion to each agent's local energy, its satellite's kinetic energy
+          relative to the centre of mass plus its part of its cables' strain energy
+          ``T^2 / (2 EA / L0)`` (a cable's energy is split equally between its agent ends);
+        * propellant: in proportion to the thrust each agent delivered;
+        * slack: in proportion to each agent's part of the slack cables;
+        * failure: equally.
+
+        A term whose weights are all 0 (e.g. no thrust at all) is split equally.
+        """
+        task = self.task
+        sim, nodes = task.sim, self.graph.nodes
+        masses = sim.masses[:, nodes]
+        velocities = sim.velocities
+        centre = (sim.masses[:, :, None] * velocities).sum(axis=1) / sim.masses.sum(axis=1)[:, None]
+        kinetic = 0.5 * masses * ((velocities[:, nodes] - centre[:, None]) ** 2).sum(axis=-1)
+        strain = 0.5 * sim.tension**2 / sim.stiffness
+        slack = (sim.tension <= 0.0).astype(np.float64)
+        thrust = np.linalg.norm(task.thrust[:, nodes], axis=-1)
+        weights = {
+            Scalar.REWARD_VIBRATION: kinetic + strain @ self._incidence.T,
+            Scalar.REWARD_PROPELLANT: thrust,
+            Scalar.REWARD_SLACK: slack @ self._incidence.T,
+            Scalar.REWARD_FAILURE: np.zeros_like(thrust),
+        }
+        shares = np.zeros((task.num_clusters, self.num_agents))
+        for term in REWARD_TERMS:
+            shares += task.scalars[:, term, None] * _normalised(weights[term])
+        return shares
+
+
 class AgentBatch:
     """B clusters of one id, each with A agents, over one :class:`DampingTask`.
 
@@ -283,9 +407,9 @@ class AgentBatch:
         reward: str = "team",
         local_observation_noise: float = 0.0,
     ) -> None:
-        self.communication = Communication.parse(communication)
+        communication = Communication.parse(communication)
         self.reward_mode = check_choice("reward", reward, REWARD_MODES)
-        self.local_observation_noise = check_number(
+        noise = check_number(
             "local_observation_noise", local_observation_noise, 0.0, MAX_OBSERVATION_NOISE, "(observation units)"
         )
         self.max_episode_steps = (
@@ -294,40 +418,24 @@ class AgentBatch:
         B = check_whole("num_envs", num_clusters, 1, MAX_NUM_ENVS)
         self.task = task = task_from_arguments(B, **dict(env_kwargs))
         self.num_clusters = B
-        self.graph = graph = AgentGraph.build(task, self.communication)
-        self.num_agents = A = graph.nodes.size
-        self.layout = LocalLayout(graph.cables.shape[1], graph.partners.shape[1])
+        self.sensors = sensors = LocalSensors(task, communication, noise)
+        self.graph, self.layout, self.num_agents = sensors.graph, sensors.layout, sensors.num_agents
         self.rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(B)]
         self.noise_rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(B)]
         self.episode_steps = np.zeros(B, dtype=np.int64)
         self.states = np.zeros((B, task.observation_size), dtype=np.float32)
-        own = self.layout.own.stop
         # The delay line: measurements of the last delay + 1 steps, the newest at ``head``.
-        self.line = np.zeros((self.communication.delay + 1, B, A, own))
+        self.line = np.zeros((communication.delay + 1, B, self.num_agents, self.layout.own.stop))
         self.head = 0
-        # Where each cable slot's fields come from, and which entries are measured (get noise).
-        present = graph.cables >= 0
-        self._present = present
-        self._cable = np.where(present, graph.cables, 0)
-        self._neighbour = np.where(present, graph.neighbours, 0)
-        slots = np.repeat(present[:, :, None].astype(np.float64), CABLE_SLOT, axis=2)
-        slots[:, :, _FIELD_AT["present"]] = 0.0
-        self._measured = np.concatenate([slots.reshape(A, -1), np.ones((A, 3))], axis=1)
-        self._partner = np.where(graph.partners >= 0, graph.partners, 0)
-        self._heard = (graph.partners >= 0).astype(np.float64)
         self._all = np.arange(B)
-        # Reward shares: who owns which cable (a cable's share split between its agent ends).
-        incidence = np.zeros((A, task.cluster.num_cables))
-        for a in range(A):
-            incidence[a, graph.cables[a, present[a]]] = 1.0
-        ends = incidence.sum(axis=0)
-        self._incidence = np.divide(incidence, ends, out=np.zeros_like(incidence), where=ends > 0)
+
+    @property
+    def communication(self) -> Communication:
+        return self.sensors.communication
 
     # ------------------------------------------------------------------ reset / step
     def check_seeds(self, seeds: Sequence[Any]) -> list[int | None]:
         """``seeds`` checked: ints >= 0 or None (keep the cluster's generators)."""
-        from tether_gym.envs.arguments import check_seed
-
         return [check_seed(f"seed[{k}]" if len(seeds) > 1 else "seed", s) for k, s in enumerate(seeds)]
 
     def reset(
@@ -338,9 +446,9 @@ class AgentBatch:
         velocities: np.ndarray | None = None,
     ) -> None:
         """Start new episodes for clusters ``indices`` (seeds checked by :meth:`check_seeds`, exact
-        states by the task's ``check_reset_state``). A seed s gives cluster the task generator
+        states by the task's ``check_reset_state``). A seed s gives the cluster the task generator
         ``seeding.np_random(s)`` (the single-agent env's) and a noise generator of its own,
-        derived from s."""
+        derived from s. The delay line of a reset cluster is filled with its first measurement."""
         for b, seed in zip(indices.tolist(), seeds, strict=True):
             if seed is not None:
                 self.rngs[b] = seeding.np_random(seed)[0]
@@ -349,7 +457,7 @@ class AgentBatch:
         self.task.reset(rngs, indices, positions, velocities)
         self.episode_steps[indices] = 0
         self.states[indices] = self.task.observe(rngs, indices)
-        self.line[:, indices] = self.measure(indices)[None]
+        self.line[:, indices] = self.sensors.measure(indices, [self.noise_rngs[b] for b in indices.tolist()])[None]
 
     def step(self, joint_actions: np.ndarray) -> None:
         """Step every cluster with (B, 3 A) float64 joint actions (checked by the caller)."""
@@ -358,88 +466,22 @@ class AgentBatch:
         self.episode_steps += 1
         self.states[:] = task.observe(self.rngs)
         self.head = (self.head + 1) % self.line.shape[0]
-        self.line[self.head] = self.measure(self._all)
-
-    # ------------------------------------------------------------------ observations
-    def measure(self, indices: np.ndarray) -> np.ndarray:
-        """(k, A, own size) the agents' own measurements in clusters ``indices`` now, with their
-        noise (drawn from each cluster's noise generator)."""
-        task, sim, layout = self.task, self.task.sim, self.layout
-        nodes = self.graph.nodes
-        positions = sim.positions[indices]  # (k, n, 3) m
-        velocities = sim.velocities[indices]
-        offset = positions[:, self._neighbour] - positions[:, nodes][:, :, None]  # (k, A, D, 3) m
-        length = np.linalg.norm(offset, axis=-1)
-        direction = offset / np.maximum(length, 1e-300)[..., None]
-        relative = (velocities[:, self._neighbour] - velocities[:, nodes][:, :, None]) / task.speed_scale
-        rest = sim.L0[indices][:, self._cable]
-        elongation = (length - rest) / task.length_scale
-        tension = sim.tension[indices][:, self._cable] / sim.breaking_load[indices][:, self._cable]
-        k, A, D = positions.shape[0], nodes.size, layout.slots
-        slots = np.empty((k, A, D, CABLE_SLOT))
-        slots[..., _FIELD_AT["present"]] = 1.0
-        slots[..., _FIELD_AT["direction"]] = direction
-        slots[..., _FIELD_AT["relative_velocity"]] = relative
-        slots[..., _FIELD_AT["elongation"]] = elongation[..., None]
-        slots[..., _FIELD_AT["tension_ratio"]] = tension[..., None]
-        slots *= self._present[None, :, :, None]  # padding slots: exactly 0
-        thrust = task.thrust[indices][:, nodes] / task.max_thrust[None, :, None]
-        measured = np.concatenate([slots.reshape(k, A, D * CABLE_SLOT), thrust], axis=-1)
-        if self.local_observation_noise:
-            noise = np.stack([self.noise_rngs[b].standard_normal(measured.shape[1:]) for b in indices.tolist()])
-            measured += self.local_observation_noise * noise * self._measured
-        return np.clip(np.nan_to_num(measured, nan=0.0), -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
+        self.line[self.head] = self.sensors.measure(self._all, self.noise_rngs)
 
     def observations(self, indices: np.ndarray | None = None) -> np.ndarray:
         """(k, A, size) float32 local observations of clusters ``indices`` (default all): the
         newest measurements, and with communication the partners' from ``delay`` steps ago."""
         rows = self._all if indices is None else indices
-        own = self.line[self.head, rows]
-        if not self.layout.partners:
-            return own.astype(np.float32)
-        delayed = self.line[(self.head + 1) % self.line.shape[0], rows]  # delay steps ago (the oldest entry)
-        messages = delayed[:, self._partner] * self._heard[None, :, :, None]  # (k, A, C, own)
-        present = np.broadcast_to(self._heard[None, :, :, None], messages.shape[:-1] + (1,))
-        parts = np.concatenate([present, messages], axis=-1).reshape(own.shape[:2] + (-1,))
-        return np.concatenate([own, parts], axis=-1).astype(np.float32)
+        delayed = self.line[(self.head + 1) % self.line.shape[0], rows]  # the oldest entry: delay steps ago
+        return self.sensors.assemble(self.line[self.head, rows], delayed)
 
     # ------------------------------------------------------------------ rewards and ends
     def rewards(self) -> np.ndarray:
-        """(B, A) rewards of the last step. ``"team"``: every agent gets the single-agent reward.
-        ``"shares"``: each reward term (``Scalar`` columns ``REWARD_*``) is split between the
-        agents by non-negative weights that sum to 1, so the shares add up to the team reward:
-
-        * vibration: in proportion to each agent's local energy, its satellite's kinetic energy
-          relative to the centre of mass plus its share of its cables' strain energy ``T^2 / 2EA
-          L0`` (a cable's energy is split between its agent ends);
-        * propellant: in proportion to the thrust each agent delivered;
-        * slack: in proportion to each agent's share of the slack cables;
-        * failure: equally.
-
-        A term whose weights are all 0 (e.g. no thrust at all) is split equally.
-        """
-        task = self.task
-        team = task.rewards()
-        if self.reward_mode == "team":
-            return np.repeat(team[:, None], self.num_agents, axis=1)
-        sim, nodes = task.sim, self.graph.nodes
-        masses = sim.masses[:, nodes]
-        velocities = sim.velocities
-        centre = (sim.masses[:, :, None] * velocities).sum(axis=1) / sim.masses.sum(axis=1)[:, None]
-        kinetic = 0.5 * masses * ((velocities[:, nodes] - centre[:, None]) ** 2).sum(axis=-1)
-        strain = 0.5 * sim.tension**2 / sim.stiffness
-        slack = (sim.tension <= 0.0).astype(np.float64)
-        thrust = np.linalg.norm(task.thrust[:, nodes], axis=-1)
-        weights = {
-            Scalar.REWARD_VIBRATION: kinetic + strain @ self._incidence.T,
-            Scalar.REWARD_PROPELLANT: thrust,
-            Scalar.REWARD_SLACK: slack @ self._incidence.T,
-            Scalar.REWARD_FAILURE: np.zeros_like(thrust),
-        }
-        shares = np.zeros((self.num_clusters, self.num_agents))
-        for term in REWARD_TERMS:
-            shares += task.scalars[:, term, None] * _normalised(weights[term])
-        return shares
+        """(B, A) rewards of the last step: ``"team"``, every agent gets the single-agent reward;
+        ``"shares"``, :meth:`LocalSensors.shares`."""
+        if self.reward_mode == "shares":
+            return self.sensors.shares()
+        return np.repeat(self.task.rewards()[:, None], self.num_agents, axis=1)
 
     def terminated(self) -> np.ndarray:
         """(B,) bool: clusters whose last step ended the episode (the task's end flags)."""
@@ -462,4 +504,3 @@ def _normalised(weights: np.ndarray) -> np.ndarray:
     total = weights.sum(axis=1, keepdims=True)
     equal = np.full_like(weights, 1.0 / weights.shape[1])
     return np.where(total > 0, weights / np.where(total > 0, total, 1.0), equal)
-

@@ -199,7 +199,9 @@ class TetherParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             if command.shape != (3,):
                 raise EnvArgumentError(f"action of {name} must have shape (3,) (x, y, z); got shape {command.shape}")
             if not np.isfinite(command).all():
-                raise EnvArgumentError(f"action of {name} contains NaN or inf; thrust commands must be finite in [-1, 1]")
+                raise EnvArgumentError(
+                    f"action of {name} contains NaN or inf; thrust commands must be finite numbers in [-1, 1]"
+                )
             joint[0, 3 * k : 3 * k + 3] = command
         return joint
 
