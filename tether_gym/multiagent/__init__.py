@@ -17,12 +17,13 @@
 * :class:`~tether_gym.multiagent.engine.AgentBatch` is the batched engine both are thin layers
   over, itself a thin layer over the batched task.
 
-Needs the ``multiagent`` extra (``pip install "tether-gym[multiagent]"``, for PettingZoo).
+The PettingZoo env needs the ``multiagent`` extra (``pip install "tether-gym[multiagent]"``); the
+engine alone (what the decentralised controllers of ``agents`` use) does not.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tether_gym.multiagent.engine import (
     CABLE_FIELDS,
@@ -32,7 +33,9 @@ from tether_gym.multiagent.engine import (
     LocalLayout,
     LocalSensors,
 )
-from tether_gym.multiagent.parallel import TetherParallelEnv
+
+if TYPE_CHECKING:
+    from tether_gym.multiagent.parallel import TetherParallelEnv
 
 __all__ = [
     "CABLE_FIELDS",
@@ -79,5 +82,16 @@ def parallel_env(env_id: str, max_episode_steps: int | None = None, **kwargs: An
             multi-agent options ``communication``, ``reward`` and ``local_observation_noise``
             (see :class:`~tether_gym.multiagent.parallel.TetherParallelEnv`).
     """
+    from tether_gym.multiagent.parallel import TetherParallelEnv
+
     env_kwargs, steps = env_arguments(env_id, max_episode_steps, **kwargs)
     return TetherParallelEnv(env_id, max_episode_steps=steps, **env_kwargs)
+
+
+def __getattr__(name: str) -> Any:
+    # TetherParallelEnv on first use: importing the engine must not need PettingZoo.
+    if name == "TetherParallelEnv":
+        from tether_gym.multiagent.parallel import TetherParallelEnv
+
+        return TetherParallelEnv
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,181 @@
+"""Decentralised controllers: each thruster acts on what its own satellite measures.
+
+Two scripted laws (registered in :data:`agents.baselines.BASELINES`, so the comparison and the
+benchmark run them like the other baselines) and the adapter that runs a shared decentralised
+policy (trained with ``python -m agents.train --multiagent``) on the single-agent envs.
+
+**Local laws.** Satellite i with thruster k sees, for each of its cables c to a neighbour j, the
+unit direction ``e_c`` from i to j, the neighbour's velocity relative to its own ``w_c = v_j - v_i``
+(m/s) and the cable's elongation ``dL_c`` (m): the cable slots of the multi-agent env's local
+observation (:mod:`tether_gym.multiagent.engine`). A law maps them to a force ``F_i`` (N) and
+knows its own cables' specifications (``L0``, ``EA``, ``N0``), as a satellite's designer would:
+
+* :class:`LocalVelocityFeedbackController`: a virtual dashpot to every cable neighbour,
+  ``F_i = g m_i sum_c w_c``: it brakes the relative motion of the satellite and its neighbours
+  in every direction, and, since each pair's two forces are opposite, it never pushes the
+  cluster as a whole.
+* :class:`LocalTensionAwareController`: the same dashpot along each cable only,
+  ``g_c m_i (w_c . e_c) e_c``, its rate scheduled on the cable's state (``g_taut`` while the
+  cable is taut, ``g_slack`` while it is slack: a slack cable no longer couples the pair, so the
+  thruster is the only damper left), plus the virtual strut of
+  :class:`agents.baselines.TensionAwareController` across a slack cable,
+  ``-kappa (dL_slack - dL_c) e_c`` with ``dL_slack = -N0 L0 / EA``.
+
+Their gains were tuned on the tuning seeds 2000-2063 (apart from the benchmark's held-out seeds
+10 000 and up and the training evaluation seeds 1 000 000 and up); see each class for the values
+and the measurements.
+
+Both read the single-agent observation too (``predict`` as every baseline): the decoded state
+(:meth:`agents.baselines.Controller.decode`) gives each satellite exactly its local quantities,
+so the same law runs on the multi-agent env (:meth:`LocalController.act_local`) and on the
+single-agent envs, and a batch of observations gives each row what that row alone gives.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from tether_gym.multiagent.engine import AgentGraph, Communication, LocalLayout
+
+from .baselines import BASELINES, Controller
+
+__all__ = [
+    "LocalController",
+    "LocalTensionAwareController",
+    "LocalVelocityFeedbackController",
+    "local_observations",
+]
+
+
+class LocalController(Controller):
+    """Base class of the decentralised laws: :meth:`local_force` maps each satellite's cable
+    measurements to its thruster's force.
+
+    Attributes:
+        graph: the agents and their cables (:class:`tether_gym.multiagent.engine.AgentGraph`).
+        slack_point: (A, D) elongation below which each cable slot is slack, m (0 for padding).
+        present: (A, D) bool, the real cable slots.
+    """
+
+    name = "local"
+
+    def __init__(self, env: Any) -> None:
+        super().__init__(env)
+        self.graph = graph = AgentGraph.build(self.task, Communication())
+        self.present = graph.cables >= 0
+        cables = np.where(self.present, graph.cables, 0)
+        self._cable = cables
+        self._neighbour = np.where(self.present, graph.neighbours, 0)
+        cluster = self.cluster
+        self.slack_point = np.where(self.present, -cluster.N0[cables] / cluster.stiffness[cables], 0.0)
+        self.layout = LocalLayout(graph.cables.shape[1], 0)
+        self.agent_masses = self.masses[graph.nodes]
+
+    def local_force(self, direction: np.ndarray, relative: np.ndarray, elongation: np.ndarray) -> np.ndarray:
+        """(N, A, 3) forces, N, from (N, A, D, 3) cable directions, (N, A, D, 3) relative
+        velocities (m/s) and (N, A, D) elongations (m); padding slots hold zeros."""
+        raise NotImplementedError
+
+    def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
+        nodes = self.graph.nodes
+        offset = positions[:, self._neighbour] - positions[:, nodes][:, :, None]
+        direction = offset / np.maximum(np.linalg.norm(offset, axis=-1, keepdims=True), 1e-300)
+        relative = velocities[:, self._neighbour] - velocities[:, nodes][:, :, None]
+        mask = self.present[None, :, :, None]
+        return self.local_force(direction * mask, relative * mask, elongations[:, self._cable] * self.present)
+
+    def act_local(self, observations: np.ndarray) -> np.ndarray:
+        """(N, A, 3) float32 commands in [-1, 1] from (N, A, size) local observations of the
+        multi-agent env (its own cable slots only; messages are not used)."""
+        obs = np.asarray(observations, dtype=np.float64)
+        layout = self.layout
+        direction = layout.cable_field(obs, "direction")
+        relative = layout.cable_field(obs, "relative_velocity") * self.task.speed_scale
+        elongation = layout.cable_field(obs, "elongation")[..., 0] * self.task.length_scale
+        force = self.local_force(direction, relative, elongation)
+        return np.clip(force / self.max_thrust[None, :, None], -1.0, 1.0).astype(np.float32)
+
+
+class LocalVelocityFeedbackController(LocalController):
+    """Virtual dashpots to the cable neighbours: ``F_i = g m_i sum_c (v_j - v_i)``.
+
+    The rate ``g`` (1/s) is one number for every id, 0.25 /s: of 0.1, 0.25, 0.5 and 1 /s it has
+    the largest mean gain over passive on the tuning seeds, averaged over the 8 ids in units of
+    the centralised velocity feedback's gain (1.14; 0.1 /s: 1.09, 0.5 /s: 1.10, 1 /s: 1.04).
+    The measurements are in ``docs/multiagent.md``.
+
+    Args:
+        env: a tether-gym env.
+        gain: the rate ``g``, 1/s.
+    """
+
+    name = "local_velocity_feedback"
+
+    def __init__(self, env: Any, gain: float = 0.25) -> None:
+        super().__init__(env)
+        if not (np.isfinite(gain) and gain >= 0):
+            raise ValueError(f"gain must be a finite rate >= 0 in 1/s; got {gain!r}")
+        self.gain = float(gain)
+
+    def local_force(self, direction: np.ndarray, relative: np.ndarray, elongation: np.ndarray) -> np.ndarray:
+        return self.gain * self.agent_masses[None, :, None] * relative.sum(axis=2)
+
+
+class LocalTensionAwareController(LocalController):
+    """Dashpots along each cable with the rate scheduled on its state, and struts across slack
+    cables (see the module docstring).
+
+    Defaults ``g_taut = g_slack = 1 /s`` with the strut: on the tuning seeds, averaged over the
+    8 ids in units of the centralised velocity feedback's gain over passive, 1.23 (slack rate
+    0.5 /s: 1.22, 2 /s: 1.19; without the strut 1.00 at 1 /s); the taut rate hardly matters
+    (0.25 /s: 1.230, 4 /s: 1.216: a taut cable damps the pair itself). The strut is what the
+    schedule is for. On the orbital chain, whose cables are barely taut, the law is poor (-141
+    against -24 for local velocity feedback, passive -250). Measurements: ``docs/multiagent.md``.
+
+    Args:
+        env: a tether-gym env.
+        taut_gain: ``g_taut``, 1/s, the axial dashpot's rate while the cable is taut.
+        slack_gain: ``g_slack``, 1/s, its rate while the cable is slack.
+        strut_stiffness: ``kappa``, N/m; None: ``m g_slack^2 / 4`` per satellite (critical
+            damping of the strut against the slack dashpot, as in the centralised law).
+    """
+
+    name = "local_tension_aware"
+
+    def __init__(
+        self, env: Any, taut_gain: float = 1.0, slack_gain: float = 1.0, strut_stiffness: float | None = None
+    ) -> None:
+        super().__init__(env)
+        for label, value in (("taut_gain", taut_gain), ("slack_gain", slack_gain)):
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{label} must be a finite rate >= 0 in 1/s; got {value!r}")
+        self.taut_gain, self.slack_gain = float(taut_gain), float(slack_gain)
+        if strut_stiffness is not None and not (np.isfinite(strut_stiffness) and strut_stiffness >= 0):
+            raise ValueError(f"strut_stiffness must be a finite stiffness >= 0 N/m; got {strut_stiffness!r}")
+        self.strut = (
+            self.agent_masses * self.slack_gain**2 / 4.0
+            if strut_stiffness is None
+            else np.full(self.agent_masses.shape, float(strut_stiffness))
+        )
+
+    def local_force(self, direction: np.ndarray, relative: np.ndarray, elongation: np.ndarray) -> np.ndarray:
+        slack = elongation < self.slack_point[None]
+        rate = np.where(slack, self.slack_gain, self.taut_gain) * self.present[None]
+        axial = (relative * direction).sum(axis=-1)  # (N, A, D) m/s, positive: the pair moves apart
+        damping = (rate * axial)[..., None] * direction * self.agent_masses[None, :, None, None]
+        shortfall = np.where(slack, self.slack_point[None] - elongation, 0.0)  # m, >= 0
+        strut = -(self.strut[None, :, None] * shortfall)[..., None] * direction
+        return (damping + strut).sum(axis=2)
+
+
+BASELINES.update({cls.name: cls for cls in (LocalVelocityFeedbackController, LocalTensionAwareController)})
+
+
+def local_observations(sensors: Any, task: Any) -> np.ndarray:
+    """(B, A, size) float32 local observations of every cluster of ``task`` now, by ``sensors``
+    (a :class:`tether_gym.multiagent.engine.LocalSensors` without noise or delay)."""
+    clusters = np.arange(task.num_clusters)
+    own = sensors.measure(clusters)
+    return sensors.assemble(own, own)
