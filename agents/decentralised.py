@@ -33,19 +33,20 @@ single-agent envs, and a batch of observations gives each row what that row alon
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from tether_gym.multiagent.engine import AgentGraph, Communication, LocalLayout
+from tether_gym.multiagent.engine import AgentGraph, Communication, LocalLayout, LocalSensors
 
-from .baselines import BASELINES, Controller
+from .baselines import BASELINES, Controller, task_of
 
 __all__ = [
     "LocalController",
+    "LocalObserver",
     "LocalTensionAwareController",
     "LocalVelocityFeedbackController",
-    "local_observations",
 ]
 
 
@@ -173,9 +174,52 @@ class LocalTensionAwareController(LocalController):
 BASELINES.update({cls.name: cls for cls in (LocalVelocityFeedbackController, LocalTensionAwareController)})
 
 
-def local_observations(sensors: Any, task: Any) -> np.ndarray:
-    """(B, A, size) float32 local observations of every cluster of ``task`` now, by ``sensors``
-    (a :class:`tether_gym.multiagent.engine.LocalSensors` without noise or delay)."""
-    clusters = np.arange(task.num_clusters)
-    own = sensors.measure(clusters)
-    return sensors.assemble(own, own)
+class LocalObserver:
+    """The multi-agent env's local observations of a single-agent env's clusters, for running a
+    shared decentralised policy there (``agents.compare``, the benchmark, the training
+    evaluation): it reads the attached env's task, whose state is the one the observation
+    handed to ``predict`` describes.
+
+    Only the stateless options can be reproduced that way: communication without delay, and no
+    local observation noise (a policy trained with them is evaluated in the multi-agent env).
+
+    Args:
+        env: a tether-gym env (single or vector).
+        options: the policy's multi-agent options (``communication``, ``reward``,
+            ``local_observation_noise``), as recorded in its ``policy.json``.
+    """
+
+    def __init__(self, env: Any, options: Mapping[str, Any]) -> None:
+        unknown = sorted(set(options) - {"communication", "reward", "local_observation_noise"})
+        if unknown:
+            raise ValueError(
+                f"unknown multi-agent option(s) {unknown}; the options are communication, reward and "
+                "local_observation_noise"
+            )
+        communication = Communication.parse(options.get("communication"))
+        if communication.delay or options.get("local_observation_noise"):
+            raise ValueError(
+                "this decentralised policy was trained with a communication delay or local observation noise, which "
+                "the single-agent envs cannot reproduce: evaluate it in tether_gym.multiagent.parallel_env"
+            )
+        self.task = task_of(env)
+        self.sensors = LocalSensors(self.task, communication)
+        self.num_agents = self.sensors.num_agents
+        self.observation_size = self.sensors.layout.size
+
+    def observe(self, observation: np.ndarray) -> tuple[np.ndarray, bool]:
+        """``(local, single)``: (N, A, size) local observations of the attached env's clusters
+        now, checked against the (obs_size,) or (N, obs_size) ``observation`` handed to
+        ``predict`` (one row per cluster), and whether that was a single observation."""
+        obs = np.asarray(observation)
+        single = obs.ndim == 1
+        rows = 1 if single else obs.shape[0]
+        if obs.ndim not in (1, 2) or rows != self.task.num_clusters or obs.shape[-1] != self.task.observation_size:
+            raise ValueError(
+                f"a decentralised policy reads the local observations of the env it is attached to "
+                f"({self.task.num_clusters} cluster(s), observations of size {self.task.observation_size}); got an "
+                f"observation batch of shape {obs.shape}: attach(env) it to the env that produced the observations"
+            )
+        clusters = np.arange(self.task.num_clusters)
+        own = self.sensors.measure(clusters)
+        return self.sensors.assemble(own, own), single
