@@ -8,18 +8,19 @@ policy (trained with ``python -m agents.train --multiagent``) on the single-agen
 unit direction ``e_c`` from i to j, the neighbour's velocity relative to its own ``w_c = v_j - v_i``
 (m/s) and the cable's elongation ``dL_c`` (m): the cable slots of the multi-agent env's local
 observation (:mod:`tether_gym.multiagent.engine`). A law maps them to a force ``F_i`` (N) and
-knows its own cables' specifications (``L0``, ``EA``, ``N0``), as a satellite's designer would:
+knows its own cables' specifications (``L0``, ``EA``, ``N0``) and its neighbours' masses, as a
+satellite's designer would:
 
 * :class:`LocalVelocityFeedbackController`: a virtual dashpot to every cable neighbour,
-  ``F_i = g m_i sum_c w_c``: it brakes the relative motion of the satellite and its neighbours
-  in every direction, and, since each pair's two forces are opposite, it never pushes the
-  cluster as a whole.
+  ``F_i = g sum_c mu_c w_c`` with ``mu_c = m_i m_j / (m_i + m_j)`` the pair's reduced mass: it
+  brakes the relative motion of the satellite and its neighbours in every direction, and, since
+  the two forces of a pair are equal and opposite, it never pushes the cluster as a whole.
 * :class:`LocalTensionAwareController`: the same dashpot along each cable only,
-  ``g_c m_i (w_c . e_c) e_c``, its rate scheduled on the cable's state (``g_taut`` while the
+  ``g_c mu_c (w_c . e_c) e_c``, its rate scheduled on the cable's state (``g_taut`` while the
   cable is taut, ``g_slack`` while it is slack: a slack cable no longer couples the pair, so the
-  thruster is the only damper left), plus the virtual strut of
+  thrusters are the only damper left), plus the virtual strut of
   :class:`agents.baselines.TensionAwareController` across a slack cable,
-  ``-kappa (dL_slack - dL_c) e_c`` with ``dL_slack = -N0 L0 / EA``.
+  ``-kappa_c (dL_slack - dL_c) e_c`` with ``dL_slack = -N0 L0 / EA``, again equal and opposite.
 
 Their gains were tuned on the tuning seeds 2000-2063 (apart from the benchmark's held-out seeds
 10 000 and up and the training evaluation seeds 1 000 000 and up); see each class for the values
@@ -72,7 +73,11 @@ class LocalController(Controller):
         cluster = self.cluster
         self.slack_point = np.where(self.present, -cluster.N0[cables] / cluster.stiffness[cables], 0.0)
         self.layout = LocalLayout(graph.cables.shape[1], 0)
-        self.agent_masses = self.masses[graph.nodes]
+        # (A, D) kg: the reduced mass m_i m_j / (m_i + m_j) of the pair each cable slot joins (0
+        # for padding). A pair's two thrusters then push with equal and opposite forces.
+        m_i = self.masses[graph.nodes][:, None]
+        m_j = self.masses[self._neighbour]
+        self.pair_mass = np.where(self.present, m_i * m_j / (m_i + m_j), 0.0)
 
     def local_force(self, direction: np.ndarray, relative: np.ndarray, elongation: np.ndarray) -> np.ndarray:
         """(N, A, 3) forces, N, from (N, A, D, 3) cable directions, (N, A, D, 3) relative
@@ -100,12 +105,12 @@ class LocalController(Controller):
 
 
 class LocalVelocityFeedbackController(LocalController):
-    """Virtual dashpots to the cable neighbours: ``F_i = g m_i sum_c (v_j - v_i)``.
+    """Virtual dashpots to the cable neighbours: ``F_i = g sum_c mu_c (v_j - v_i)``.
 
-    The rate ``g`` (1/s) is one number for every id, 0.25 /s: of 0.1, 0.25, 0.5 and 1 /s it has
-    the largest mean gain over passive on the tuning seeds, averaged over the 8 ids in units of
-    the centralised velocity feedback's gain (1.14; 0.1 /s: 1.09, 0.5 /s: 1.10, 1 /s: 1.04).
-    The measurements are in ``docs/multiagent.md``.
+    The rate ``g`` (1/s) is one number for every id, 0.5 /s: of 0.25, 0.5, 1 and 2 /s it has the
+    largest mean gain over passive on the tuning seeds, averaged over the 8 ids in units of the
+    centralised velocity feedback's gain (1.14; 0.25 /s: 1.13, 1 /s: 1.11, 2 /s: 1.05). The
+    measurements are in ``docs/multiagent.md``.
 
     Args:
         env: a tether-gym env.
@@ -114,39 +119,39 @@ class LocalVelocityFeedbackController(LocalController):
 
     name = "local_velocity_feedback"
 
-    def __init__(self, env: Any, gain: float = 0.25) -> None:
+    def __init__(self, env: Any, gain: float = 0.5) -> None:
         super().__init__(env)
         if not (np.isfinite(gain) and gain >= 0):
             raise ValueError(f"gain must be a finite rate >= 0 in 1/s; got {gain!r}")
         self.gain = float(gain)
 
     def local_force(self, direction: np.ndarray, relative: np.ndarray, elongation: np.ndarray) -> np.ndarray:
-        return self.gain * self.agent_masses[None, :, None] * relative.sum(axis=2)
+        return self.gain * (self.pair_mass[None, :, :, None] * relative).sum(axis=2)
 
 
 class LocalTensionAwareController(LocalController):
     """Dashpots along each cable with the rate scheduled on its state, and struts across slack
     cables (see the module docstring).
 
-    Defaults ``g_taut = g_slack = 1 /s`` with the strut: on the tuning seeds, averaged over the
-    8 ids in units of the centralised velocity feedback's gain over passive, 1.23 (slack rate
-    0.5 /s: 1.22, 2 /s: 1.19; without the strut 1.00 at 1 /s); the taut rate hardly matters
-    (0.25 /s: 1.230, 4 /s: 1.216: a taut cable damps the pair itself). The strut is what the
-    schedule is for. On the orbital chain, whose cables are barely taut, the law is poor (-141
-    against -24 for local velocity feedback, passive -250). Measurements: ``docs/multiagent.md``.
+    Defaults ``g_taut = 2 /s``, ``g_slack = 1 /s``, with the strut: on the tuning seeds, averaged
+    over the 8 ids in units of the centralised velocity feedback's gain over passive, 1.23
+    (slack rate 2 /s: 1.20, 4 /s: 1.04; without the strut 1.04 at 1 /s). The taut rate hardly
+    matters (0.5, 2 and 8 /s: 1.197, 1.201, 1.184 at a slack rate of 2 /s: a taut cable damps the
+    pair itself); the strut across slack cables is what the schedule is for. On the orbital
+    chain, whose cables are barely taut, the law is poor (see ``docs/multiagent.md``).
 
     Args:
         env: a tether-gym env.
         taut_gain: ``g_taut``, 1/s, the axial dashpot's rate while the cable is taut.
         slack_gain: ``g_slack``, 1/s, its rate while the cable is slack.
-        strut_stiffness: ``kappa``, N/m; None: ``m g_slack^2 / 4`` per satellite (critical
+        strut_stiffness: ``kappa``, N/m; None: ``mu_c g_slack^2 / 4`` per cable (critical
             damping of the strut against the slack dashpot, as in the centralised law).
     """
 
     name = "local_tension_aware"
 
     def __init__(
-        self, env: Any, taut_gain: float = 1.0, slack_gain: float = 1.0, strut_stiffness: float | None = None
+        self, env: Any, taut_gain: float = 2.0, slack_gain: float = 1.0, strut_stiffness: float | None = None
     ) -> None:
         super().__init__(env)
         for label, value in (("taut_gain", taut_gain), ("slack_gain", slack_gain)):
@@ -155,19 +160,19 @@ class LocalTensionAwareController(LocalController):
         self.taut_gain, self.slack_gain = float(taut_gain), float(slack_gain)
         if strut_stiffness is not None and not (np.isfinite(strut_stiffness) and strut_stiffness >= 0):
             raise ValueError(f"strut_stiffness must be a finite stiffness >= 0 N/m; got {strut_stiffness!r}")
-        self.strut = (
-            self.agent_masses * self.slack_gain**2 / 4.0
+        self.strut = (  # (A, D) N/m
+            self.pair_mass * self.slack_gain**2 / 4.0
             if strut_stiffness is None
-            else np.full(self.agent_masses.shape, float(strut_stiffness))
+            else np.where(self.present, float(strut_stiffness), 0.0)
         )
 
     def local_force(self, direction: np.ndarray, relative: np.ndarray, elongation: np.ndarray) -> np.ndarray:
         slack = elongation < self.slack_point[None]
         rate = np.where(slack, self.slack_gain, self.taut_gain) * self.present[None]
         axial = (relative * direction).sum(axis=-1)  # (N, A, D) m/s, positive: the pair moves apart
-        damping = (rate * axial)[..., None] * direction * self.agent_masses[None, :, None, None]
+        damping = (rate * self.pair_mass[None] * axial)[..., None] * direction
         shortfall = np.where(slack, self.slack_point[None] - elongation, 0.0)  # m, >= 0
-        strut = -(self.strut[None, :, None] * shortfall)[..., None] * direction
+        strut = -(self.strut[None] * shortfall)[..., None] * direction
         return (damping + strut).sum(axis=2)
 
 
