@@ -51,6 +51,17 @@ SHIPPED_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE)
 RUNS_TABLE = "training_runs"
 
 
+#: What a shared decentralised policy's model name adds to its algorithm's (``ppo_multiagent``),
+#: as agents.train names its run directories: the two kinds of model of an id ship side by side.
+MULTIAGENT_SUFFIX = "_multiagent"
+
+
+def model_name(metadata: Mapping[str, Any]) -> str:
+    """The name a policy ships under: its algorithm, with :data:`MULTIAGENT_SUFFIX` for a shared
+    decentralised policy."""
+    return metadata["algo"] + (MULTIAGENT_SUFFIX if metadata.get("multiagent") is not None else "")
+
+
 def _policy_dir(run: Path) -> Path:
     for directory in (run / "best", run):
         if is_policy_dir(directory):
@@ -109,7 +120,7 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
         candidates.append(
             {
                 "env_id": env_id,
-                "algo": metadata["algo"],
+                "algo": model_name(metadata),
                 "run": str(run),
                 "policy": str(policy_dir),
                 "seed": config.get("seed"),
@@ -229,7 +240,8 @@ def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
             skip_value = True
         elif not token.startswith("--hyperparams="):
             kept.append(token)
-    for flag, value in (("--algo", algo), ("--env", env_id), ("--seed", candidate["seed"])):
+    algorithm = algo.removesuffix(MULTIAGENT_SUFFIX)
+    for flag, value in (("--algo", algorithm), ("--env", env_id), ("--seed", candidate["seed"])):
         if flag not in kept:
             kept += [flag, str(value)]
     return shlex.join([*kept, "--hyperparams", str(Path(shipped_at) / env_id / algo / "config.yml")])

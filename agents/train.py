@@ -898,7 +898,9 @@ def train(
     multiagent = hyperparams.get("multiagent")
     if multiagent is not None and hyperparams.get("residual_on") is not None:
         raise HyperparameterError("'multiagent' and 'residual_on' do not combine: a residual policy is centralised")
-    run = _prepare_run_dir(out, env_id, algo if multiagent is None else f"{algo}_multiagent", seed, force)
+    from .ship import model_name
+
+    run = _prepare_run_dir(out, env_id, model_name({"algo": algo, "multiagent": multiagent}), seed, force)
 
     record = {
         "algo": algo,
