@@ -119,3 +119,19 @@ def test_ppo_trains_a_shared_decentralised_policy(tmp_path: Path) -> None:
     observations, _ = env.reset(seed=0)
     local = np.stack([observations[name] for name in env.possible_agents])
     assert controller.act_local(local).shape == (4, 3)
+
+
+def test_decentralised_models_ship_beside_the_centralised_ones() -> None:
+    from agents.ship import model_name, reproduce_command
+
+    assert model_name({"algo": "ppo", "multiagent": None}) == "ppo"
+    assert model_name({"algo": "ppo", "multiagent": {}}) == "ppo_multiagent"
+    candidate = {
+        "env_id": "TetherHub-v0",
+        "algo": "ppo_multiagent",
+        "seed": 2,
+        "command": "python -m agents.train --multiagent --env TetherHub-v0 --seed 2 --no-progress",
+    }
+    command = reproduce_command(candidate, "agents/models")
+    assert "--algo ppo " in command and "--multiagent" in command
+    assert command.endswith("--hyperparams agents/models/TetherHub-v0/ppo_multiagent/config.yml")
