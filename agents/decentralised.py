@@ -34,7 +34,7 @@ single-agent envs, and a batch of observations gives each row what that row alon
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -48,6 +48,7 @@ __all__ = [
     "LocalObserver",
     "LocalTensionAwareController",
     "LocalVelocityFeedbackController",
+    "local_trajectory_observations",
 ]
 
 
@@ -228,3 +229,24 @@ class LocalObserver:
         clusters = np.arange(self.task.num_clusters)
         own = self.sensors.measure(clusters)
         return self.sensors.assemble(own, own), single
+
+
+def local_trajectory_observations(
+    act: Callable[[np.ndarray], np.ndarray], env_id: str, options: Mapping[str, Any]
+) -> Callable[[int], np.ndarray]:
+    """A function ``n -> (n, size)`` of agents' local observations along the trajectories of
+    ``act`` (a batch of local observations -> a batch of (3,) commands), 8 clusters in parallel,
+    seeds 0-7: what :func:`agents.convert.trajectory_observations` is to a centralised policy,
+    for the reference actions of a shipped decentralised one."""
+    from tether_gym.multiagent.sb3 import make_agent_vec_env
+
+    def observations(count: int) -> np.ndarray:
+        venv = make_agent_vec_env(env_id, num_envs=8, seed=0, **dict(options))
+        rows = [venv.reset()]
+        while sum(len(r) for r in rows) < count:
+            obs, *_ = venv.step(act(rows[-1]))
+            rows.append(obs)
+        venv.close()
+        return np.concatenate(rows)[:count]
+
+    return observations

@@ -159,13 +159,14 @@ def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) ->
     env.close()
     statistics = policy.normalizer
     mean, var = (statistics.obs_mean, statistics.obs_var) if statistics is not None else (0.0, 1.0)
+    if policy.multiagent is not None:  # a shared decentralised policy: the agents' local observations
+        from .decentralised import local_trajectory_observations
+
+        trajectory = local_trajectory_observations(policy.act_local, env_id, policy.multiagent)
+    else:
+        trajectory = trajectory_observations(lambda obs: policy.predict(obs)[0], env_id)
     observations = reference_observations(
-        count,
-        policy.policy.observation_space,
-        mean,
-        var,
-        np.random.default_rng(0),
-        trajectory_observations(lambda obs: policy.predict(obs)[0], env_id),
+        count, policy.policy.observation_space, mean, var, np.random.default_rng(0), trajectory
     )
     actions = _safe_actions(directory, observations)
     atomic_write_bytes(
