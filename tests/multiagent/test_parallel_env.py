@@ -218,3 +218,16 @@ def test_bad_input_gets_a_clear_error() -> None:
         env.reset(seed=-1)
     with pytest.warns(UserWarning, match=r"reset options \['colour'\] .* ignored"):
         env.reset(seed=0, options={"colour": 1})
+
+
+def test_communication_graphs() -> None:
+    # Hub: spokes and rim are 100 m; across the wheel 173 m and 200 m.
+    def partners(communication: dict) -> list[set[int]]:
+        graph = parallel_env("TetherHub-v0", communication=communication).batch.graph
+        return [{int(graph.nodes[p]) for p in row if p >= 0} for row in graph.partners]
+
+    assert partners({"range": 150.0}) == partners({"hops": 1})
+    assert partners({"hops": 1})[0] == {1, 2, 3, 4, 5, 6} and partners({"hops": 1})[1] == {0, 2, 6}
+    assert partners({"range": 180.0})[1] == {0, 2, 3, 5, 6}
+    assert partners({"hops": 2})[1] == {0, 2, 3, 4, 5, 6}
+    assert parallel_env("TetherHub-v0", communication={"range": 50.0}).layout.partners == 0
