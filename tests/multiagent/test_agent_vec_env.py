@@ -135,3 +135,20 @@ def test_decentralised_models_ship_beside_the_centralised_ones() -> None:
     command = reproduce_command(candidate, "agents/models")
     assert "--algo ppo " in command and "--multiagent" in command
     assert command.endswith("--hyperparams agents/models/TetherHub-v0/ppo_multiagent/config.yml")
+
+
+def test_single_agent_envs_refuse_what_they_cannot_reproduce() -> None:
+    from stable_baselines3 import PPO
+
+    from agents.policies import TrainedPolicy
+
+    options = {"communication": {"hops": 1, "delay": 2}}
+    model = PPO("MlpPolicy", make_agent_vec_env("TetherTriangle-v0", num_envs=1, seed=0, **options), device="cpu")
+    policy = TrainedPolicy.from_parts(model.policy, None, "TetherTriangle-v0", "ppo", multiagent=options)
+    with pytest.raises(ValueError, match="evaluate it in tether_gym.multiagent.parallel_env"):
+        policy.attach(gym.make("TetherTriangle-v0"))
+    with pytest.raises(RuntimeError, match="attach"):
+        policy.predict(np.zeros(gym.make("TetherTriangle-v0").observation_space.shape))
+    stateless = TrainedPolicy.from_parts(model.policy, None, "TetherTriangle-v0", "ppo", multiagent={})
+    with pytest.raises(ValueError, match="local observations of size"):
+        stateless.attach(gym.make("TetherTriangle-v0"))  # trained with messages, attached without
