@@ -557,10 +557,15 @@ class TensionAwareController(Controller):
         return damping + self.strut_forces(positions, elongations)[:, self.thrusters]
 
 
-#: The scripted baselines by name.
+#: The scripted baselines by name: the centralised laws, then the decentralised ones of
+#: :mod:`agents.decentralised` (which use only what each satellite measures itself, and add
+#: themselves here when that module is imported, as it is just below).
 BASELINES: dict[str, type[Controller]] = {
     cls.name: cls for cls in (PassiveController, VelocityFeedbackController, LQRController, TensionAwareController)
 }
+
+# After BASELINES: the decentralised laws subclass Controller and register themselves in it.
+from . import decentralised  # noqa: E402, F401
 
 
 def make_baseline(name: str, env: Any, **kwargs: Any) -> Controller:

@@ -99,6 +99,9 @@ class TrainedPolicy:
         #: The baseline whose actions the policy corrects (agents.residual), or None.
         self.residual_on: str | None = self.metadata.get("residual_on")
         self.baseline: Any = None
+        #: A shared decentralised policy's multi-agent options (agents.decentralised), or None.
+        self.multiagent: dict[str, Any] | None = self.metadata.get("multiagent")
+        self.observer: Any = None
 
     @classmethod
     def from_parts(
@@ -109,20 +112,31 @@ class TrainedPolicy:
         algo: str,
         residual_on: str | None = None,
         name: str | None = None,
+        multiagent: dict[str, Any] | None = None,
     ) -> TrainedPolicy:
         """A TrainedPolicy around an in-memory SB3 ``policy`` and its observation ``normalizer``
         (a ``VecNormalize`` or None), e.g. the model being trained; nothing is copied, so it acts
         with the weights and statistics they hold when ``predict`` is called."""
         self = cls.__new__(cls)
         self.policy, self.normalizer, self.algo, self.env_id = policy, normalizer, algo, env_id
-        self.metadata = {"algo": algo, "env_id": env_id, "residual_on": residual_on}
+        self.metadata = {"algo": algo, "env_id": env_id, "residual_on": residual_on, "multiagent": multiagent}
         self.path = Path(f"<in-memory {algo} policy>")
         self._adopt(name)
         return self
 
     def attach(self, env: Any) -> None:
-        """Build the baseline a residual policy adds its corrections to, from ``env`` (a
+        """Build the baseline a residual policy adds its corrections to, or the local observer of
+        a decentralised policy (:class:`agents.decentralised.LocalObserver`), from ``env`` (a
         tether-gym env of the policy's id); nothing to do for a plain policy."""
+        if self.multiagent is not None:
+            from .decentralised import LocalObserver
+
+            self.observer = LocalObserver(env, self.multiagent)
+            if self.observer.observation_size != self.observation_size:
+                raise ValueError(
+                    f"{self.path} takes local observations of size {self.observation_size}, but the agents of "
+                    f"this env have {self.observer.observation_size}: pass a model trained on this id"
+                )
         if self.residual_on is not None:
             from .baselines import make_baseline
 
@@ -146,7 +160,11 @@ class TrainedPolicy:
         """The policy's ``predict`` on the normalised observation: ``(actions, state)``.
 
         ``observation`` is (obs_dim,) or (N, obs_dim), in the env's units; actions are
-        (act_dim,) or (N, act_dim), in [-1, 1]."""
+        (act_dim,) or (N, act_dim), in [-1, 1]. A decentralised policy acts on the local
+        observations of the env it is attached to, one agent per row, and returns the joint
+        actions."""
+        if self.multiagent is not None:
+            return self._predict_decentralised(observation, deterministic), None
         obs = np.asarray(observation, dtype=np.float32)
         if obs.shape[-1:] != (self.observation_size,) or obs.ndim not in (1, 2):
             raise ValueError(
@@ -169,6 +187,26 @@ class TrainedPolicy:
         from .residual import residual_actions
 
         return residual_actions(self.baseline, raw, actions), state
+
+    def act_local(self, local: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        """(..., 3) commands of a decentralised policy from (..., size) local observations (of
+        the multi-agent env, or :class:`agents.decentralised.LocalObserver`)."""
+        obs = np.asarray(local, dtype=np.float32)
+        rows = obs.reshape(-1, obs.shape[-1])
+        if self.normalizer is not None:
+            rows = self.normalizer.normalize_obs(rows).astype(np.float32)
+        actions, _ = self.policy.predict(rows, deterministic=deterministic)
+        return np.asarray(actions, dtype=np.float32).reshape(obs.shape[:-1] + (3,))
+
+    def _predict_decentralised(self, observation: np.ndarray, deterministic: bool) -> np.ndarray:
+        if self.observer is None:
+            raise RuntimeError(
+                f"{self.path} is a decentralised policy: attach(env) it to the tether-gym env whose observations "
+                "it is given (make_controller and agents.evaluate.rollout do)"
+            )
+        local, single = self.observer.observe(observation)
+        joint = self.act_local(local, deterministic).reshape(local.shape[0], -1)
+        return joint[0] if single else joint
 
 
 def shipped_models(env_id: str) -> dict[str, Path]:
@@ -217,7 +255,7 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
     controller.attach(env)
     observation_space = getattr(env, "single_observation_space", None) or getattr(env, "observation_space", None)
     shape = tuple(getattr(observation_space, "shape", ()) or ())
-    if shape and shape != controller.observation_shape:
+    if shape and shape != controller.observation_shape and controller.multiagent is None:
         raise ValueError(
             f"controller {spec!r} takes observations of shape {controller.observation_shape}, but "
             f"{env_id or 'the env'} gives {shape}: pass a model trained on this id"

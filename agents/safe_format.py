@@ -650,6 +650,7 @@ def policy_metadata(
     normalization: bool,
     training_state: bool,
     residual_on: str | None = None,
+    multiagent: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The ``policy.json`` of ``model`` (see the module docstring)."""
     policy_class = model.policy_class
@@ -666,6 +667,7 @@ def policy_metadata(
         "normalization": normalization,
         "training_state": training_state,
         "residual_on": residual_on,
+        "multiagent": None if multiagent is None else _json_value(dict(multiagent), "multiagent"),
         "versions": _versions(),
         "provenance": _json_value(dict(provenance or {}), "provenance"),
     }
@@ -680,6 +682,7 @@ def save_policy(
     training_state: bool = False,
     extra_files: Iterable[str] = (),
     residual_on: str | None = None,
+    multiagent: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write ``model``'s policy (and ``normalizer``'s statistics) to ``directory`` in the safe
     format; with ``training_state``, also the optimizer states and counters that resuming needs.
@@ -690,7 +693,9 @@ def save_policy(
     statistics = (
         NormalizationStatistics.from_vec_normalize(normalizer) if isinstance(normalizer, VecNormalize) else normalizer
     )
-    metadata = policy_metadata(model, env_id, provenance, statistics is not None, training_state, residual_on)
+    metadata = policy_metadata(
+        model, env_id, provenance, statistics is not None, training_state, residual_on, multiagent
+    )
     written = [METADATA_FILE, WEIGHTS_FILE]
     atomic_write_bytes(directory / WEIGHTS_FILE, tensor_bytes(model.policy.state_dict()))
     if statistics is not None:
@@ -803,6 +808,14 @@ def read_metadata(directory: Path, reader: _VerifiedReader | None = None) -> dic
         metadata["residual_on"] = check_residual_on(metadata.get("residual_on"), f"{where}: residual_on")
     except ValueError as error:
         raise PolicyFormatError(str(error)) from None
+    # Optional (centralised policies have none): the multi-agent options of a shared
+    # decentralised policy, which acts on local observations (agents.decentralised).
+    multiagent = metadata.get("multiagent")
+    if multiagent is not None and not isinstance(multiagent, dict):
+        raise PolicyFormatError(
+            f"{where}: multiagent must be a dict of multi-agent options or null; got {multiagent!r}"
+        )
+    metadata["multiagent"] = multiagent
     return metadata
 
 

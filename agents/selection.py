@@ -96,6 +96,7 @@ class SeededEvaluation(BaseCallback):
         started: ``time.perf_counter()`` at the start of the training command.
         env_kwargs: the env's keyword arguments (``env_kwargs`` of the hyperparameters).
         residual_on: the baseline a residual policy corrects, or None.
+        multiagent: a shared decentralised policy's multi-agent options, or None.
         verbose: 1 prints a line per evaluation.
     """
 
@@ -109,12 +110,14 @@ class SeededEvaluation(BaseCallback):
         started: float,
         env_kwargs: dict[str, Any] | None = None,
         residual_on: str | None = None,
+        multiagent: dict[str, Any] | None = None,
         verbose: int = 1,
     ) -> None:
         super().__init__(verbose=verbose)
         self.env_id, self.seeds, self.every = env_id, evaluation_seeds(episodes), max(int(every), 1)
         self.log_dir, self.on_new_best, self.started = Path(log_dir), on_new_best, started
         self.env_kwargs, self.residual_on = dict(env_kwargs or {}), residual_on
+        self.multiagent = multiagent
         self.baseline_returns: dict[str, np.ndarray] = {}
         self.bar: str = ""
         self.best_mean = -np.inf
@@ -147,6 +150,7 @@ class SeededEvaluation(BaseCallback):
             self.env_id,
             algo=type(self.model).__name__.lower(),
             residual_on=self.residual_on,
+            multiagent=self.multiagent,
         )
         if self.residual_on is not None:
             import gymnasium as gym

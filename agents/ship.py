@@ -51,6 +51,17 @@ SHIPPED_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE)
 RUNS_TABLE = "training_runs"
 
 
+#: What a shared decentralised policy's model name adds to its algorithm's (``ppo_multiagent``),
+#: as agents.train names its run directories: the two kinds of model of an id ship side by side.
+MULTIAGENT_SUFFIX = "_multiagent"
+
+
+def model_name(metadata: Mapping[str, Any]) -> str:
+    """The name a policy ships under: its algorithm, with :data:`MULTIAGENT_SUFFIX` for a shared
+    decentralised policy."""
+    return metadata["algo"] + (MULTIAGENT_SUFFIX if metadata.get("multiagent") is not None else "")
+
+
 def _policy_dir(run: Path) -> Path:
     for directory in (run / "best", run):
         if is_policy_dir(directory):
@@ -109,7 +120,7 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
         candidates.append(
             {
                 "env_id": env_id,
-                "algo": metadata["algo"],
+                "algo": model_name(metadata),
                 "run": str(run),
                 "policy": str(policy_dir),
                 "seed": config.get("seed"),
@@ -148,13 +159,14 @@ def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) ->
     env.close()
     statistics = policy.normalizer
     mean, var = (statistics.obs_mean, statistics.obs_var) if statistics is not None else (0.0, 1.0)
+    if policy.multiagent is not None:  # a shared decentralised policy: the agents' local observations
+        from .decentralised import local_trajectory_observations
+
+        trajectory = local_trajectory_observations(policy.act_local, env_id, policy.multiagent)
+    else:
+        trajectory = trajectory_observations(lambda obs: policy.predict(obs)[0], env_id)
     observations = reference_observations(
-        count,
-        policy.policy.observation_space,
-        mean,
-        var,
-        np.random.default_rng(0),
-        trajectory_observations(lambda obs: policy.predict(obs)[0], env_id),
+        count, policy.policy.observation_space, mean, var, np.random.default_rng(0), trajectory
     )
     actions = _safe_actions(directory, observations)
     atomic_write_bytes(
@@ -229,7 +241,8 @@ def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
             skip_value = True
         elif not token.startswith("--hyperparams="):
             kept.append(token)
-    for flag, value in (("--algo", algo), ("--env", env_id), ("--seed", candidate["seed"])):
+    algorithm = algo.removesuffix(MULTIAGENT_SUFFIX)
+    for flag, value in (("--algo", algorithm), ("--env", env_id), ("--seed", candidate["seed"])):
         if flag not in kept:
             kept += [flag, str(value)]
     return shlex.join([*kept, "--hyperparams", str(Path(shipped_at) / env_id / algo / "config.yml")])

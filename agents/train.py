@@ -110,7 +110,10 @@ RUN_KEYS = (
     "curriculum",
     "residual_on",
     "action_noise_std",
+    "multiagent",
 )
+#: The keys of a ``multiagent`` entry (the options of tether_gym.multiagent, checked there).
+MULTIAGENT_KEYS = ("communication", "reward", "local_observation_noise")
 #: Constructor arguments that agents.train sets itself, and where the user sets them instead.
 CONTROLLED_KEYS = {
     "env": "the env comes from --env",
@@ -430,7 +433,25 @@ def _check_run_key(algo: str, key: str, value: Any, where: str) -> Any:
             return check_residual_on(value, f"{where}: 'residual_on'")
         except ValueError as error:
             raise HyperparameterError(str(error)) from None
+    if key == "multiagent":
+        return _check_multiagent(value, where)
     raise AssertionError(f"RUN_KEYS has {key!r}, which _check_run_key does not handle")
+
+
+def _check_multiagent(value: Any, where: str) -> dict[str, Any]:
+    """A ``multiagent`` entry: a mapping of multi-agent options (:data:`MULTIAGENT_KEYS`; their
+    values are checked when the env is built), possibly empty (the defaults)."""
+    if value is None:
+        value = {}
+    if not isinstance(value, dict):
+        raise HyperparameterError(
+            f"{where}: 'multiagent' must be a mapping of multi-agent options ({', '.join(MULTIAGENT_KEYS)}), "
+            f"e.g. {{}} for the defaults; got {value!r}"
+        )
+    for key in value:
+        if key not in MULTIAGENT_KEYS:
+            raise _unknown_key(str(key), list(MULTIAGENT_KEYS), f"{where}, 'multiagent'", "multi-agent option")
+    return dict(value)
 
 
 def _check_algorithm_key(
@@ -605,12 +626,21 @@ def make_training_env(
     env_kwargs: Mapping[str, Any] | None = None,
     training: bool = True,
     residual_on: str | None = None,
+    multiagent: Mapping[str, Any] | None = None,
 ) -> VecEnv:
     """The native vector env of ``env_id`` through the SB3 adapter, with ``VecMonitor`` and, if
     ``normalize`` is truthy (a bool or ``VecNormalize`` keyword arguments), ``VecNormalize``;
     with ``residual_on`` (a baseline's name) the actions are corrections to that baseline's
-    (:class:`agents.residual.ResidualVecEnv`)."""
-    base: VecEnv = make_sb3_vec_env(env_id, num_envs, seed=seed, **dict(env_kwargs or {}))
+    (:class:`agents.residual.ResidualVecEnv`); with ``multiagent`` (the multi-agent options) it
+    is ``num_envs`` clusters x their agents, one row per agent, for a shared decentralised policy
+    (:class:`tether_gym.multiagent.sb3.AgentVecEnv`)."""
+    base: VecEnv
+    if multiagent is not None:
+        from tether_gym.multiagent.sb3 import make_agent_vec_env
+
+        base = make_agent_vec_env(env_id, num_envs, seed=seed, **dict(env_kwargs or {}), **dict(multiagent))
+    else:
+        base = make_sb3_vec_env(env_id, num_envs, seed=seed, **dict(env_kwargs or {}))
     if residual_on is not None:
         base = ResidualVecEnv(base, residual_on)
     venv: VecEnv = VecMonitor(base)
@@ -642,12 +672,14 @@ class SafePolicySaver(BaseCallback):
         prefix: str = "",
         residual_on: str | None = None,
         training_state: bool = True,
+        multiagent: Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__()
         self.directory, self.env_id, self.provenance = directory, env_id, dict(provenance)
         self.every, self.prefix, self.residual_on = every, prefix, residual_on
         #: Whether to save the optimizer state (False where the model only carries the weights).
         self.training_state = training_state
+        self.multiagent = multiagent
 
     def _on_step(self) -> bool:
         if self.every is None:
@@ -665,6 +697,7 @@ class SafePolicySaver(BaseCallback):
             self.provenance,
             training_state=self.training_state,
             residual_on=self.residual_on,
+            multiagent=self.multiagent,
         )
 
 
@@ -723,8 +756,9 @@ def _earlier_run_files(run: Path) -> list[str]:
 
 
 def _prepare_run_dir(out: str | Path, env_id: str, algo: str, seed: int, force: bool) -> Path:
-    """The run directory ``out/env_id/algo_seed<seed>``, checked before any work: usable, no
-    symlinks in it, and no earlier run unless ``force``."""
+    """The run directory ``out/env_id/algo_seed<seed>`` (``algo`` may carry a suffix, e.g.
+    ``ppo_multiagent``), checked before any work: usable, no symlinks in it, and no earlier run
+    unless ``force``."""
     out = Path(out)
     if out.is_symlink():
         raise OutputError(f"--out {out} is a symlink; refusing to write through it: pass the real directory")
@@ -874,7 +908,12 @@ def train(
     resume_kind, resume_path, keep = (
         _resume_source(resume, trust_pickle, algo, env_id) if resume is not None else (None, None, set())
     )
-    run = _prepare_run_dir(out, env_id, algo, seed, force)
+    multiagent = hyperparams.get("multiagent")
+    if multiagent is not None and hyperparams.get("residual_on") is not None:
+        raise HyperparameterError("'multiagent' and 'residual_on' do not combine: a residual policy is centralised")
+    from .ship import model_name
+
+    run = _prepare_run_dir(out, env_id, model_name({"algo": algo, "multiagent": multiagent}), seed, force)
 
     record = {
         "algo": algo,
@@ -888,7 +927,11 @@ def train(
     normalize = hyperparams.get("normalize", False)
     env_kwargs = hyperparams.get("env_kwargs")
     residual_on = hyperparams.get("residual_on")
-    venv = make_training_env(env_id, n_envs, seed, normalize, env_kwargs, residual_on=residual_on)
+    venv = make_training_env(
+        env_id, n_envs, seed, normalize, env_kwargs, residual_on=residual_on, multiagent=multiagent
+    )
+    # The vector env's rows: n_envs, or n_envs clusters x their agents (timesteps count rows).
+    rows = venv.num_envs
     cls = ALGORITHMS[algo]
     model = _build_model(cls, hyperparams, venv, seed, verbose, run, resume_kind, resume_path)
     venv = model.get_env()  # a pickle resume wraps the statistics it loaded around the env
@@ -901,20 +944,22 @@ def train(
             run / "checkpoints",
             env_id,
             provenance,
-            every=max(checkpoint_freq // n_envs, 1),
+            every=max(checkpoint_freq // rows, 1),
             prefix=algo,
             residual_on=residual_on,
+            multiagent=multiagent,
         ),
     ]
     evaluation = SeededEvaluation(
         env_id,
         eval_episodes,
-        every=eval_freq // n_envs,
+        every=eval_freq // rows,
         log_dir=run / "best",
-        on_new_best=SafePolicySaver(run / "best", env_id, provenance, residual_on=residual_on),
+        on_new_best=SafePolicySaver(run / "best", env_id, provenance, residual_on=residual_on, multiagent=multiagent),
         started=started,
         env_kwargs=env_kwargs,
         residual_on=residual_on,
+        multiagent=multiagent,
         verbose=1 if progress_bar or verbose else 0,
     )
     callback_items.append(evaluation)
@@ -938,6 +983,7 @@ def train(
         training_state=True,
         extra_files=["config.yml"],
         residual_on=residual_on,
+        multiagent=multiagent,
     )
     elapsed = time.perf_counter() - start
     evaluation.finish(model.num_timesteps)
@@ -1028,6 +1074,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--algo", default="ppo", choices=sorted(ALGORITHMS))
     add_env_argument(parser)
     parser.add_argument("--seed", type=int_at_least(0), default=0)
+    parser.add_argument(
+        "--multiagent",
+        action="store_true",
+        help="train one shared decentralised policy (every satellite its own agent, local observations); "
+        "hyperparameters from agents/hyperparams/<algo>_multiagent.yml unless --hyperparams is given",
+    )
     parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/<algo>_seed<seed>")
     parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps")
     parser.add_argument("--n-envs", type=int_at_least(1), help="override n_envs")
@@ -1067,6 +1119,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _overrides(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The hyperparameters the command line sets: the curriculum, and ``--multiagent`` (the
+    file's ``multiagent`` options, or the defaults)."""
+    overrides: dict[str, Any] = {}
+    if args.curriculum:
+        overrides["curriculum"] = {"start": args.curriculum[0], "fraction": args.curriculum[1]}
+    if args.multiagent:
+        file = args.hyperparams or HYPERPARAMS_DIR / f"{args.algo}_multiagent.yml"
+        overrides["multiagent"] = load_hyperparameters(args.algo, args.env, file).get("multiagent") or {}
+    return overrides or None
+
+
 def main(argv: list[str] | None = None) -> Path:
     args = build_parser().parse_args(argv)
     return train(
@@ -1076,12 +1140,11 @@ def main(argv: list[str] | None = None) -> Path:
         out=args.out,
         timesteps=args.timesteps,
         num_envs=args.n_envs,
-        hyperparams_file=args.hyperparams,
+        hyperparams_file=args.hyperparams
+        or (HYPERPARAMS_DIR / f"{args.algo}_multiagent.yml" if args.multiagent else None),
         resume=args.resume,
         eval_freq=args.eval_freq,
-        overrides={"curriculum": {"start": args.curriculum[0], "fraction": args.curriculum[1]}}
-        if args.curriculum
-        else None,
+        overrides=_overrides(args),
         eval_episodes=args.eval_episodes,
         checkpoint_freq=args.checkpoint_freq,
         progress_bar=not args.no_progress,
