@@ -25,6 +25,17 @@ are, with RLlib's names; every entry is checked before Ray starts. A run directo
   policy in the project's safe format, which ``agents.compare``, ``agents.benchmark`` and
   :class:`agents.policies.TrainedPolicy` load like any SB3-trained policy.
 
+``--multiagent`` trains one shared decentralised policy instead (issue 15): every satellite with a
+thruster is an RLlib agent of :func:`tether_gym.multiagent.parallel_env` (through Ray's
+``ParallelPettingZooEnv``), and all agents map to one module, ``"shared"`` (parameter sharing).
+Its hyperparameters come from ``agents/hyperparams/rllib_ppo_multiagent.yml``, whose
+``multiagent`` entry holds the options of :mod:`tether_gym.multiagent` as ``agents.train
+--multiagent`` takes them; the run directory is ``rllib_ppo_multiagent_seed<seed>/``, and the
+shared module is exported as the SB3 multi-agent runs are (``multiagent`` in ``policy.json``), so
+``agents.compare`` runs it on each satellite's local observations. One env per runner, and no
+observation filter (RLlib's ``MeanStdFilter`` keeps per-agent statistics, which one exported
+policy cannot hold).
+
 The policy format is SB3's ``MlpPolicy``: RLlib's default PPO module with separate policy and value
 networks, no head layers and a free log std has the same structure, and its weights are mapped
 onto it (:func:`export_policy`); RLlib's ``MeanStdFilter`` statistics become the normalisation
@@ -151,15 +162,7 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
     for key, value in entry.items():
         if key not in KEYS:
             raise _unknown_key(str(key), list(KEYS), where, "agents.train_rllib")
-        if key == "multiagent":
-            checked[key] = _check_multiagent(value, where)
-            continue
-        if key == "fcnet_hiddens":
-            if not (isinstance(value, list) and value and all(_is_count(size) for size in value)):
-                raise HyperparameterError(f"{where}: 'fcnet_hiddens' must be a list of layer sizes >= 1; got {value!r}")
-            checked[key] = [int(size) for size in value]
-            continue
-        checked[key] = _check_value(str(key), value, KEYS[key], where)
+        checked[key] = _check_entry_value(str(key), value, where)
     if "n_timesteps" not in checked:
         raise HyperparameterError(f"{where}: 'n_timesteps' is missing (the total env steps to train)")
     for key in (
@@ -184,19 +187,36 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
             f"{where}: 'fcnet_activation' must be one of {list(ACTIVATIONS)} (the activations the policy format "
             f"has); got {checked['fcnet_activation']!r}"
         )
-    if "multiagent" in checked and checked.get("normalize_obs", False):
+    if "multiagent" in checked:
+        _check_multiagent_run(checked, where)
+    if checked.get("minibatch_size", 0) > checked.get("train_batch_size_per_learner", 4000):
+        raise HyperparameterError(f"{where}: 'minibatch_size' must not exceed 'train_batch_size_per_learner'")
+    return checked
+
+
+def _check_entry_value(key: str, value: Any, where: str) -> Any:
+    """One known key's value, checked (and converted as :func:`~agents.train._check_value` does)."""
+    if key == "multiagent":
+        return _check_multiagent(value, where)
+    if key == "fcnet_hiddens":
+        if not (isinstance(value, list) and value and all(_is_count(size) for size in value)):
+            raise HyperparameterError(f"{where}: 'fcnet_hiddens' must be a list of layer sizes >= 1; got {value!r}")
+        return [int(size) for size in value]
+    return _check_value(key, value, KEYS[key], where)
+
+
+def _check_multiagent_run(checked: Mapping[str, Any], where: str) -> None:
+    """The settings a multi-agent run cannot take."""
+    if checked.get("normalize_obs", False):
         raise HyperparameterError(
             f"{where}: 'normalize_obs' must be false with 'multiagent': RLlib's MeanStdFilter keeps one set of "
             f"statistics per agent, which one shared policy cannot be exported with; set normalize_obs: false"
         )
-    if "multiagent" in checked and checked.get("num_envs_per_env_runner", 1) != 1:
+    if checked.get("num_envs_per_env_runner", 1) != 1:
         raise HyperparameterError(
-            f"{where}: 'num_envs_per_env_runner' must be 1 with 'multiagent' (RLlib's multi-agent env runner steps "
-            f"one env); scale out with --num-env-runners instead"
+            f"{where}: 'num_envs_per_env_runner' must be 1 with 'multiagent' (one env per env runner: the setting "
+            f"tested); scale out with --num-env-runners instead"
         )
-    if checked.get("minibatch_size", 0) > checked.get("train_batch_size_per_learner", 4000):
-        raise HyperparameterError(f"{where}: 'minibatch_size' must not exceed 'train_batch_size_per_learner'")
-    return checked
 
 
 def _is_count(value: Any) -> bool:
@@ -808,8 +828,7 @@ def main(argv: list[str] | None = None) -> Path:
         envs_per_runner=args.envs_per_runner,
         address=args.address,
         num_cpus=args.num_cpus,
-        hyperparams_file=args.hyperparams
-        or (HYPERPARAMS_DIR / f"{ALGO}_multiagent.yml" if args.multiagent else None),
+        hyperparams_file=args.hyperparams or (HYPERPARAMS_DIR / f"{ALGO}_multiagent.yml" if args.multiagent else None),
         multiagent=args.multiagent,
         resume=args.resume,
         trust_pickle=args.trust_pickle,

@@ -1,6 +1,7 @@
 """Training on Ray RLlib (agents.train_rllib): one iteration with the native vector env in the env
 runners, checkpoint and resume, the export to the policy format (its actions equal RLlib's), the
-exported policy in agents.compare, and clear errors for bad input.
+exported policy in agents.compare, and clear errors for bad input; the same for the multi-agent
+run with one shared module (--multiagent).
 
 These need the rllib extra (bash scripts/test_rllib.sh); without Ray they are skipped. They share
 one local Ray instance of 2 CPUs, started and shut down by a session fixture."""
@@ -31,6 +32,7 @@ from agents.train_rllib import (  # noqa: E402
     build_config,
     export_policy,
     load_rllib_hyperparameters,
+    make_multiagent_env,
     make_vessel,
     rllib_actions,
     train_rllib,
@@ -234,3 +236,113 @@ def test_the_command_line_rejects_bad_counts_and_ids(tmp_path: Path) -> None:
     ):
         result = _command(*arguments, "--out", str(tmp_path))
         assert result.returncode == 2 and message in result.stderr, result.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# Multi-agent: one shared module for every satellite (agents.train_rllib --multiagent)
+# ---------------------------------------------------------------------------------------------
+
+#: A small multi-agent run: 200 env steps (x 4 agents) per iteration, one env per runner.
+SMALL_MULTIAGENT = {
+    **SMALL,
+    "multiagent": {"reward": "shares"},
+    "n_timesteps": 200,
+    "num_envs_per_env_runner": 1,
+    "train_batch_size_per_learner": 200,
+    "minibatch_size": 100,
+    "normalize_obs": False,
+}
+
+
+def _local_observations(multiagent: dict[str, object]) -> np.ndarray:
+    """(B, local obs) observations of the agents after a reset and a random step, and wider random ones."""
+    from tether_gym.multiagent import parallel_env
+
+    env = parallel_env(ENV_ID, **multiagent)
+    first, _ = env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    stepped, *_ = env.step({agent: rng.uniform(-1, 1, 3) for agent in env.agents})
+    rows = np.stack([*first.values(), *stepped.values()])
+    return np.concatenate([rows, rng.normal(0, 3, rows.shape)]).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def multiagent_run(ray_instance: object, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One iteration of the shared-policy PPO, sampled in the driver, evaluated on 2 seeds."""
+    path = tmp_path_factory.mktemp("hyperparams") / "multiagent.yml"
+    path.write_text(yaml.safe_dump({ENV_ID: SMALL_MULTIAGENT}))
+    return train_rllib(
+        ENV_ID, seed=2, out=tmp_path_factory.mktemp("runs"), hyperparams_file=path, eval_freq=200, eval_episodes=2
+    )
+
+
+def test_one_multiagent_iteration_trains_the_shared_module(multiagent_run: Path) -> None:
+    assert multiagent_run.name == f"{ALGO}_multiagent_seed2"
+    config = yaml.safe_load((multiagent_run / "config.yml").read_text())
+    assert config["hyperparams"]["multiagent"] == {"reward": "shares"}
+    policy = TrainedPolicy(multiagent_run)
+    assert policy.multiagent == {"reward": "shares"} and policy.metadata["num_timesteps"] == 200
+    assert policy.observation_size == _local_observations({}).shape[1] and policy.normalizer is None
+    assert (multiagent_run / "best" / "evaluations.json").is_file()
+
+
+def test_every_agent_maps_to_the_one_shared_module(ray_instance: object) -> None:
+    algo = build_config(ENV_ID, SMALL_MULTIAGENT, num_env_runners=0, envs_per_runner=1, seed=0).build_algo()
+    try:
+        agents = list(make_multiagent_env({"env_id": ENV_ID}).get_agent_ids())
+        mapped = {algo.config.policy_mapping_fn(agent, None) for agent in agents}
+        modules = set(algo.env_runner.module.keys())
+    finally:
+        algo.stop()
+    assert len(agents) == 4 and mapped == {"shared"} and modules == {"shared"}
+
+
+def test_the_exported_multiagent_policy_acts_as_the_shared_module(ray_instance: object, tmp_path: Path) -> None:
+    algo = build_config(ENV_ID, SMALL_MULTIAGENT, num_env_runners=0, envs_per_runner=1, seed=1).build_algo()
+    try:
+        algo.train()
+        vessel = make_vessel(ENV_ID, SMALL_MULTIAGENT, seed=1)
+        export_policy(algo, vessel, 200)
+        samples = _local_observations(SMALL_MULTIAGENT["multiagent"])
+        expected = rllib_actions(algo, samples)
+    finally:
+        algo.stop()
+    assert np.abs(expected).max() > 0.01  # not a trivially zero policy
+    save_policy(tmp_path, vessel, None, ENV_ID, multiagent=SMALL_MULTIAGENT["multiagent"])
+    loaded = TrainedPolicy(tmp_path)
+    actions, _ = loaded.policy.predict(samples, deterministic=True)
+    np.testing.assert_allclose(actions, expected, rtol=0, atol=1e-6)
+
+
+def test_the_exported_multiagent_policy_runs_in_compare(multiagent_run: Path, tmp_path: Path) -> None:
+    records, _ = compare.main(
+        [
+            "--controllers",
+            "local_velocity_feedback",
+            str(multiagent_run),
+            "--episodes",
+            "2",
+            "--no-plots",
+            "--out",
+            str(tmp_path / "cmp"),
+        ]
+    )
+    assert [record.name for record in records] == ["local_velocity_feedback", str(multiagent_run)]
+    assert np.isfinite(records[1].rewards.sum())
+
+
+def test_bad_multiagent_options_fail_before_training(ray_instance: object, tmp_path: Path) -> None:
+    def run(entry: dict[str, object]) -> Path:
+        path = tmp_path / "bad.yml"
+        path.write_text(yaml.safe_dump({ENV_ID: {**SMALL_MULTIAGENT, **entry}}))
+        return train_rllib(ENV_ID, out=tmp_path, hyperparams_file=path)
+
+    with pytest.raises(HyperparameterError, match="unknown key 'rewards'.*reward"):
+        run({"multiagent": {"rewards": "shares"}})
+    with pytest.raises(HyperparameterError, match="'multiagent'.*'sharez'"):
+        run({"multiagent": {"reward": "sharez"}})
+    with pytest.raises(HyperparameterError, match="'normalize_obs' must be false with 'multiagent'"):
+        run({"normalize_obs": True})
+    with pytest.raises(HyperparameterError, match="'num_envs_per_env_runner' must be 1 with 'multiagent'"):
+        run({"num_envs_per_env_runner": 4})
+    assert not list(tmp_path.glob(f"{ENV_ID}/*"))  # nothing was written
