@@ -12,7 +12,9 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -121,22 +123,34 @@ def test_the_env_runners_step_the_native_vector_env_in_next_step_mode(ray_instan
     assert found == [(TetherClusterVectorEnv.__name__, "NextStep", 3)]
 
 
-def test_the_exported_policy_acts_as_the_rllib_module(ray_instance: object, tmp_path: Path) -> None:
-    algo = build_config(ENV_ID, SMALL, num_env_runners=0, envs_per_runner=8, seed=1).build_algo()
+def _exported_after_one_iteration(
+    hyperparams: dict[str, Any], envs_per_runner: int, samples: Callable[[], np.ndarray]
+) -> tuple[Any, np.ndarray, np.ndarray]:
+    """One iteration sampled in the driver, exported: ``(vessel, observations, RLlib's actions on them)``."""
+    algo = build_config(ENV_ID, hyperparams, num_env_runners=0, envs_per_runner=envs_per_runner, seed=1).build_algo()
     try:
         algo.train()
-        vessel = make_vessel(ENV_ID, SMALL, seed=1)
-        export_policy(algo, vessel, 800)
-        # Observations the env gives (the statistics matter there), and wider random ones (clipping).
-        envs = gym.make_vec(ENV_ID, num_envs=16)
-        observations, _ = envs.reset(seed=5)
-        stepped, *_ = envs.step(np.random.default_rng(0).uniform(-1, 1, envs.action_space.shape))
-        wide = np.random.default_rng(1).normal(0, 3, observations.shape)
-        samples = np.concatenate([observations, stepped, wide]).astype(np.float32)
-        expected = rllib_actions(algo, samples)
+        vessel = make_vessel(ENV_ID, hyperparams, seed=1)
+        export_policy(algo, vessel, hyperparams["train_batch_size_per_learner"])
+        observations = samples()
+        expected = rllib_actions(algo, observations)
     finally:
         algo.stop()
     assert np.abs(expected).max() > 0.01  # not a trivially zero policy
+    return vessel, observations, expected
+
+
+def _vector_observations() -> np.ndarray:
+    """Observations the env gives (the statistics matter there), and wider random ones (clipping)."""
+    envs = gym.make_vec(ENV_ID, num_envs=16)
+    observations, _ = envs.reset(seed=5)
+    stepped, *_ = envs.step(np.random.default_rng(0).uniform(-1, 1, envs.action_space.shape))
+    wide = np.random.default_rng(1).normal(0, 3, observations.shape)
+    return np.concatenate([observations, stepped, wide]).astype(np.float32)
+
+
+def test_the_exported_policy_acts_as_the_rllib_module(ray_instance: object, tmp_path: Path) -> None:
+    vessel, samples, expected = _exported_after_one_iteration(SMALL, 8, _vector_observations)
     save_policy(tmp_path, vessel, vessel.get_vec_normalize_env(), ENV_ID)
     loaded = TrainedPolicy(tmp_path)
     actions, _ = loaded.predict(samples, deterministic=True)
@@ -298,17 +312,9 @@ def test_every_agent_maps_to_the_one_shared_module(ray_instance: object) -> None
 
 
 def test_the_exported_multiagent_policy_acts_as_the_shared_module(ray_instance: object, tmp_path: Path) -> None:
-    algo = build_config(ENV_ID, SMALL_MULTIAGENT, num_env_runners=0, envs_per_runner=1, seed=1).build_algo()
-    try:
-        algo.train()
-        vessel = make_vessel(ENV_ID, SMALL_MULTIAGENT, seed=1)
-        export_policy(algo, vessel, 200)
-        samples = _local_observations(SMALL_MULTIAGENT["multiagent"])
-        expected = rllib_actions(algo, samples)
-    finally:
-        algo.stop()
-    assert np.abs(expected).max() > 0.01  # not a trivially zero policy
-    save_policy(tmp_path, vessel, None, ENV_ID, multiagent=SMALL_MULTIAGENT["multiagent"])
+    options = SMALL_MULTIAGENT["multiagent"]
+    vessel, samples, expected = _exported_after_one_iteration(SMALL_MULTIAGENT, 1, lambda: _local_observations(options))
+    save_policy(tmp_path, vessel, None, ENV_ID, multiagent=options)
     loaded = TrainedPolicy(tmp_path)
     actions, _ = loaded.policy.predict(samples, deterministic=True)
     np.testing.assert_allclose(actions, expected, rtol=0, atol=1e-6)
