@@ -25,6 +25,17 @@ are, with RLlib's names; every entry is checked before Ray starts. A run directo
   policy in the project's safe format, which ``agents.compare``, ``agents.benchmark`` and
   :class:`agents.policies.TrainedPolicy` load like any SB3-trained policy.
 
+``--multiagent`` trains one shared decentralised policy instead (issue 15): every satellite with a
+thruster is an RLlib agent of :func:`tether_gym.multiagent.parallel_env` (through Ray's
+``ParallelPettingZooEnv``), and all agents map to one module, ``"shared"`` (parameter sharing).
+Its hyperparameters come from ``agents/hyperparams/rllib_ppo_multiagent.yml``, whose
+``multiagent`` entry holds the options of :mod:`tether_gym.multiagent` as ``agents.train
+--multiagent`` takes them; the run directory is ``rllib_ppo_multiagent_seed<seed>/``, and the
+shared module is exported as the SB3 multi-agent runs are (``multiagent`` in ``policy.json``), so
+``agents.compare`` runs it on each satellite's local observations. One env per runner, and no
+observation filter (RLlib's ``MeanStdFilter`` keeps per-agent statistics, which one exported
+policy cannot hold).
+
 The policy format is SB3's ``MlpPolicy``: RLlib's default PPO module with separate policy and value
 networks, no head layers and a free log std has the same structure, and its weights are mapped
 onto it (:func:`export_policy`); RLlib's ``MeanStdFilter`` statistics become the normalisation
@@ -56,6 +67,7 @@ from .safe_format import PolicyFormatError
 from .train import (
     HYPERPARAMS_DIR,
     HyperparameterError,
+    _check_multiagent,
     _check_value,
     _clear_earlier_run,
     _positive_int,
@@ -102,7 +114,12 @@ KEYS: dict[str, Any] = {
     "fcnet_activation": str,
     "normalize_obs": bool,
     "env_kwargs": dict | None,
+    "multiagent": dict | None,
 }
+#: The id of the one module every agent of a multi-agent run maps to.
+SHARED_MODULE_ID = "shared"
+#: The name under which the multi-agent env is registered with Ray (:func:`make_multiagent_env`).
+MULTIAGENT_ENV_NAME = "tether_gym_multiagent"
 #: RLlib's activation names that SB3's ``MlpPolicy`` (the export format) has too.
 ACTIVATIONS = ("tanh", "relu")
 #: Keys in (0, 1].
@@ -145,12 +162,7 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
     for key, value in entry.items():
         if key not in KEYS:
             raise _unknown_key(str(key), list(KEYS), where, "agents.train_rllib")
-        if key == "fcnet_hiddens":
-            if not (isinstance(value, list) and value and all(_is_count(size) for size in value)):
-                raise HyperparameterError(f"{where}: 'fcnet_hiddens' must be a list of layer sizes >= 1; got {value!r}")
-            checked[key] = [int(size) for size in value]
-            continue
-        checked[key] = _check_value(str(key), value, KEYS[key], where)
+        checked[key] = _check_entry_value(str(key), value, where)
     if "n_timesteps" not in checked:
         raise HyperparameterError(f"{where}: 'n_timesteps' is missing (the total env steps to train)")
     for key in (
@@ -175,9 +187,36 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
             f"{where}: 'fcnet_activation' must be one of {list(ACTIVATIONS)} (the activations the policy format "
             f"has); got {checked['fcnet_activation']!r}"
         )
+    if "multiagent" in checked:
+        _check_multiagent_run(checked, where)
     if checked.get("minibatch_size", 0) > checked.get("train_batch_size_per_learner", 4000):
         raise HyperparameterError(f"{where}: 'minibatch_size' must not exceed 'train_batch_size_per_learner'")
     return checked
+
+
+def _check_entry_value(key: str, value: Any, where: str) -> Any:
+    """One known key's value, checked (and converted as :func:`~agents.train._check_value` does)."""
+    if key == "multiagent":
+        return _check_multiagent(value, where)
+    if key == "fcnet_hiddens":
+        if not (isinstance(value, list) and value and all(_is_count(size) for size in value)):
+            raise HyperparameterError(f"{where}: 'fcnet_hiddens' must be a list of layer sizes >= 1; got {value!r}")
+        return [int(size) for size in value]
+    return _check_value(key, value, KEYS[key], where)
+
+
+def _check_multiagent_run(checked: Mapping[str, Any], where: str) -> None:
+    """The settings a multi-agent run cannot take."""
+    if checked.get("normalize_obs", False):
+        raise HyperparameterError(
+            f"{where}: 'normalize_obs' must be false with 'multiagent': RLlib's MeanStdFilter keeps one set of "
+            f"statistics per agent, which one shared policy cannot be exported with; set normalize_obs: false"
+        )
+    if checked.get("num_envs_per_env_runner", 1) != 1:
+        raise HyperparameterError(
+            f"{where}: 'num_envs_per_env_runner' must be 1 with 'multiagent' (one env per env runner: the setting "
+            f"tested); scale out with --num-env-runners instead"
+        )
 
 
 def _is_count(value: Any) -> bool:
@@ -285,28 +324,75 @@ def build_config(
     if "lr" in hyperparams:
         training["lr"] = _learning_rate(hyperparams["lr"], int(hyperparams["n_timesteps"]))
     connector = (lambda env, spaces, device: MeanStdFilter()) if hyperparams.get("normalize_obs", False) else None
-    return (
-        PPOConfig()
+    model_config = DefaultModelConfig(
+        fcnet_hiddens=list(hyperparams.get("fcnet_hiddens", [128, 128])),
+        fcnet_activation=hyperparams.get("fcnet_activation", "tanh"),
+        head_fcnet_hiddens=[],
+        free_log_std=True,
+        vf_share_layers=False,
+    )
+    config = PPOConfig()
+    multiagent = hyperparams.get("multiagent")
+    if multiagent is None:
         # "tether_gym:<id>": gymnasium imports tether_gym (registering the ids) in every runner process.
-        .environment(f"tether_gym:{env_id}", env_config=env_config, normalize_actions=False, clip_actions=True)
-        .env_runners(
-            num_env_runners=num_env_runners,
-            num_envs_per_env_runner=envs_per_runner,
-            gym_env_vectorize_mode="vector_entry_point",
-            env_to_module_connector=connector,
-        )
-        .training(**training)
-        .rl_module(
-            model_config=DefaultModelConfig(
-                fcnet_hiddens=list(hyperparams.get("fcnet_hiddens", [128, 128])),
-                fcnet_activation=hyperparams.get("fcnet_activation", "tanh"),
-                head_fcnet_hiddens=[],
-                free_log_std=True,
-                vf_share_layers=False,
+        config = config.environment(
+            f"tether_gym:{env_id}", env_config=env_config, normalize_actions=False, clip_actions=True
+        ).env_runners(gym_env_vectorize_mode="vector_entry_point")
+        config = config.rl_module(model_config=model_config)
+    else:
+        from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
+        from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+        from ray.tune.registry import register_env
+
+        register_env(MULTIAGENT_ENV_NAME, make_multiagent_env)
+        config = (
+            config.environment(
+                MULTIAGENT_ENV_NAME,
+                env_config={"env_id": env_id, **dict(hyperparams.get("env_kwargs") or {}), **dict(multiagent)},
+                normalize_actions=False,
+                clip_actions=True,
+            )
+            # Parameter sharing: every agent (satellite) maps to the one module.
+            .multi_agent(policies={SHARED_MODULE_ID}, policy_mapping_fn=_shared_policy)
+            .rl_module(
+                rl_module_spec=MultiRLModuleSpec(
+                    rl_module_specs={SHARED_MODULE_ID: RLModuleSpec(model_config=model_config)}
+                )
             )
         )
+    return (
+        config.env_runners(
+            num_env_runners=num_env_runners, num_envs_per_env_runner=envs_per_runner, env_to_module_connector=connector
+        )
+        .training(**training)
         .debugging(seed=seed)
     )
+
+
+def _shared_policy(agent_id: str, *args: Any, **kwargs: Any) -> str:
+    """RLlib's ``policy_mapping_fn`` of a multi-agent run: every agent acts with the shared module."""
+    return SHARED_MODULE_ID
+
+
+def make_multiagent_env(config: Mapping[str, Any]) -> Any:
+    """The env of a multi-agent run (registered with Ray as :data:`MULTIAGENT_ENV_NAME`): Ray's
+    ``ParallelPettingZooEnv`` around :func:`tether_gym.multiagent.parallel_env`, whose dicts it
+    passes on as they are (``"__all__"``: all agents end together when the cluster's episode
+    ends). ``config``: ``env_id`` and the keyword arguments of ``parallel_env``."""
+    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+
+    from tether_gym.multiagent import parallel_env
+
+    kwargs = dict(config)
+    env_id = kwargs.pop("env_id")
+    return ParallelPettingZooEnv(parallel_env(env_id, **kwargs))
+
+
+def _module_id(algo: Any) -> str:
+    """The id of the run's (shared) module: RLlib's default one, or :data:`SHARED_MODULE_ID`."""
+    from ray.rllib.core import DEFAULT_MODULE_ID
+
+    return SHARED_MODULE_ID if algo.config.is_multi_agent else DEFAULT_MODULE_ID
 
 
 # ---------------------------------------------------------------------------------------------
@@ -315,11 +401,11 @@ def build_config(
 
 
 def module_weights(algo: Any) -> dict[str, np.ndarray]:
-    """The learner's RLModule weights (policy and value networks), as numpy arrays by name."""
-    from ray.rllib.core import DEFAULT_MODULE_ID
-
-    state = algo.learner_group.get_state(components=f"learner/rl_module/{DEFAULT_MODULE_ID}")
-    return {name: np.asarray(value) for name, value in state["learner"]["rl_module"][DEFAULT_MODULE_ID].items()}
+    """The learner's RLModule weights (policy and value networks; the shared module of a
+    multi-agent run), as numpy arrays by name."""
+    module_id = _module_id(algo)
+    state = algo.learner_group.get_state(components=f"learner/rl_module/{module_id}")
+    return {name: np.asarray(value) for name, value in state["learner"]["rl_module"][module_id].items()}
 
 
 def observation_filter(algo: Any) -> tuple[np.ndarray, np.ndarray, float] | None:
@@ -348,7 +434,16 @@ def make_vessel(env_id: str, hyperparams: Mapping[str, Any], seed: int) -> Any:
 
     hidden = list(hyperparams.get("fcnet_hiddens", [128, 128]))
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[hyperparams.get("fcnet_activation", "tanh")]
-    venv: Any = make_sb3_vec_env(env_id, 1, seed=seed, **dict(hyperparams.get("env_kwargs") or {}))
+    env_kwargs = dict(hyperparams.get("env_kwargs") or {})
+    multiagent = hyperparams.get("multiagent")
+    venv: Any
+    if multiagent is None:
+        venv = make_sb3_vec_env(env_id, 1, seed=seed, **env_kwargs)
+    else:
+        from tether_gym.multiagent.sb3 import make_agent_vec_env
+
+        # The shared policy's spaces: one agent's local observation and (3,) thrust command.
+        venv = make_agent_vec_env(env_id, 1, seed=seed, **env_kwargs, **dict(multiagent))
     if hyperparams.get("normalize_obs", False):
         # epsilon 0: the divisor is set to RLlib's exactly (see export_policy).
         venv = VecNormalize(venv, training=False, norm_obs=True, norm_reward=False, epsilon=0.0)
@@ -424,7 +519,7 @@ def rllib_actions(algo: Any, observations: np.ndarray) -> np.ndarray:
     if statistics is not None:
         mean, divisor, clip = statistics
         obs = np.clip((obs - mean) / divisor.astype(np.float32), -clip, clip).astype(np.float32)
-    module = algo.get_module()
+    module = algo.get_module(_module_id(algo))
     with torch.no_grad():
         out = module.forward_inference({"obs": torch.as_tensor(obs)})
     distribution = module.get_inference_action_dist_cls().from_logits(out["action_dist_inputs"])
@@ -465,13 +560,13 @@ def _tensorboard_logger(run: Path) -> Any:
     return configure(str(run / "tensorboard" / f"{ALGO}_{number}"), ["tensorboard"])
 
 
-def _record_iteration(logger: Any, result: Mapping[str, Any], steps_per_s: float) -> None:
+def _record_iteration(logger: Any, result: Mapping[str, Any], steps_per_s: float, module_id: str) -> None:
     """The iteration's returns, losses and speed into the TensorBoard logger."""
     runners = result.get("env_runners", {})
     for key, name in (("episode_return_mean", "rollout/ep_rew_mean"), ("episode_len_mean", "rollout/ep_len_mean")):
         if key in runners:
             logger.record(name, float(runners[key]))
-    learner = result.get("learners", {}).get("default_policy", {})
+    learner = result.get("learners", {}).get(module_id, {})
     for key in ("policy_loss", "vf_loss", "entropy", "mean_kl_loss", "vf_explained_var"):
         if key in learner:
             logger.record(f"train/{key}", float(learner[key]))
@@ -489,6 +584,7 @@ def train_rllib(
     address: str | None = None,
     num_cpus: int | None = None,
     hyperparams_file: str | Path | None = None,
+    multiagent: bool = False,
     resume: str | Path | None = None,
     trust_pickle: bool = False,
     eval_freq: int = 50_000,
@@ -501,7 +597,10 @@ def train_rllib(
 
     ``timesteps`` and ``envs_per_runner`` override the file's ``n_timesteps`` and
     ``num_envs_per_env_runner``; ``eval_freq`` and ``checkpoint_freq`` count env steps over all
-    runners (each is acted on at the first iteration that reaches it). ``num_cpus`` caps a local
+    runners (each is acted on at the first iteration that reaches it; a multi-agent run counts
+    env steps, each of which moves every agent). ``multiagent`` trains one shared decentralised
+    policy (the file's ``multiagent`` options, or the defaults; an entry with ``multiagent`` does
+    so without it). ``num_cpus`` caps a local
     Ray instance. Everything is checked before Ray starts, the cluster's CPUs against the runners
     after: errors name the argument and the fix."""
     started = time.perf_counter()
@@ -519,6 +618,8 @@ def train_rllib(
                 "num_cpus sets the size of a local Ray instance; with --address the cluster's nodes set it"
             )
     hyperparams = load_rllib_hyperparameters(env_id, hyperparams_file)
+    if multiagent:
+        hyperparams["multiagent"] = hyperparams.get("multiagent") or {}
     if timesteps is not None:
         hyperparams["n_timesteps"] = _positive_int("timesteps", timesteps)
     if envs_per_runner is not None:
@@ -528,9 +629,14 @@ def train_rllib(
     if envs > MAX_NUM_ENVS:
         raise ValueError(f"envs_per_runner must be at most {MAX_NUM_ENVS} (use more runners); got {envs}")
     total = int(hyperparams["n_timesteps"])
+    multiagent = hyperparams.get("multiagent")
+    if multiagent is not None:
+        _check_multiagent_env(env_id, hyperparams)
     checkpoint = _resume_checkpoint(resume, trust_pickle) if resume is not None else None
     ray = _ray()
-    run = _prepare_run_dir(out, env_id, ALGO, seed, force)
+    from .ship import model_name
+
+    run = _prepare_run_dir(out, env_id, model_name({"algo": ALGO, "multiagent": multiagent}), seed, force)
     owns_ray = connect(address, num_cpus)
     try:
         _check_resources(num_env_runners)
@@ -582,6 +688,7 @@ def _train_loop(
     from .selection import SeededEvaluation
     from .train import SafePolicySaver
 
+    multiagent = hyperparams.get("multiagent")
     vessel = make_vessel(env_id, hyperparams, seed)
     vessel.set_logger(_tensorboard_logger(run))
     provenance = {"seed": seed, "command": command, "config": "config.yml of the run directory", "trainer": "rllib"}
@@ -590,9 +697,10 @@ def _train_loop(
         eval_episodes,
         every=1,
         log_dir=run / "best",
-        on_new_best=SafePolicySaver(run / "best", env_id, provenance, training_state=False),
+        on_new_best=SafePolicySaver(run / "best", env_id, provenance, training_state=False, multiagent=multiagent),
         started=started,
         env_kwargs=hyperparams.get("env_kwargs"),
+        multiagent=multiagent,
     )
     evaluation.init_callback(vessel)
     evaluation.on_training_start({}, {})
@@ -605,7 +713,7 @@ def _train_loop(
         result = algo.train()
         before, steps = steps, _lifetime_steps(algo)
         speed = (steps - before) / max(time.perf_counter() - tick, 1e-9)
-        _record_iteration(vessel.logger, result, speed)
+        _record_iteration(vessel.logger, result, speed, _module_id(algo))
         returns = result.get("env_runners", {}).get("episode_return_mean", float("nan"))
         ended = f"episode return {returns:.2f}" if np.isfinite(returns) else "no episode ended"
         print(
@@ -621,7 +729,15 @@ def _train_loop(
             next_checkpoint = steps + checkpoint_freq
         vessel.logger.dump(steps)
     export_policy(algo, vessel, steps)
-    save_policy(run, vessel, vessel.get_vec_normalize_env(), env_id, provenance, extra_files=["config.yml"])
+    save_policy(
+        run,
+        vessel,
+        vessel.get_vec_normalize_env(),
+        env_id,
+        provenance,
+        extra_files=["config.yml"],
+        multiagent=multiagent,
+    )
     evaluation.finish(steps)
     elapsed = time.perf_counter() - start
     print(
@@ -629,6 +745,18 @@ def _train_loop(
         f"({(steps - first) / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}"
     )
     print_evaluation_summary(evaluation)
+
+
+def _check_multiagent_env(env_id: str, hyperparams: Mapping[str, Any]) -> None:
+    """Build the multi-agent env once in the driver, so that a bad multi-agent option fails here
+    with the env's own message (naming the option and the fix), not inside an env runner."""
+    from tether_gym.envs.arguments import EnvArgumentError
+    from tether_gym.multiagent import parallel_env
+
+    try:
+        parallel_env(env_id, **dict(hyperparams.get("env_kwargs") or {}), **dict(hyperparams["multiagent"])).close()
+    except (EnvArgumentError, TypeError) as error:
+        raise HyperparameterError(f"hyperparameters, 'multiagent' {hyperparams['multiagent']!r}: {error}") from error
 
 
 def _lifetime_steps(algo: Any) -> int:
@@ -653,6 +781,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_env_argument(parser)
     parser.add_argument("--seed", type=int_at_least(0), default=0)
+    parser.add_argument(
+        "--multiagent",
+        action="store_true",
+        help=f"train one shared decentralised policy (every satellite its own agent, local observations); "
+        f"hyperparameters from agents/hyperparams/{ALGO}_multiagent.yml unless --hyperparams is given",
+    )
     parser.add_argument("--out", default="runs", help=f"parent of the run directory <out>/<env>/{ALGO}_seed<seed>")
     parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps (total env steps)")
     parser.add_argument(
@@ -694,7 +828,8 @@ def main(argv: list[str] | None = None) -> Path:
         envs_per_runner=args.envs_per_runner,
         address=args.address,
         num_cpus=args.num_cpus,
-        hyperparams_file=args.hyperparams,
+        hyperparams_file=args.hyperparams or (HYPERPARAMS_DIR / f"{ALGO}_multiagent.yml" if args.multiagent else None),
+        multiagent=args.multiagent,
         resume=args.resume,
         trust_pickle=args.trust_pickle,
         eval_freq=args.eval_freq,

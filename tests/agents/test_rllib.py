@@ -1,6 +1,7 @@
 """Training on Ray RLlib (agents.train_rllib): one iteration with the native vector env in the env
 runners, checkpoint and resume, the export to the policy format (its actions equal RLlib's), the
-exported policy in agents.compare, and clear errors for bad input.
+exported policy in agents.compare, and clear errors for bad input; the same for the multi-agent
+run with one shared module (--multiagent).
 
 These need the rllib extra (bash scripts/test_rllib.sh); without Ray they are skipped. They share
 one local Ray instance of 2 CPUs, started and shut down by a session fixture."""
@@ -11,7 +12,9 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -31,6 +34,7 @@ from agents.train_rllib import (  # noqa: E402
     build_config,
     export_policy,
     load_rllib_hyperparameters,
+    make_multiagent_env,
     make_vessel,
     rllib_actions,
     train_rllib,
@@ -119,22 +123,34 @@ def test_the_env_runners_step_the_native_vector_env_in_next_step_mode(ray_instan
     assert found == [(TetherClusterVectorEnv.__name__, "NextStep", 3)]
 
 
-def test_the_exported_policy_acts_as_the_rllib_module(ray_instance: object, tmp_path: Path) -> None:
-    algo = build_config(ENV_ID, SMALL, num_env_runners=0, envs_per_runner=8, seed=1).build_algo()
+def _exported_after_one_iteration(
+    hyperparams: dict[str, Any], envs_per_runner: int, samples: Callable[[], np.ndarray]
+) -> tuple[Any, np.ndarray, np.ndarray]:
+    """One iteration sampled in the driver, exported: ``(vessel, observations, RLlib's actions on them)``."""
+    algo = build_config(ENV_ID, hyperparams, num_env_runners=0, envs_per_runner=envs_per_runner, seed=1).build_algo()
     try:
         algo.train()
-        vessel = make_vessel(ENV_ID, SMALL, seed=1)
-        export_policy(algo, vessel, 800)
-        # Observations the env gives (the statistics matter there), and wider random ones (clipping).
-        envs = gym.make_vec(ENV_ID, num_envs=16)
-        observations, _ = envs.reset(seed=5)
-        stepped, *_ = envs.step(np.random.default_rng(0).uniform(-1, 1, envs.action_space.shape))
-        wide = np.random.default_rng(1).normal(0, 3, observations.shape)
-        samples = np.concatenate([observations, stepped, wide]).astype(np.float32)
-        expected = rllib_actions(algo, samples)
+        vessel = make_vessel(ENV_ID, hyperparams, seed=1)
+        export_policy(algo, vessel, hyperparams["train_batch_size_per_learner"])
+        observations = samples()
+        expected = rllib_actions(algo, observations)
     finally:
         algo.stop()
     assert np.abs(expected).max() > 0.01  # not a trivially zero policy
+    return vessel, observations, expected
+
+
+def _vector_observations() -> np.ndarray:
+    """Observations the env gives (the statistics matter there), and wider random ones (clipping)."""
+    envs = gym.make_vec(ENV_ID, num_envs=16)
+    observations, _ = envs.reset(seed=5)
+    stepped, *_ = envs.step(np.random.default_rng(0).uniform(-1, 1, envs.action_space.shape))
+    wide = np.random.default_rng(1).normal(0, 3, observations.shape)
+    return np.concatenate([observations, stepped, wide]).astype(np.float32)
+
+
+def test_the_exported_policy_acts_as_the_rllib_module(ray_instance: object, tmp_path: Path) -> None:
+    vessel, samples, expected = _exported_after_one_iteration(SMALL, 8, _vector_observations)
     save_policy(tmp_path, vessel, vessel.get_vec_normalize_env(), ENV_ID)
     loaded = TrainedPolicy(tmp_path)
     actions, _ = loaded.predict(samples, deterministic=True)
@@ -234,3 +250,105 @@ def test_the_command_line_rejects_bad_counts_and_ids(tmp_path: Path) -> None:
     ):
         result = _command(*arguments, "--out", str(tmp_path))
         assert result.returncode == 2 and message in result.stderr, result.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# Multi-agent: one shared module for every satellite (agents.train_rllib --multiagent)
+# ---------------------------------------------------------------------------------------------
+
+#: A small multi-agent run: 200 env steps (x 4 agents) per iteration, one env per runner.
+SMALL_MULTIAGENT = {
+    **SMALL,
+    "multiagent": {"reward": "shares"},
+    "n_timesteps": 200,
+    "num_envs_per_env_runner": 1,
+    "train_batch_size_per_learner": 200,
+    "minibatch_size": 100,
+    "normalize_obs": False,
+}
+
+
+def _local_observations(multiagent: dict[str, object]) -> np.ndarray:
+    """(B, local obs) observations of the agents after a reset and a random step, and wider random ones."""
+    from tether_gym.multiagent import parallel_env
+
+    env = parallel_env(ENV_ID, **multiagent)
+    first, _ = env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    stepped, *_ = env.step({agent: rng.uniform(-1, 1, 3) for agent in env.agents})
+    rows = np.stack([*first.values(), *stepped.values()])
+    return np.concatenate([rows, rng.normal(0, 3, rows.shape)]).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def multiagent_run(ray_instance: object, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One iteration of the shared-policy PPO, sampled in the driver, evaluated on 2 seeds."""
+    path = tmp_path_factory.mktemp("hyperparams") / "multiagent.yml"
+    path.write_text(yaml.safe_dump({ENV_ID: SMALL_MULTIAGENT}))
+    return train_rllib(
+        ENV_ID, seed=2, out=tmp_path_factory.mktemp("runs"), hyperparams_file=path, eval_freq=200, eval_episodes=2
+    )
+
+
+def test_one_multiagent_iteration_trains_the_shared_module(multiagent_run: Path) -> None:
+    assert multiagent_run.name == f"{ALGO}_multiagent_seed2"
+    config = yaml.safe_load((multiagent_run / "config.yml").read_text())
+    assert config["hyperparams"]["multiagent"] == {"reward": "shares"}
+    policy = TrainedPolicy(multiagent_run)
+    assert policy.multiagent == {"reward": "shares"} and policy.metadata["num_timesteps"] == 200
+    assert policy.observation_size == _local_observations({}).shape[1] and policy.normalizer is None
+    assert (multiagent_run / "best" / "evaluations.json").is_file()
+
+
+def test_every_agent_maps_to_the_one_shared_module(ray_instance: object) -> None:
+    algo = build_config(ENV_ID, SMALL_MULTIAGENT, num_env_runners=0, envs_per_runner=1, seed=0).build_algo()
+    try:
+        agents = list(make_multiagent_env({"env_id": ENV_ID}).get_agent_ids())
+        mapped = {algo.config.policy_mapping_fn(agent, None) for agent in agents}
+        modules = set(algo.env_runner.module.keys())
+    finally:
+        algo.stop()
+    assert len(agents) == 4 and mapped == {"shared"} and modules == {"shared"}
+
+
+def test_the_exported_multiagent_policy_acts_as_the_shared_module(ray_instance: object, tmp_path: Path) -> None:
+    options = SMALL_MULTIAGENT["multiagent"]
+    vessel, samples, expected = _exported_after_one_iteration(SMALL_MULTIAGENT, 1, lambda: _local_observations(options))
+    save_policy(tmp_path, vessel, None, ENV_ID, multiagent=options)
+    loaded = TrainedPolicy(tmp_path)
+    actions, _ = loaded.policy.predict(samples, deterministic=True)
+    np.testing.assert_allclose(actions, expected, rtol=0, atol=1e-6)
+
+
+def test_the_exported_multiagent_policy_runs_in_compare(multiagent_run: Path, tmp_path: Path) -> None:
+    records, _ = compare.main(
+        [
+            "--controllers",
+            "local_velocity_feedback",
+            str(multiagent_run),
+            "--episodes",
+            "2",
+            "--no-plots",
+            "--out",
+            str(tmp_path / "cmp"),
+        ]
+    )
+    assert [record.name for record in records] == ["local_velocity_feedback", str(multiagent_run)]
+    assert np.isfinite(records[1].rewards.sum())
+
+
+def test_bad_multiagent_options_fail_before_training(ray_instance: object, tmp_path: Path) -> None:
+    def run(entry: dict[str, object]) -> Path:
+        path = tmp_path / "bad.yml"
+        path.write_text(yaml.safe_dump({ENV_ID: {**SMALL_MULTIAGENT, **entry}}))
+        return train_rllib(ENV_ID, out=tmp_path, hyperparams_file=path)
+
+    with pytest.raises(HyperparameterError, match="unknown key 'rewards'.*reward"):
+        run({"multiagent": {"rewards": "shares"}})
+    with pytest.raises(HyperparameterError, match="'multiagent'.*'sharez'"):
+        run({"multiagent": {"reward": "sharez"}})
+    with pytest.raises(HyperparameterError, match="'normalize_obs' must be false with 'multiagent'"):
+        run({"normalize_obs": True})
+    with pytest.raises(HyperparameterError, match="'num_envs_per_env_runner' must be 1 with 'multiagent'"):
+        run({"num_envs_per_env_runner": 4})
+    assert not list(tmp_path.glob(f"{ENV_ID}/*"))  # nothing was written
