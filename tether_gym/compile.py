@@ -69,9 +69,10 @@ KERNELS: tuple[tuple[str, str, Callable[[], None]], ...] = (
     ("remove_rigid_velocity", "the task's initial states", _initial_states),
     ("evaluate_serial", "the task's observation and reward, one thread", _task(1, step=False)),
     ("evaluate_parallel", "the task's observation and reward, all threads", _task(PARALLEL_MIN_BATCH, step=False)),
+    # Before the fused step, which calls it: each line then compiles what it names.
+    ("command_forces", "the thrust commands of steps with disturbances", _task(1, step=True, thrust_noise=0.1)),
     ("step_serial", "a whole task step, one thread", _task(1, step=True)),
     ("step_parallel", "a whole task step, all threads", _task(PARALLEL_MIN_BATCH, step=True)),
-    ("command_forces", "the thrust commands of steps with disturbances", _task(1, step=True, thrust_noise=0.1)),
     ("all_finite", "the envs' check of the actions", _action_checks),
 )
 
