@@ -838,13 +838,12 @@ class DampingTask:
             "thruster_ok": episode.thruster_ok[index].copy(),
             "broken_cables": cables[:, k.INTACT] == 0.0,
         }
+        reason = self.end_reason[index].item()
         if stepped:
             info["substeps"] = int(sim.counter_table[index, k.SUBSTEPS])
             info["step_min"] = cluster[k.STEP_MIN]
             info["step_max"] = cluster[k.STEP_MAX]
             info["peak_tension"] = cables[:, k.PEAK_TENSION].copy()
-        reason = self.end_reason[index].item()
-        if stepped:
             for key in REWARD_TERM_KEYS:
                 info[key] = values[key]
             info["end_reason"] = END_REASONS[reason]
