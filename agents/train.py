@@ -111,6 +111,7 @@ RUN_KEYS = (
     "residual_on",
     "action_noise_std",
     "multiagent",
+    "critic_warmup",
 )
 #: The keys of a ``multiagent`` entry (the options of tether_gym.multiagent, checked there).
 MULTIAGENT_KEYS = ("communication", "reward", "local_observation_noise")
@@ -363,6 +364,7 @@ def _check_range(key: str, value: Any, where: str) -> None:
         "target_policy_noise",
         "target_noise_clip",
         "action_noise_std",
+        "critic_warmup",
     )
     unit = ("gamma", "gae_lambda", "tau")
     if key in positive and not value > 0:
@@ -435,6 +437,8 @@ def _check_run_key(algo: str, key: str, value: Any, where: str) -> Any:
             raise HyperparameterError(str(error)) from None
     if key == "multiagent":
         return _check_multiagent(value, where)
+    if key == "critic_warmup":
+        return _check_value(key, value, int, where)
     raise AssertionError(f"RUN_KEYS has {key!r}, which _check_run_key does not handle")
 
 
@@ -655,6 +659,63 @@ def make_training_env(
 # ---------------------------------------------------------------------------------------------
 # Callbacks
 # ---------------------------------------------------------------------------------------------
+
+
+def actor_parameters(model: BaseAlgorithm) -> list[Any]:
+    """The parameters of ``model``'s actor alone (torch tensors): PPO's policy branch, action
+    head and log-std; SAC's and TD3's actor network. Shared layers (a shared feature extractor
+    with parameters, shared hidden layers) are left out: they serve the critic too."""
+    import torch
+
+    policy = model.policy
+    if hasattr(policy, "action_net"):  # PPO's ActorCriticPolicy
+        log_std = getattr(policy, "log_std", None)
+        extra = [log_std] if isinstance(log_std, torch.nn.Parameter) else []
+        modules = [policy.mlp_extractor.policy_net, policy.action_net]
+        return [p for module in modules for p in module.parameters()] + extra
+    return list(model.actor.parameters())
+
+
+class CriticWarmup(BaseCallback):
+    """Freezes the actor for the first ``steps`` env steps, so that only the critic (PPO's value
+    function, SAC's and TD3's Q networks) learns, then releases it.
+
+    Why: a residual policy starts exactly at its baseline (:func:`start_at_the_baseline`), and a
+    critic that has learned nothing yet gives it random gradients. Updating the actor from the
+    first batch moves it away from a strong baseline before the critic can say which way is up
+    (a TD3 residual on LQR fell 46 below LQR in 20 000 steps, ``docs/benchmark.md``). Residual
+    policy learning (Silver et al., 2018, arXiv:1812.06298) trains the critic alone for a
+    burn-in period for this reason.
+
+    The freeze is ``requires_grad = False`` on :func:`actor_parameters`: their gradients stay
+    ``None``, which the optimisers skip, so the actor's weights, its Adam state and (for TD3) its
+    target network stay exactly as they were. It is applied before every update (at the end of
+    each rollout) and logged as ``train/actor_frozen``.
+    """
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        if steps < 0:
+            raise ValueError(f"critic_warmup must be >= 0 env steps; got {steps!r}")
+        self.steps = int(steps)
+        self.frozen: bool | None = None
+
+    def _on_training_start(self) -> None:
+        self._update()
+
+    def _on_rollout_end(self) -> None:
+        self._update()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _update(self) -> None:
+        frozen = self.num_timesteps < self.steps
+        if frozen != self.frozen:
+            for parameter in actor_parameters(self.model):
+                parameter.requires_grad_(not frozen)
+            self.frozen = frozen
+        self.logger.record("train/actor_frozen", float(frozen))
 
 
 class SafePolicySaver(BaseCallback):
@@ -963,6 +1024,8 @@ def train(
         verbose=1 if progress_bar or verbose else 0,
     )
     callback_items.append(evaluation)
+    if hyperparams.get("critic_warmup"):
+        callback_items.append(CriticWarmup(hyperparams["critic_warmup"]))
     curriculum = hyperparams.get("curriculum")
     if curriculum:
         callback_items.append(DifficultyCurriculum(curriculum["start"], curriculum["fraction"], total))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -100,3 +101,46 @@ def test_action_noise_is_for_off_policy_algorithms() -> None:
         validate_hyperparameters("sac", {"n_timesteps": 100, "action_noise_std": -0.1})
     with pytest.raises(HyperparameterError, match="action_noise_std"):
         validate_hyperparameters("sac", {"n_timesteps": 100, "action_noise_std": "0.1"})
+
+
+def _actor_and_critic(model: Any) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Copies of the actor's and the critic's weights (SAC/TD3: ``model.critic``; PPO: the rest
+    of the policy)."""
+    from agents.train import actor_parameters
+
+    actor = actor_parameters(model)
+    actor_ids = {id(p) for p in actor}
+    critic = model.critic.parameters() if hasattr(model, "critic") else model.policy.parameters()
+    return [p.detach().numpy().copy() for p in actor], [
+        p.detach().numpy().copy() for p in critic if id(p) not in actor_ids
+    ]
+
+
+@pytest.mark.parametrize("algo", ["ppo", "td3", "sac"])
+def test_critic_warmup_freezes_the_actor_and_then_releases_it(algo: str) -> None:
+    """While warming up only the critic learns (the actor's weights stay bit-identical); after the
+    warm-up the actor learns too."""
+    from agents.safe_format import ALGORITHMS
+    from agents.train import CriticWarmup
+
+    venv = ResidualVecEnv(make_sb3_vec_env("TetherTriangle-v0", 2, seed=0), "local_tension_aware")
+    options: dict[str, Any] = {"n_steps": 32, "batch_size": 32} if algo == "ppo" else {"learning_starts": 16}
+    model = ALGORITHMS[algo]("MlpPolicy", venv, seed=0, device="cpu", **options)
+    actor0, critic0 = _actor_and_critic(model)
+    warmup = CriticWarmup(10_000)
+    model.learn(total_timesteps=128, callback=warmup)
+    assert warmup.frozen
+    actor1, critic1 = _actor_and_critic(model)
+    assert all(np.array_equal(a, b) for a, b in zip(actor0, actor1, strict=True))
+    assert any(not np.array_equal(a, b) for a, b in zip(critic0, critic1, strict=True))
+    warmup.steps = 0  # released from the next update on
+    model.learn(total_timesteps=128, callback=warmup, reset_num_timesteps=False)
+    assert warmup.frozen is False
+    actor2, _ = _actor_and_critic(model)
+    assert any(not np.array_equal(a, b) for a, b in zip(actor1, actor2, strict=True))
+
+
+def test_critic_warmup_is_checked() -> None:
+    assert validate_hyperparameters("ppo", {"n_timesteps": 10, "critic_warmup": 5})["critic_warmup"] == 5
+    with pytest.raises(HyperparameterError, match="critic_warmup.*>= 0"):
+        validate_hyperparameters("ppo", {"n_timesteps": 10, "critic_warmup": -1})
