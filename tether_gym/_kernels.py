@@ -500,8 +500,31 @@ def _hold_cluster(cables: np.ndarray, cluster: np.ndarray, counters: np.ndarray)
 
 
 @njit(inline="always", error_model="numpy")
-def _advance_cluster(
-    duration: float,
+def _begin_advance(settings: np.ndarray, nodes: np.ndarray, cables: np.ndarray, cluster: np.ndarray) -> tuple:
+    """What stays fixed over one cluster's interval, ``(tidal_max, turning, viscous, h_damping)``,
+    and the running values its sub-steps carry, ``(elapsed, count, h_lo, h_hi, work, dissipated,
+    h_last)``; also starts each cable's ``PEAK_TENSION`` at its tension."""
+    tidal_max = _largest_tidal(cluster)
+    turning = cluster[FRAME_RATE] != 0.0 or tidal_max != 0.0
+    viscous = False
+    for c in range(cables.shape[0]):
+        viscous = viscous or cables[c, AXIAL_DAMPING] > 0.0
+        cables[c, PEAK_TENSION] = cables[c, TENSION]
+    h_damping = _damping_step(nodes, settings[SAFETY_FACTOR])
+    fixed = (tidal_max, turning, viscous, h_damping)
+    running = (0.0, 0, math.inf, 0.0, cluster[WORK], cluster[DISSIPATED], cluster[LAST_STEP])
+    return fixed, running
+
+
+@njit(inline="always", error_model="numpy")
+def _next_step(duration: float, settings: np.ndarray, cluster: np.ndarray, fixed: tuple, running: tuple) -> tuple:
+    """:func:`_step_size` of the cluster's next sub-step, ``(h, last)``."""
+    return _step_size(cluster[OMEGA2], fixed[3], settings, duration - running[0], running[1])
+
+
+@njit(inline="always", error_model="numpy")
+def _substep(
+    step: tuple[float, bool],
     settings: np.ndarray,
     topology: np.ndarray,
     nodes: np.ndarray,
@@ -509,8 +532,89 @@ def _advance_cluster(
     cluster: np.ndarray,
     counters: np.ndarray,
     step_record: np.ndarray,
+    fixed: tuple,
+    running: tuple,
+) -> tuple:
+    """One sub-step ``step = (h, last)`` of :func:`_next_step` (kick, drift, forces at the new
+    positions): ``(done, running)``, ``done`` when the interval ends (``last``) or the cluster is
+    flagged."""
+    h, last = step
+    tidal_max, turning, viscous, _ = fixed
+    elapsed, count, h_lo, h_hi, work, dissipated, h_last = running
+    if h == 0.0:
+        counters[STATUS] = STATUS_TOO_MANY_SUBSTEPS
+        return True, running
+    if h_last == 0.0:
+        _kick_from_rest(nodes, cluster, h)
+    else:
+        blend = h_last / (h_last + h) if count == 0 else 0.0
+        if turning:
+            _kick_turning(nodes, cluster, 0.5 * (h_last + h), blend)
+        else:
+            _kick(nodes, 0.5 * (h_last + h), blend)
+    work, dissipated = _drift(nodes, h, work, dissipated)
+    if count < step_record.shape[0]:
+        step_record[count] = h
+    count += 1
+    h_last = h
+    h_lo = min(h_lo, h)
+    h_hi = max(h_hi, h)
+    omega2_cables, finite, viscous_power, released = _update_forces(
+        nodes, cables, topology, settings[LINEARISED] != 0.0, viscous
+    )
+    cluster[OMEGA2] = omega2_cables + tidal_max
+    dissipated += h * viscous_power + released
+    done = True
+    if not finite:
+        counters[STATUS] = STATUS_NON_FINITE
+    elif not last:
+        elapsed += h
+        done = False
+    return done, (elapsed, count, h_lo, h_hi, work, dissipated, h_last)
+
+
+@njit(inline="always", error_model="numpy")
+def _end_advance(duration: float, nodes: np.ndarray, cluster: np.ndarray, counters: np.ndarray, running: tuple) -> None:
+    """Store a cluster's measurements of the interval, and its velocity at the end of it."""
+    _, count, h_lo, h_hi, work, dissipated, h_last = running
+    cluster[LAST_STEP] = h_last
+    cluster[WORK] = work
+    cluster[DISSIPATED] = dissipated
+    counters[SUBSTEPS] = count
+    cluster[STEP_MIN] = h_lo
+    cluster[STEP_MAX] = h_hi
+    if count == 0:  # refused before its first step: the state is left exactly as it was
+        return
+    for i in range(nodes.shape[0]):
+        for d in range(3):
+            nodes[i, PREVIOUS_FORCE + d] = nodes[i, APPLIED_FORCE + d]
+    _synchronise_velocity(nodes, cluster, h_last)
+    if counters[STATUS] == STATUS_OK:
+        cluster[TIME] += duration
+
+
+@njit(inline="always", error_model="numpy")
+def _advance_pair(
+    duration: float,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
+    counters: np.ndarray,
+    step_record: np.ndarray,
+    a: int,
+    b: int,
 ) -> None:
-    """Integrate one healthy cluster over ``duration`` seconds with its ``APPLIED_FORCE`` held.
+    """Integrate healthy clusters ``a`` and ``b`` of the tables (``b < 0``: ``a`` alone) over
+    ``duration`` seconds, each with its ``APPLIED_FORCE`` held.
+
+    Their sub-steps are taken in turn: each sub-step is a chain of dependent square roots and
+    divisions (step size, kick, cable lengths), and two independent chains in one loop let the
+    processor overlap them.  Each cluster goes through exactly its own operations, so the bits
+    are those of a cluster integrated alone.  (The body appears twice; a separate loop for a lone
+    cluster, or for the one left when the other ends first, made the first compilation seconds
+    longer.)
 
     Central differences in half-step (leapfrog) form, valid for variable steps::
 
@@ -544,64 +648,46 @@ def _advance_cluster(
     cable's largest tension over the interval, N; ``step_record`` (R,) the first R sub-steps, s.
     A cluster that stays healthy has ``duration`` added to its ``TIME``.
     """
-    linearised = settings[LINEARISED] != 0.0
-    tidal_max = _largest_tidal(cluster)
-    turning = cluster[FRAME_RATE] != 0.0 or tidal_max != 0.0
-    viscous = False
-    for c in range(cables.shape[0]):
-        viscous = viscous or cables[c, AXIAL_DAMPING] > 0.0
-        cables[c, PEAK_TENSION] = cables[c, TENSION]
-    h_damping = _damping_step(nodes, settings[SAFETY_FACTOR])
-    elapsed = 0.0
-    count = 0
-    h_lo = math.inf
-    h_hi = 0.0
-    work = cluster[WORK]
-    dissipated = cluster[DISSIPATED]
-    h_last = cluster[LAST_STEP]
-    while True:
-        h, last = _step_size(cluster[OMEGA2], h_damping, settings, duration - elapsed, count)
-        if h == 0.0:
-            counters[STATUS] = STATUS_TOO_MANY_SUBSTEPS
-            break
-        if h_last == 0.0:
-            _kick_from_rest(nodes, cluster, h)
-        else:
-            blend = h_last / (h_last + h) if count == 0 else 0.0
-            if turning:
-                _kick_turning(nodes, cluster, 0.5 * (h_last + h), blend)
-            else:
-                _kick(nodes, 0.5 * (h_last + h), blend)
-        work, dissipated = _drift(nodes, h, work, dissipated)
-        if count < step_record.shape[0]:
-            step_record[count] = h
-        count += 1
-        h_last = h
-        h_lo = min(h_lo, h)
-        h_hi = max(h_hi, h)
-        omega2_cables, finite, viscous_power, released = _update_forces(nodes, cables, topology, linearised, viscous)
-        cluster[OMEGA2] = omega2_cables + tidal_max
-        dissipated += h * viscous_power + released
-        if not finite:
-            counters[STATUS] = STATUS_NON_FINITE
-            break
-        if last:
-            break
-        elapsed += h
-    cluster[LAST_STEP] = h_last
-    cluster[WORK] = work
-    cluster[DISSIPATED] = dissipated
-    counters[SUBSTEPS] = count
-    cluster[STEP_MIN] = h_lo
-    cluster[STEP_MAX] = h_hi
-    if count == 0:  # refused before its first step: the state is left exactly as it was
-        return
-    for i in range(nodes.shape[0]):
-        for d in range(3):
-            nodes[i, PREVIOUS_FORCE + d] = nodes[i, APPLIED_FORCE + d]
-    _synchronise_velocity(nodes, cluster, h_last)
-    if counters[STATUS] == STATUS_OK:
-        cluster[TIME] += duration
+    alone = b < 0
+    if alone:
+        b = a  # its tables are read (not stepped) so that both chains have values of one type
+    fixed_a, running_a = _begin_advance(settings, nodes[a], cables[a], clusters[a])
+    fixed_b, running_b = _begin_advance(settings, nodes[b], cables[b], clusters[b])
+    done_a = False
+    done_b = alone
+    while not (done_a and done_b):
+        # Both step sizes first (each only reads its cluster): their chains overlap.
+        step_a = _next_step(duration, settings, clusters[a], fixed_a, running_a)
+        step_b = _next_step(duration, settings, clusters[b], fixed_b, running_b)
+        if not done_a:
+            done_a, running_a = _substep(
+                step_a,
+                settings,
+                topology,
+                nodes[a],
+                cables[a],
+                clusters[a],
+                counters[a],
+                step_record[a],
+                fixed_a,
+                running_a,
+            )
+        if not done_b:
+            done_b, running_b = _substep(
+                step_b,
+                settings,
+                topology,
+                nodes[b],
+                cables[b],
+                clusters[b],
+                counters[b],
+                step_record[b],
+                fixed_b,
+                running_b,
+            )
+    _end_advance(duration, nodes[a], clusters[a], counters[a], running_a)
+    if not alone:
+        _end_advance(duration, nodes[b], clusters[b], counters[b], running_b)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -617,19 +703,26 @@ def _advance_clusters(
     step_record: np.ndarray,
 ) -> None:
     """Advance every cluster of the given tables (a batch, or a chunk of one) by ``duration`` s:
-    those ``active`` and healthy by :func:`_advance_cluster`, the others held.  ``step_record``
+    those ``active`` and healthy by :func:`_advance_pair`, two at a time, the others held.  ``step_record``
     (B, R) receives the first R sub-steps of each cluster.
 
     It is the one-thread driver, and :func:`advance_parallel` calls it on chunks: compiled once
     for both (inlined into the parallel driver, it made that take seconds longer to compile), and
     one call per chunk (a call per cluster cost more than a short interval's work)."""
-    for b in range(nodes.shape[0]):
-        if active[b] and counters[b, STATUS] == STATUS_OK:
-            _advance_cluster(
-                duration, settings, topology, nodes[b], cables[b], clusters[b], counters[b], step_record[b]
-            )
-        else:
+    # One call site of the inlined pair: each copy of its body costs seconds of compilation.
+    batch = nodes.shape[0]
+    waiting = -1  # a healthy cluster waiting for a partner
+    for b in range(batch + 1):
+        if b < batch and not (active[b] and counters[b, STATUS] == STATUS_OK):
             _hold_cluster(cables[b], clusters[b], counters[b])
+        elif b < batch and waiting < 0:
+            waiting = b
+        elif waiting >= 0:  # a partner, or the end of the batch: the waiting cluster goes alone
+            partner = b if b < batch else -1
+            _advance_pair(
+                duration, settings, topology, nodes, cables, clusters, counters, step_record, waiting, partner
+            )
+            waiting = -1
 
 
 #: The integrator on one thread, for small batches (its start-up cost is lower).

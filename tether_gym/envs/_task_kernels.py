@@ -19,8 +19,10 @@ The scalar results follow :class:`~tether_gym.envs.contract.Scalar`, the end rea
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -443,8 +445,12 @@ def _evaluate_cluster(
     )
 
 
-#: The numbers of other files the kernels below are compiled with (see :func:`_compile_command_forces`).
+#: The numbers of other files the kernels below are compiled with (see :func:`_compile_command_forces`),
+#: and the physics kernels' source: the fused step compiles the integrator into its own cached
+#: code, and numba's cache keys only on this file's contents, so an edit of ``_kernels.py`` alone
+#: would otherwise leave the old integrator in the cached step.
 FOREIGN_LAYOUT = (
+    hashlib.sha256(Path(_kernels.__file__).read_bytes()).hexdigest(),
     _kernels.LAYOUT,
     PARALLEL_CHUNKS,
     _kernels.STATUS_OK,
