@@ -32,9 +32,11 @@ j.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numba
@@ -118,6 +120,9 @@ SETTINGS = 4
 #: Every column number above, in one tuple: the kernels of other modules that read these tables
 #: hold it in their closure, which numba's cache hashes, so that a change here recompiles them
 #: (the cache watches only the file a kernel is written in).
+#: SHA-256 of this file: kernels of other modules that compile these into their own cached code
+#: key their cache on it (numba keys a cache only on the file of the kernel itself).
+SOURCE_SHA256 = hashlib.sha256((Path(__file__).resolve().parent / "_kernels.py").read_bytes()).hexdigest()
 LAYOUT = (
     (MASS, DAMPING, REFERENCE, POSITION, HALF_STEP_VELOCITY, VELOCITY, INTERNAL_FORCE, PREVIOUS_FORCE),
     (APPLIED_FORCE, NODE_COLUMNS),

@@ -19,10 +19,8 @@ The scalar results follow :class:`~tether_gym.envs.contract.Scalar`, the end rea
 
 from __future__ import annotations
 
-import hashlib
 import math
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -450,7 +448,7 @@ def _evaluate_cluster(
 #: code, and numba's cache keys only on this file's contents, so an edit of ``_kernels.py`` alone
 #: would otherwise leave the old integrator in the cached step.
 FOREIGN_LAYOUT = (
-    hashlib.sha256(Path(_kernels.__file__).read_bytes()).hexdigest(),
+    _kernels.SOURCE_SHA256,
     _kernels.LAYOUT,
     PARALLEL_CHUNKS,
     _kernels.STATUS_OK,
