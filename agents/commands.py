@@ -7,7 +7,8 @@ command line they print or record is built here from ``__package__``, so it is o
 run under either name.
 
 The console scripts of ``pyproject.toml`` (``tether-gym-train``, ``tether-gym-compare``,
-``tether-gym-benchmark``, ``tether-gym-ship``, ``tether-gym-convert``, ``tether-gym-train-rllib``)
+``tether-gym-benchmark``, ``tether-gym-ship``, ``tether-gym-convert``, ``tether-gym-train-rllib``,
+``tether-gym-train-ars``)
 run their module exactly as ``python -m`` does, ``__main__`` block and its error handling
 included, so the two ways to run a command cannot drift apart.
 """
@@ -20,6 +21,7 @@ from collections.abc import Sequence
 
 __all__ = [
     "SCRIPTS",
+    "ars",
     "benchmark",
     "command_line",
     "compare",
@@ -39,6 +41,7 @@ SCRIPTS: dict[str, str] = {
     "ship": "tether-gym-ship",
     "convert": "tether-gym-convert",
     "train_rllib": "tether-gym-train-rllib",
+    "ars": "tether-gym-train-ars",
 }
 
 # The console script running now (set by its entry point before the module runs), or None under
@@ -108,3 +111,8 @@ def convert() -> None:
 def train_rllib() -> None:
     """``tether-gym-train-rllib``: ``python -m tether_gym_agents.train_rllib`` (needs the rllib extra)."""
     _run("train_rllib")
+
+
+def ars() -> None:
+    """``tether-gym-train-ars``: ``python -m tether_gym_agents.ars``."""
+    _run("ars")

@@ -54,6 +54,7 @@ from .files import atomic_write_bytes, atomic_write_text
 __all__ = [
     "ACTIVATIONS",
     "ALGORITHMS",
+    "POLICY_HOSTS",
     "ChecksumError",
     "LoadedPolicy",
     "METADATA_FILE",
@@ -85,6 +86,9 @@ MANIFEST_FILE = "MANIFEST.sha256"
 POLICY_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE, TRAINING_STATE_FILE, TRAINING_META_FILE, MANIFEST_FILE)
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
+#: Training algorithms that are not SB3's, and the SB3 algorithm whose policy classes store their
+#: policies: ARS (:mod:`agents.ars`) trains the linear actor of PPO's ``ActorCriticPolicy``.
+POLICY_HOSTS: dict[str, type[BaseAlgorithm]] = {"ars": PPO}
 #: Activation functions by the names that hyperparameter files and policy.json use.
 ACTIVATIONS: dict[str, type[torch.nn.Module]] = {
     "tanh": torch.nn.Tanh,
@@ -326,9 +330,10 @@ def decode_policy_kwargs(data: Any, policy_class: type, where: str) -> dict[str,
 
 
 def _policy_class(algo: str, alias: str, where: str) -> type[BasePolicy]:
-    if algo not in ALGORITHMS:
-        raise PolicyFormatError(f"{where}: algorithm {algo!r} is not one of {sorted(ALGORITHMS)}")
-    aliases = ALGORITHMS[algo].policy_aliases
+    hosts = {**ALGORITHMS, **POLICY_HOSTS}
+    if algo not in hosts:
+        raise PolicyFormatError(f"{where}: algorithm {algo!r} is not one of {sorted(hosts)}")
+    aliases = hosts[algo].policy_aliases
     if alias not in aliases:
         raise PolicyFormatError(f"{where}: policy {alias!r} is not one of {algo}'s {sorted(aliases)}")
     return aliases[alias]
@@ -651,13 +656,18 @@ def policy_metadata(
     training_state: bool,
     residual_on: str | None = None,
     multiagent: Mapping[str, Any] | None = None,
+    algo: str | None = None,
 ) -> dict[str, Any]:
-    """The ``policy.json`` of ``model`` (see the module docstring)."""
+    """The ``policy.json`` of ``model`` (see the module docstring); ``algo`` names a training
+    algorithm of :data:`POLICY_HOSTS` whose policy ``model`` holds (default: ``model``'s own)."""
+    if algo is not None and POLICY_HOSTS.get(algo) is not type(model):
+        host = type(model).__name__
+        raise PolicyFormatError(f"algo {algo!r} is not one of {sorted(POLICY_HOSTS)} with a {host} policy")
     policy_class = model.policy_class
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
-        "algo": _algo_name(model),
+        "algo": algo or _algo_name(model),
         "env_id": env_id,
         "policy": policy_alias(model),
         "policy_kwargs": encode_policy_kwargs(policy_constructor_kwargs(model), policy_class),
@@ -683,9 +693,11 @@ def save_policy(
     extra_files: Iterable[str] = (),
     residual_on: str | None = None,
     multiagent: Mapping[str, Any] | None = None,
+    algo: str | None = None,
 ) -> Path:
     """Write ``model``'s policy (and ``normalizer``'s statistics) to ``directory`` in the safe
-    format; with ``training_state``, also the optimizer states and counters that resuming needs.
+    format; with ``training_state``, also the optimizer states and counters that resuming needs;
+    ``algo`` as in :func:`policy_metadata`.
     Every file is written atomically, the manifest last; it also covers ``extra_files`` (names
     of files already in ``directory``, such as ``config.yml``). Returns the directory."""
     directory = Path(directory)
@@ -694,7 +706,7 @@ def save_policy(
         NormalizationStatistics.from_vec_normalize(normalizer) if isinstance(normalizer, VecNormalize) else normalizer
     )
     metadata = policy_metadata(
-        model, env_id, provenance, statistics is not None, training_state, residual_on, multiagent
+        model, env_id, provenance, statistics is not None, training_state, residual_on, multiagent, algo
     )
     written = [METADATA_FILE, WEIGHTS_FILE]
     atomic_write_bytes(directory / WEIGHTS_FILE, tensor_bytes(model.policy.state_dict()))

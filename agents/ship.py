@@ -37,6 +37,7 @@ from .files import OutputError, atomic_write_bytes, atomic_write_text, prepare_o
 from .safe_format import (
     METADATA_FILE,
     NORMALIZATION_FILE,
+    POLICY_HOSTS,
     WEIGHTS_FILE,
     PolicyFormatError,
     is_policy_dir,
@@ -242,7 +243,11 @@ def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
         elif not token.startswith("--hyperparams="):
             kept.append(token)
     algorithm = algo.removesuffix(MULTIAGENT_SUFFIX)
-    for flag, value in (("--algo", algorithm), ("--env", env_id), ("--seed", candidate["seed"])):
+    # agents.train takes --algo; a trainer of its own (agents.ars) is named by its command.
+    flags = [("--env", env_id), ("--seed", candidate["seed"])]
+    if algorithm not in POLICY_HOSTS:
+        flags.insert(0, ("--algo", algorithm))
+    for flag, value in flags:
         if flag not in kept:
             kept += [flag, str(value)]
     return shlex.join([*kept, "--hyperparams", str(Path(shipped_at) / env_id / algo / "config.yml")])

@@ -1,0 +1,475 @@
+"""Train a linear residual policy with Augmented Random Search on paired seeds: python -m agents.ars --env TetherHub-v0.
+
+ARS (Mania, Guy and Recht, 2018, arXiv:1803.07055) improves a deterministic policy's parameters
+``theta`` directly. At every iteration it draws ``directions`` Gaussian perturbations ``delta``,
+runs the policies ``theta + nu delta`` and ``theta - nu delta`` for each, and steps along the
+directions whose pair differs most in return:
+
+    theta <- theta + step_size / (top * sigma_R) * sum over the ``top`` best directions of
+             (R(theta + nu delta) - R(theta - nu delta)) delta
+
+where ``sigma_R`` is the standard deviation of the 2 ``top`` returns used (version V1-t of the
+paper, with observations normalised by statistics fixed before training).
+
+The policy here is a linear correction on top of a scripted baseline (``residual_on``), on the
+normalised observation ``z``: ``action = clip(baseline(obs) + clip(W z + b, -1, 1), -1, 1)``. It
+starts at ``W = 0, b = 0``, the baseline itself.
+
+**Why ARS, and why paired seeds.** On the ids where a scripted law is best, the known room above
+it is small: the model-predictive reference, with the true state and model, gains 0.5-7 % over
+the local tension-aware law. PPO and TD3 residuals on that law lose return as soon as their actor
+moves (``docs/benchmark.md``): their gradient is that of a *noisy* policy, or of a critic, and
+near a strong law both point the wrong way often enough. ARS measures the *deterministic*
+policy's return, and every candidate of an iteration (``2 directions``) runs on the *same*
+``seeds_per_direction`` episodes, all of them at once in one batched vector env. The difference
+``R(theta + nu delta) - R(theta - nu delta)`` is then a paired difference, free of the spread
+between episodes' initial conditions (returns from -1 to -130 on the default id), which would
+otherwise drown a 1 % gain.
+
+Training, evaluation and selection follow ``agents.train``: the run directory
+``<out>/<env>/ars_seed<seed>`` holds ``config.yml`` (settings and the exact command), TensorBoard
+logs, ``best/`` (the policy with the best mean return on the evaluation seeds, 1 000 000 up,
+never the benchmark's held-out seeds) with ``best/evaluations.json``, and the final policy. The
+policy is stored in the safe format (:mod:`agents.safe_format`) as the linear actor of SB3's
+``ActorCriticPolicy`` (``net_arch: {pi: [], vf: []}``) with ``algo: ars``, so ``agents.compare``,
+``agents.benchmark`` and ``agents.ship`` load it like any trained model. Settings per id are in
+``agents/hyperparams/ars.yml``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .baselines import BASELINES, make_baseline
+from .commands import command_line, description, program
+from .files import OutputError, atomic_write_text
+from .residual import residual_actions
+from .safe_format import NormalizationStatistics, PolicyFormatError, save_policy
+from .selection import baseline_returns, episode_returns, evaluation_seeds
+
+__all__ = [
+    "ARS_SETTINGS_FILE",
+    "ARSSettings",
+    "LinearResidualPolicy",
+    "ars_update",
+    "load_ars_settings",
+    "train_ars",
+]
+
+#: Per-id ARS settings (plain YAML, nothing evaluated).
+ARS_SETTINGS_FILE = Path(__file__).resolve().parent / "hyperparams" / "ars.yml"
+#: First seed of the episodes the observation statistics come from, and of the training episodes
+#: (each run and iteration takes its own block): far from the evaluation seeds (1 000 000 up), the
+#: benchmark's held-out seeds (10 000 up) and the mpc tuning seeds (2 000 up).
+NORMALIZATION_SEEDS_START = 50_000_000
+TRAINING_SEEDS_START = 100_000_000
+#: Seeds set aside per run (seed s trains on TRAINING_SEEDS_START + s * SEEDS_PER_RUN + ...).
+SEEDS_PER_RUN = 1_000_000
+
+
+@dataclasses.dataclass(frozen=True)
+class ARSSettings:
+    """Settings of :func:`train_ars` (see the module docstring).
+
+    Attributes:
+        residual_on: the scripted baseline the policy corrects (``agents.baselines.BASELINES``).
+        iterations: ARS updates.
+        directions: perturbation directions per iteration (each run with + and -).
+        top: directions kept for the update (the largest ``max(R+, R-)``), <= ``directions``.
+        seeds_per_direction: episodes per candidate, the same seeds for every candidate of an
+            iteration (so an iteration runs ``2 directions seeds_per_direction`` episodes at once).
+        exploration: ``nu``, the standard deviation of the perturbation of each weight. A weight
+            maps one normalised observation component (about unit spread) to normalised thrust.
+        step_size: ``alpha``, the update's step in units of ``sigma_R``-scaled directions.
+        eval_every: iterations between evaluations on the evaluation seeds.
+        eval_episodes: evaluation episodes (seeds 1 000 000 up, as ``agents.train``).
+        normalization_episodes: baseline episodes whose states give the observation statistics.
+    """
+
+    residual_on: str = "local_tension_aware"
+    iterations: int = 60
+    directions: int = 16
+    top: int = 8
+    seeds_per_direction: int = 16
+    exploration: float = 0.005
+    step_size: float = 0.001
+    eval_every: int = 10
+    eval_episodes: int = 64
+    normalization_episodes: int = 64
+
+    def __post_init__(self) -> None:
+        if self.residual_on not in BASELINES:
+            raise ValueError(f"ars setting residual_on must be one of {sorted(BASELINES)}; got {self.residual_on!r}")
+        names = ("iterations", "directions", "top", "seeds_per_direction", "eval_every")
+        for name in (*names, "eval_episodes", "normalization_episodes"):
+            value, least = getattr(self, name), 1 if name in names else 2  # 2: a spread, an interval
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise ValueError(f"ars setting {name} must be an integer >= {least}; got {value!r}")
+        if self.top > self.directions:
+            raise ValueError(f"ars setting top ({self.top}) must be <= directions ({self.directions})")
+        for name in ("exploration", "step_size"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not (np.isfinite(value) and value > 0):
+                raise ValueError(f"ars setting {name} must be a positive number; got {value!r}")
+
+
+def load_ars_settings(env_id: str | None, path: str | Path | None = None, **overrides: Any) -> ARSSettings:
+    """The ARS settings of ``env_id``: its entry of ``agents/hyperparams/ars.yml`` (or of ``path``,
+    which may also be a run's ``config.yml``), else the file's ``default`` entry, with keyword
+    ``overrides`` on top."""
+    file = Path(path) if path is not None else ARS_SETTINGS_FILE
+    table = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
+    if not isinstance(table, dict):
+        raise ValueError(f"{file} must map env ids to ARS settings")
+    if table.get("algo") == "ars" and isinstance(table.get("hyperparams"), dict):  # a run's config.yml
+        entry = dict(table["hyperparams"])
+    else:
+        entry = dict(table.get(env_id, table.get("default")) or {})
+    entry.update(overrides)
+    known = {field.name for field in dataclasses.fields(ARSSettings)}
+    unknown = sorted(set(entry) - known)
+    if unknown:
+        raise ValueError(f"{file}: unknown ARS setting(s) {unknown} for {env_id!r}; settings are {sorted(known)}")
+    return ARSSettings(**entry)
+
+
+def ars_update(
+    theta: np.ndarray, deltas: np.ndarray, plus: np.ndarray, minus: np.ndarray, top: int, step_size: float
+) -> np.ndarray:
+    """One ARS step (V1-t): ``theta`` (any shape P) moved along the ``top`` directions of
+    ``deltas`` (D, *P) with the largest ``max(plus, minus)``, weighted by ``plus - minus`` (D,
+    returns of ``theta +- nu delta``) and scaled by ``step_size / (top * sigma)``, ``sigma`` the
+    standard deviation of the 2 ``top`` returns used (the step is 0 when they are all equal)."""
+    plus, minus = np.asarray(plus, dtype=float), np.asarray(minus, dtype=float)
+    if plus.shape != (deltas.shape[0],) or minus.shape != plus.shape:
+        raise ValueError(f"plus and minus must have shape ({deltas.shape[0]},); got {plus.shape} and {minus.shape}")
+    if not 1 <= top <= deltas.shape[0]:
+        raise ValueError(f"top must be in 1..{deltas.shape[0]}; got {top}")
+    kept = np.argsort(-np.maximum(plus, minus), kind="stable")[:top]
+    sigma = float(np.concatenate([plus[kept], minus[kept]]).std())
+    if sigma == 0.0:
+        return theta.copy()
+    step = np.tensordot(plus[kept] - minus[kept], deltas[kept], axes=1)
+    return theta + step_size / (top * sigma) * step
+
+
+class LinearResidualPolicy:
+    """``clip(baseline(obs) + clip(W z + b, -1, 1), -1, 1)`` with ``z`` the normalised observation,
+    one ``(W, b)`` per row of the batch or one for all (a controller for ``agents.evaluate.rollout``).
+
+    Args:
+        residual_on: the baseline's name; it is built for the env of :meth:`attach`.
+        statistics: the observation statistics (``z = statistics.normalize_obs(obs)``).
+        weights: (A, O + 1) or (R, A, O + 1): ``W`` and, in the last column, ``b``.
+    """
+
+    name = "ars"
+
+    def __init__(self, residual_on: str, statistics: NormalizationStatistics, weights: np.ndarray) -> None:
+        self.residual_on, self.statistics = residual_on, statistics
+        self.weights = np.asarray(weights, dtype=float)
+        self.baseline: Any = None
+
+    def attach(self, env: Any) -> None:
+        """Build the baseline for ``env`` (the env the rollout steps)."""
+        self.baseline = make_baseline(self.residual_on, env)
+
+    def predict(
+        self, observation: np.ndarray, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[np.ndarray, None]:
+        """Actions (N, A) for observations (N, O)."""
+        if self.baseline is None:
+            raise RuntimeError("attach(env) the policy before predicting: its baseline needs the env's cluster")
+        z = self.statistics.normalize_obs(observation).astype(float)
+        gains, bias = self.weights[..., :-1], self.weights[..., -1]
+        correction = np.einsum("...ao,...o->...a", gains, z) + bias
+        return residual_actions(self.baseline, observation, np.clip(correction, -1.0, 1.0)), None
+
+
+def observation_statistics(env_id: str, residual_on: str, seeds: list[int]) -> NormalizationStatistics:
+    """Mean and variance of the observations the baseline's closed loop visits on ``seeds``, as
+    fixed normalisation statistics (no reward scaling)."""
+    import gymnasium as gym
+
+    envs = gym.make_vec(env_id, num_envs=len(seeds))
+    baseline = make_baseline(residual_on, envs)
+    observation, _ = envs.reset(seed=seeds)
+    alive = np.ones(len(seeds), dtype=bool)
+    visited = []
+    while alive.any():
+        visited.append(observation[alive])
+        action, _ = baseline.predict(observation)
+        observation, _, terminated, truncated, _ = envs.step(action)
+        alive &= ~(terminated | truncated)
+    envs.close()
+    states = np.concatenate(visited)
+    return NormalizationStatistics(
+        obs_mean=states.mean(axis=0),
+        obs_var=states.var(axis=0),
+        obs_count=float(len(states)),
+        ret_mean=np.zeros(()),
+        ret_var=np.ones(()),
+        ret_count=1e-4,
+        clip_obs=10.0,
+        clip_reward=10.0,
+        epsilon=1e-8,
+        gamma=0.99,
+        norm_obs=True,
+        norm_reward=False,
+    )
+
+
+def save_linear_policy(
+    directory: Path,
+    env_id: str,
+    residual_on: str,
+    statistics: NormalizationStatistics,
+    theta: np.ndarray,
+    timesteps: int,
+    provenance: dict[str, Any],
+    extra_files: tuple[str, ...] = (),
+) -> Path:
+    """Write ``theta`` (A, O + 1) in the safe format, as the linear actor of an SB3
+    ``ActorCriticPolicy`` (``net_arch: {pi: [], vf: []}``) with ``algo: ars``."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from tether_gym.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(env_id, 1, seed=0)
+    with torch.random.fork_rng(devices=[]):
+        model = PPO(
+            "MlpPolicy", venv, policy_kwargs={"net_arch": {"pi": [], "vf": []}}, device="cpu", n_steps=64, batch_size=64
+        )
+    action_net = model.policy.action_net
+    if tuple(action_net.weight.shape) != theta[:, :-1].shape:
+        shape = tuple(action_net.weight.shape)
+        raise PolicyFormatError(f"ARS weights {theta.shape} do not fit {env_id}'s action net {shape}")
+    with torch.no_grad():
+        action_net.weight.copy_(torch.as_tensor(theta[:, :-1], dtype=torch.float32))
+        action_net.bias.copy_(torch.as_tensor(theta[:, -1], dtype=torch.float32))
+    model.num_timesteps = int(timesteps)
+    venv.close()
+    return save_policy(
+        directory, model, statistics, env_id, provenance, extra_files=extra_files, residual_on=residual_on, algo="ars"
+    )
+
+
+def train_ars(
+    env_id: str,
+    seed: int = 1,
+    out: str | Path = "runs",
+    settings: ARSSettings | None = None,
+    force: bool = False,
+    progress: bool = True,
+    command: str | None = None,
+) -> Path:
+    """Train a linear residual policy with ARS (see the module docstring); returns the run directory.
+
+    Args:
+        env_id: a registered tether-gym id.
+        seed: the run's seed: it draws the perturbations and picks the block of training seeds.
+        out: parent of the run directory ``<out>/<env_id>/ars_seed<seed>``.
+        settings: default: ``load_ars_settings(env_id)``.
+        force: replace an earlier run in the same directory.
+        progress: show a progress bar.
+        command: the command line recorded in ``config.yml``.
+    """
+    from stable_baselines3.common.logger import configure
+
+    import tether_gym
+    from tether_gym.registration import ENV_IDS
+
+    from .benchmark import paired_difference
+    from .train import _prepare_run_dir
+
+    if env_id not in ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; choose one of {', '.join(ENV_IDS)}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 1000:
+        raise ValueError(f"seed must be an integer in 0..999; got {seed!r}")
+    s = settings if settings is not None else load_ars_settings(env_id)
+    if s.iterations * s.seeds_per_direction > SEEDS_PER_RUN:
+        raise ValueError(f"iterations x seeds_per_direction must be <= {SEEDS_PER_RUN:,} (the run's block of seeds)")
+    run = _prepare_run_dir(out, env_id, "ars", seed, force)
+    for stale in ("best", "policy.json"):
+        if force and (run / stale).exists():
+            import shutil
+
+            shutil.rmtree(run / stale) if (run / stale).is_dir() else (run / stale).unlink()
+    record = {
+        "algo": "ars",
+        "env_id": env_id,
+        "seed": seed,
+        "hyperparams": dataclasses.asdict(s),
+        "command": command or command_line("ars", ["--env", env_id, "--seed", str(seed)]),
+        "tether_gym_version": tether_gym.__version__,
+    }
+    atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
+    provenance = {"seed": seed, "command": record["command"], "config": "config.yml of the run directory"}
+    logger = configure(str(run / "tensorboard"), ["tensorboard", "csv"])
+    started = time.perf_counter()
+
+    normalization_seeds = range(NORMALIZATION_SEEDS_START, NORMALIZATION_SEEDS_START + s.normalization_episodes)
+    statistics = observation_statistics(env_id, s.residual_on, list(normalization_seeds))
+    seeds = evaluation_seeds(s.eval_episodes)
+    by_name, bar = baseline_returns(env_id, seeds)
+    start_returns = by_name[s.residual_on]
+    rng = np.random.default_rng(seed)
+    action_size, observation_size = _sizes(env_id)
+    theta = np.zeros((action_size, observation_size + 1))
+    block = TRAINING_SEEDS_START + seed * SEEDS_PER_RUN
+    log: dict[str, Any] = {
+        "env_id": env_id,
+        "seeds": [seeds[0], seeds[-1]],
+        "baselines": {name: float(r.mean()) for name, r in by_name.items()},
+        "bar": bar,
+        "residual_on": s.residual_on,
+        "best_mean_return": float(start_returns.mean()),
+        "first_beat": {},
+        "training": None,
+        "evaluations": [],
+    }
+    timesteps = 0
+    best_iteration = 0
+    bar_update = _progress_bar(s.iterations, f"ars {env_id} seed {seed}", progress)
+    for iteration in range(1, s.iterations + 1):
+        deltas = rng.standard_normal((s.directions, *theta.shape))
+        candidates = np.concatenate([theta + s.exploration * deltas, theta - s.exploration * deltas])
+        episode_seeds = block + (iteration - 1) * s.seeds_per_direction + np.arange(s.seeds_per_direction)
+        policy = LinearResidualPolicy(s.residual_on, statistics, np.repeat(candidates, s.seeds_per_direction, axis=0))
+        record_ = _rollout(policy, env_id, np.tile(episode_seeds, 2 * s.directions).tolist())
+        timesteps += int(record_.end_step.sum())
+        returns = record_.rewards.sum(axis=1).reshape(2 * s.directions, s.seeds_per_direction).mean(axis=1)
+        plus, minus = returns[: s.directions], returns[s.directions :]
+        theta = ars_update(theta, deltas, plus, minus, s.top, s.step_size)
+        logger.record("train/candidate_return_mean", float(returns.mean()))
+        logger.record("train/weight_max", float(np.abs(theta).max()))
+        logger.record("time/iterations", iteration)
+        if iteration % s.eval_every == 0 or iteration == s.iterations:
+            returns_eval = episode_returns(LinearResidualPolicy(s.residual_on, statistics, theta), env_id, seeds)
+            paired = paired_difference(returns_eval, by_name[bar])
+            wall = time.perf_counter() - started
+            entry = {
+                "iteration": iteration,
+                "timesteps": timesteps,
+                "wall_time_s": round(wall, 2),
+                "mean_return": float(returns_eval.mean()),
+                "returns": returns_eval.tolist(),
+                "difference_vs_bar": paired.mean,
+                "difference_low": paired.low,
+                "difference_high": paired.high,
+                "wins": int((returns_eval > by_name[bar]).sum()),
+            }
+            log["evaluations"].append(entry)
+            for name, baseline in by_name.items():
+                if name not in log["first_beat"] and returns_eval.mean() > baseline.mean():
+                    log["first_beat"][name] = {"timesteps": timesteps, "wall_time_s": round(wall, 2)}
+            for key in ("mean_return", "difference_vs_bar"):
+                logger.record(f"eval/{key}", entry[key])
+            if entry["mean_return"] > log["best_mean_return"]:
+                log["best_mean_return"], best_iteration = entry["mean_return"], iteration
+                save_linear_policy(run / "best", env_id, s.residual_on, statistics, theta, timesteps, provenance)
+            bar_update(f"eval {entry['mean_return']:.2f}, {paired.mean:+.2f} vs {bar}")
+        logger.dump(timesteps)
+        bar_update(None)
+    elapsed = time.perf_counter() - started
+    log["training"] = {"timesteps": timesteps, "wall_time_s": round(elapsed, 2), "best_iteration": best_iteration}
+    if best_iteration == 0:  # never above the baseline: best/ is the starting point, the baseline itself
+        save_linear_policy(run / "best", env_id, s.residual_on, statistics, np.zeros_like(theta), 0, provenance)
+    atomic_write_text(run / "best" / "evaluations.json", _json(log))
+    final = (run, env_id, s.residual_on, statistics, theta, timesteps, provenance)
+    save_linear_policy(*final, extra_files=("config.yml",))
+    logger.close()
+    last = log["evaluations"][-1]
+    print(
+        f"trained ars on {env_id} for {s.iterations} iterations ({timesteps:,} env steps) in {elapsed / 60:.1f} min; "
+        f"best evaluation {log['best_mean_return']:.2f} at iteration {best_iteration} against {bar} "
+        f"{log['baselines'][bar]:.2f} (last: {last['difference_vs_bar']:+.2f} [{last['difference_low']:+.2f}, "
+        f"{last['difference_high']:+.2f}]); run directory {run}"
+    )
+    return run
+
+
+def _sizes(env_id: str) -> tuple[int, int]:
+    import gymnasium as gym
+
+    env = gym.make(env_id)
+    sizes = int(env.action_space.shape[0]), int(env.observation_space.shape[0])
+    env.close()
+    return sizes
+
+
+def _rollout(policy: LinearResidualPolicy, env_id: str, seeds: list[int]) -> Any:
+    from .evaluate import rollout
+
+    return rollout(policy, env_id, seeds)
+
+
+def _json(value: Any) -> str:
+    import json
+
+    return json.dumps(value, indent=1) + "\n"
+
+
+def _progress_bar(total: int, label: str, enabled: bool) -> Callable[[str | None], None]:
+    """An update function: ``update(None)`` advances one iteration, ``update(text)`` sets the postfix."""
+    if not enabled:
+        return lambda text: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=label, unit="it")
+
+    def update(text: str | None) -> None:
+        if text is None:
+            bar.update(1)
+            if bar.n >= total:
+                bar.close()
+        else:
+            bar.set_postfix_str(text)
+
+    return update
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=program("ars"), description=description(__doc__))
+    parser.add_argument("--env", default="TetherTetrahedron-v0", metavar="ID", help="env id")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/ars_seed<seed>")
+    parser.add_argument(
+        "--hyperparams", help="YAML file instead of agents/hyperparams/ars.yml, or a run's config.yml (reproduces it)"
+    )
+    parser.add_argument("--iterations", type=int, help="override the number of ARS iterations")
+    parser.add_argument("--force", action="store_true", help="replace an earlier run with the same --out, env and seed")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar (for logs)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> Path:
+    args = build_parser().parse_args(argv)
+    overrides = {} if args.iterations is None else {"iterations": args.iterations}
+    settings = load_ars_settings(args.env, args.hyperparams, **overrides)
+    return train_ars(
+        args.env,
+        args.seed,
+        args.out,
+        settings,
+        force=args.force,
+        progress=not args.no_progress,
+        command=command_line("ars", sys.argv[1:] if argv is None else argv),
+    )
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except (OutputError, PolicyFormatError, ValueError, OSError) as error:
+        sys.exit(f"{program('ars')}: error: {error}")
