@@ -96,7 +96,7 @@ class ARSSettings:
     """
 
     residual_on: str = "local_tension_aware"
-    iterations: int = 60
+    iterations: int = 100
     directions: int = 16
     top: int = 8
     seeds_per_direction: int = 16
