@@ -55,6 +55,7 @@ from .files import OutputError, atomic_write_text
 from .residual import residual_actions
 from .safe_format import NormalizationStatistics, PolicyFormatError, save_policy
 from .selection import baseline_returns, episode_returns, evaluation_seeds
+from .settings import load_settings
 
 __all__ = [
     "ARS_SETTINGS_FILE",
@@ -127,19 +128,7 @@ def load_ars_settings(env_id: str | None, path: str | Path | None = None, **over
     which may also be a run's ``config.yml``), else the file's ``default`` entry, with keyword
     ``overrides`` on top."""
     file = Path(path) if path is not None else ARS_SETTINGS_FILE
-    table = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
-    if not isinstance(table, dict):
-        raise ValueError(f"{file} must map env ids to ARS settings")
-    if table.get("algo") == "ars" and isinstance(table.get("hyperparams"), dict):  # a run's config.yml
-        entry = dict(table["hyperparams"])
-    else:
-        entry = dict(table.get(env_id, table.get("default")) or {})
-    entry.update(overrides)
-    known = {field.name for field in dataclasses.fields(ARSSettings)}
-    unknown = sorted(set(entry) - known)
-    if unknown:
-        raise ValueError(f"{file}: unknown ARS setting(s) {unknown} for {env_id!r}; settings are {sorted(known)}")
-    return ARSSettings(**entry)
+    return load_settings(ARSSettings, file, env_id, "ARS", overrides, run_algo="ars")
 
 
 def ars_update(

@@ -40,11 +40,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from tether_gym.envs.contract import Scalar
 from tether_gym.envs.task import DampingTask, TaskState
 from tether_gym.limits import is_whole_number
+
+from .settings import load_settings
 
 __all__ = ["MPC_SETTINGS_FILE", "MPCController", "MPCSettings", "load_mpc_settings"]
 
@@ -118,16 +119,7 @@ def load_mpc_settings(env_id: str | None, path: str | Path | None = None, **over
     """The ``mpc`` settings of ``env_id``: its entry of ``agents/hyperparams/mpc.yml`` (or of
     ``path``), else the file's ``default`` entry, with keyword ``overrides`` on top."""
     file = Path(path) if path is not None else MPC_SETTINGS_FILE
-    table = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
-    if not isinstance(table, dict):
-        raise ValueError(f"{file} must map env ids to mpc settings")
-    entry = dict(table.get(env_id, table.get("default")) or {})
-    entry.update(overrides)
-    known = {field.name for field in dataclasses.fields(MPCSettings)}
-    unknown = sorted(set(entry) - known)
-    if unknown:
-        raise ValueError(f"{file}: unknown mpc setting(s) {unknown} for {env_id!r}; settings are {sorted(known)}")
-    return MPCSettings(**entry)
+    return load_settings(MPCSettings, file, env_id, "mpc", overrides)
 
 
 class MPCController:
