@@ -246,6 +246,10 @@ def save_linear_policy(
     with torch.no_grad():
         action_net.weight.copy_(torch.as_tensor(theta[:, :-1], dtype=torch.float32))
         action_net.bias.copy_(torch.as_tensor(theta[:, -1], dtype=torch.float32))
+        # ARS has no critic: the host policy's value head is unused, and zero rather than
+        # randomly initialised so that the same run writes the same bytes.
+        for parameter in model.policy.value_net.parameters():
+            parameter.zero_()
     model.num_timesteps = int(timesteps)
     venv.close()
     return save_policy(

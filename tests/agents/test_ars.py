@@ -135,5 +135,6 @@ def test_the_same_seed_trains_the_same_weights(tmp_path: Path) -> None:
     first = train_ars("TetherTriangle-v0", seed=3, out=tmp_path / "a", settings=settings, progress=False)
     second = train_ars("TetherTriangle-v0", seed=3, out=tmp_path / "b", settings=settings, progress=False)
     other = train_ars("TetherTriangle-v0", seed=4, out=tmp_path / "c", settings=settings, progress=False)
-    weights = [(run / "policy.safetensors").read_bytes() for run in (first, second, other)]
-    assert weights[0] == weights[1] and weights[0] != weights[2]
+    for name in ("policy.safetensors", "best/policy.safetensors"):
+        assert (first / name).read_bytes() == (second / name).read_bytes()
+    assert (first / "policy.safetensors").read_bytes() != (other / "policy.safetensors").read_bytes()
