@@ -54,7 +54,7 @@ from .commands import command_line, description, program
 from .files import OutputError, atomic_write_text
 from .residual import residual_actions
 from .safe_format import NormalizationStatistics, PolicyFormatError, save_policy
-from .selection import baseline_returns, episode_returns, evaluation_seeds
+from .selection import EvaluationLog, baseline_returns, episode_returns, evaluation_seeds
 from .settings import load_settings
 
 __all__ = [
@@ -282,8 +282,8 @@ def train_ars(
     import tether_gym
     from tether_gym.registration import ENV_IDS
 
-    from .benchmark import paired_difference
-    from .train import _prepare_run_dir
+    from .evaluate import rollout
+    from .train import _clear_earlier_run, _prepare_run_dir
 
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; choose one of {', '.join(ENV_IDS)}")
@@ -293,11 +293,8 @@ def train_ars(
     if s.iterations * s.seeds_per_direction > SEEDS_PER_RUN:
         raise ValueError(f"iterations x seeds_per_direction must be <= {SEEDS_PER_RUN:,} (the run's block of seeds)")
     run = _prepare_run_dir(out, env_id, "ars", seed, force)
-    for stale in ("best", "policy.json"):
-        if force and (run / stale).exists():
-            import shutil
-
-            shutil.rmtree(run / stale) if (run / stale).is_dir() else (run / stale).unlink()
+    if force:
+        _clear_earlier_run(run, "ars", set())
     record = {
         "algo": "ars",
         "env_id": env_id,
@@ -315,22 +312,12 @@ def train_ars(
     statistics = observation_statistics(env_id, s.residual_on, list(normalization_seeds))
     seeds = evaluation_seeds(s.eval_episodes)
     by_name, bar = baseline_returns(env_id, seeds)
-    start_returns = by_name[s.residual_on]
+    # A first "best" must beat the baseline the policy starts as.
+    log = EvaluationLog(env_id, seeds, by_name, bar, started, best_mean=float(by_name[s.residual_on].mean()))
     rng = np.random.default_rng(seed)
     action_size, observation_size = _sizes(env_id)
     theta = np.zeros((action_size, observation_size + 1))
     block = TRAINING_SEEDS_START + seed * SEEDS_PER_RUN
-    log: dict[str, Any] = {
-        "env_id": env_id,
-        "seeds": [seeds[0], seeds[-1]],
-        "baselines": {name: float(r.mean()) for name, r in by_name.items()},
-        "bar": bar,
-        "residual_on": s.residual_on,
-        "best_mean_return": float(start_returns.mean()),
-        "first_beat": {},
-        "training": None,
-        "evaluations": [],
-    }
     timesteps = 0
     best_iteration = 0
     bar_update = _progress_bar(s.iterations, f"ars {env_id} seed {seed}", progress)
@@ -339,9 +326,9 @@ def train_ars(
         candidates = np.concatenate([theta + s.exploration * deltas, theta - s.exploration * deltas])
         episode_seeds = block + (iteration - 1) * s.seeds_per_direction + np.arange(s.seeds_per_direction)
         policy = LinearResidualPolicy(s.residual_on, statistics, np.repeat(candidates, s.seeds_per_direction, axis=0))
-        record_ = _rollout(policy, env_id, np.tile(episode_seeds, 2 * s.directions).tolist())
-        timesteps += int(record_.end_step.sum())
-        returns = record_.rewards.sum(axis=1).reshape(2 * s.directions, s.seeds_per_direction).mean(axis=1)
+        record = rollout(policy, env_id, np.tile(episode_seeds, 2 * s.directions).tolist())
+        timesteps += int(record.end_step.sum())
+        returns = record.rewards.sum(axis=1).reshape(2 * s.directions, s.seeds_per_direction).mean(axis=1)
         plus, minus = returns[: s.directions], returns[s.directions :]
         theta = ars_update(theta, deltas, plus, minus, s.top, s.step_size)
         logger.record("train/candidate_return_mean", float(returns.mean()))
@@ -349,45 +336,28 @@ def train_ars(
         logger.record("time/iterations", iteration)
         if iteration % s.eval_every == 0 or iteration == s.iterations:
             returns_eval = episode_returns(LinearResidualPolicy(s.residual_on, statistics, theta), env_id, seeds)
-            paired = paired_difference(returns_eval, by_name[bar])
-            wall = time.perf_counter() - started
-            entry = {
-                "iteration": iteration,
-                "timesteps": timesteps,
-                "wall_time_s": round(wall, 2),
-                "mean_return": float(returns_eval.mean()),
-                "returns": returns_eval.tolist(),
-                "difference_vs_bar": paired.mean,
-                "difference_low": paired.low,
-                "difference_high": paired.high,
-                "wins": int((returns_eval > by_name[bar]).sum()),
-            }
-            log["evaluations"].append(entry)
-            for name, baseline in by_name.items():
-                if name not in log["first_beat"] and returns_eval.mean() > baseline.mean():
-                    log["first_beat"][name] = {"timesteps": timesteps, "wall_time_s": round(wall, 2)}
+            entry, paired, new_best = log.add(returns_eval, timesteps, iteration=iteration)
             for key in ("mean_return", "difference_vs_bar"):
                 logger.record(f"eval/{key}", entry[key])
-            if entry["mean_return"] > log["best_mean_return"]:
-                log["best_mean_return"], best_iteration = entry["mean_return"], iteration
+            if new_best:
+                best_iteration = iteration
                 save_linear_policy(run / "best", env_id, s.residual_on, statistics, theta, timesteps, provenance)
             bar_update(f"eval {entry['mean_return']:.2f}, {paired.mean:+.2f} vs {bar}")
         logger.dump(timesteps)
         bar_update(None)
-    elapsed = time.perf_counter() - started
-    log["training"] = {"timesteps": timesteps, "wall_time_s": round(elapsed, 2), "best_iteration": best_iteration}
+    log.finish(timesteps, best_iteration=best_iteration)
     if best_iteration == 0:  # never above the baseline: best/ is the starting point, the baseline itself
         save_linear_policy(run / "best", env_id, s.residual_on, statistics, np.zeros_like(theta), 0, provenance)
-    atomic_write_text(run / "best" / "evaluations.json", _json(log))
+    log.write(run / "best")
     final = (run, env_id, s.residual_on, statistics, theta, timesteps, provenance)
     save_linear_policy(*final, extra_files=("config.yml",))
     logger.close()
-    last = log["evaluations"][-1]
+    last = log.history[-1]
     print(
-        f"trained ars on {env_id} for {s.iterations} iterations ({timesteps:,} env steps) in {elapsed / 60:.1f} min; "
-        f"best evaluation {log['best_mean_return']:.2f} at iteration {best_iteration} against {bar} "
-        f"{log['baselines'][bar]:.2f} (last: {last['difference_vs_bar']:+.2f} [{last['difference_low']:+.2f}, "
-        f"{last['difference_high']:+.2f}]); run directory {run}"
+        f"trained ars on {env_id} for {s.iterations} iterations ({timesteps:,} env steps) in "
+        f"{log.finished['wall_time_s'] / 60:.1f} min; best evaluation {log.best_mean:.2f} at iteration "
+        f"{best_iteration} against {bar} {by_name[bar].mean():.2f} (last: {last['difference_vs_bar']:+.2f} "
+        f"[{last['difference_low']:+.2f}, {last['difference_high']:+.2f}]); run directory {run}"
     )
     return run
 
@@ -399,18 +369,6 @@ def _sizes(env_id: str) -> tuple[int, int]:
     sizes = int(env.action_space.shape[0]), int(env.observation_space.shape[0])
     env.close()
     return sizes
-
-
-def _rollout(policy: LinearResidualPolicy, env_id: str, seeds: list[int]) -> Any:
-    from .evaluate import rollout
-
-    return rollout(policy, env_id, seeds)
-
-
-def _json(value: Any) -> str:
-    import json
-
-    return json.dumps(value, indent=1) + "\n"
 
 
 def _progress_bar(total: int, label: str, enabled: bool) -> Callable[[str | None], None]:

@@ -21,6 +21,9 @@ baselines are compared episode by episode:
 * it records the wall time, counted from the start of the training command, and the step count of
   the first evaluation whose mean return beats each baseline's: the "time to beat the best
   baseline" is the bar's entry.
+
+The bookkeeping is :class:`EvaluationLog`, which trainers outside SB3's callbacks (``agents.ars``)
+keep theirs in too.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from .files import atomic_write_text
 __all__ = [
     "EVALUATIONS_FILE",
     "EVAL_SEEDS_START",
+    "EvaluationLog",
     "SeededEvaluation",
     "baseline_returns",
     "episode_returns",
@@ -83,6 +87,91 @@ def baseline_returns(
     return returns, bar
 
 
+class EvaluationLog:
+    """A training run's evaluations on the evaluation seeds, as ``best/evaluations.json`` holds
+    them: each evaluation's returns and paired difference from the bar, the best mean so far, and
+    the first evaluation that beat each baseline (see the module docstring).
+
+    Args:
+        env_id: the id trained on.
+        seeds: the evaluation seeds.
+        baseline_returns: every scripted baseline's (E,) returns on ``seeds``; ``bar``: the best
+            eligible one (:func:`baseline_returns` gives both).
+        started: ``time.perf_counter()`` at the start of training; wall times count from it.
+        best_mean: the mean return a first "best" must exceed (default: any).
+    """
+
+    def __init__(
+        self,
+        env_id: str,
+        seeds: list[int],
+        baseline_returns: dict[str, np.ndarray],
+        bar: str,
+        started: float,
+        best_mean: float = -np.inf,
+    ) -> None:
+        self.env_id, self.seeds, self.baseline_returns, self.bar = env_id, seeds, baseline_returns, bar
+        self.started, self.best_mean = started, best_mean
+        self.history: list[dict[str, Any]] = []
+        #: For each baseline, the first evaluation whose mean return beat its mean: {timesteps, wall_time_s}.
+        self.first_beat: dict[str, dict[str, Any]] = {}
+        #: Set by :meth:`finish`: the wall time and step count at the end of training.
+        self.finished: dict[str, Any] | None = None
+
+    def add(self, returns: np.ndarray, timesteps: int, **extra: Any) -> tuple[dict[str, Any], Any, bool]:
+        """Record an evaluation's (E,) ``returns`` after ``timesteps`` env steps (``extra``: more
+        entries of its record); returns its record, its paired difference from the bar
+        (:class:`agents.benchmark.PairedDifference`) and whether it is the best so far."""
+        from .benchmark import paired_difference
+
+        paired = paired_difference(returns, self.baseline_returns[self.bar])
+        entry = {
+            "timesteps": int(timesteps),
+            **extra,
+            "wall_time_s": round(time.perf_counter() - self.started, 2),
+            "mean_return": float(returns.mean()),
+            "returns": returns.tolist(),
+            "difference_vs_bar": paired.mean,
+            "difference_low": paired.low,
+            "difference_high": paired.high,
+            "wins": paired.wins,
+        }
+        self.history.append(entry)
+        for name, baseline in self.baseline_returns.items():
+            if name not in self.first_beat and returns.mean() > baseline.mean():
+                self.first_beat[name] = {"timesteps": entry["timesteps"], "wall_time_s": entry["wall_time_s"]}
+        new_best = returns.mean() > self.best_mean
+        if new_best:
+            self.best_mean = float(returns.mean())
+        return entry, paired, new_best
+
+    def summary(self) -> dict[str, Any]:
+        """What the run's ``best/evaluations.json`` holds."""
+        return {
+            "env_id": self.env_id,
+            "seeds": [self.seeds[0], self.seeds[-1]],
+            "baselines": {name: float(r.mean()) for name, r in self.baseline_returns.items()},
+            "bar": self.bar,
+            "best_mean_return": None if not self.history else self.best_mean,
+            "first_beat": self.first_beat,
+            "training": self.finished,
+            "evaluations": self.history,
+        }
+
+    def finish(self, timesteps: int, **extra: Any) -> None:
+        """Record the end of training: ``timesteps`` trained, the wall time, and ``extra``."""
+        self.finished = {
+            "timesteps": int(timesteps),
+            "wall_time_s": round(time.perf_counter() - self.started, 2),
+            **extra,
+        }
+
+    def write(self, log_dir: Path) -> None:
+        """Write :meth:`summary` to ``log_dir/evaluations.json``."""
+        log_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(log_dir / EVALUATIONS_FILE, json.dumps(self.summary(), indent=1) + "\n")
+
+
 class SeededEvaluation(BaseCallback):
     """Evaluate the policy every ``every`` calls on fixed seeds, paired against the best scripted
     baseline (see the module docstring).
@@ -118,21 +207,36 @@ class SeededEvaluation(BaseCallback):
         self.log_dir, self.on_new_best, self.started = Path(log_dir), on_new_best, started
         self.env_kwargs, self.residual_on = dict(env_kwargs or {}), residual_on
         self.multiagent = multiagent
-        self.baseline_returns: dict[str, np.ndarray] = {}
-        self.bar: str = ""
-        self.best_mean = -np.inf
-        self.history: list[dict[str, Any]] = []
-        #: For each baseline, the first evaluation whose mean return beat its mean: {timesteps, wall_time_s}.
-        self.first_beat: dict[str, dict[str, Any]] = {}
+        #: The evaluations, from the start of training (when the baselines have been rolled out).
+        self.log = EvaluationLog(env_id, self.seeds, {}, "", started)
         self.policy: Any = None
-        #: Set by :meth:`finish`: the command's wall time and step count at the end of training.
-        self.finished: dict[str, Any] | None = None
+
+    @property
+    def history(self) -> list[dict[str, Any]]:
+        return self.log.history
+
+    @property
+    def first_beat(self) -> dict[str, dict[str, Any]]:
+        return self.log.first_beat
+
+    @property
+    def best_mean(self) -> float:
+        return self.log.best_mean
+
+    @property
+    def bar(self) -> str:
+        return self.log.bar
+
+    @property
+    def baseline_returns(self) -> dict[str, np.ndarray]:
+        return self.log.baseline_returns
 
     def _init_callback(self) -> None:
         self.on_new_best.init_callback(self.model)
 
     def _on_training_start(self) -> None:
-        self.baseline_returns, self.bar = baseline_returns(self.env_id, self.seeds, self.env_kwargs)
+        returns, bar = baseline_returns(self.env_id, self.seeds, self.env_kwargs)
+        self.log = EvaluationLog(self.env_id, self.seeds, returns, bar, self.started)
         self.policy = self._policy()
         if self.verbose:
             means = ", ".join(f"{name} {r.mean():.2f}" for name, r in self.baseline_returns.items())
@@ -167,32 +271,13 @@ class SeededEvaluation(BaseCallback):
 
     def evaluate(self) -> dict[str, Any]:
         """Run the evaluation now; returns (and logs) its entry."""
-        from .benchmark import paired_difference
-
         returns = episode_returns(self.policy, self.env_id, self.seeds, self.env_kwargs)
-        bar_returns = self.baseline_returns[self.bar]
-        paired = paired_difference(returns, bar_returns)
-        wall = time.perf_counter() - self.started
-        entry = {
-            "timesteps": int(self.num_timesteps),
-            "wall_time_s": round(wall, 2),
-            "mean_return": float(returns.mean()),
-            "returns": returns.tolist(),
-            "difference_vs_bar": paired.mean,
-            "difference_low": paired.low,
-            "difference_high": paired.high,
-            "wins": paired.wins,
-        }
-        self.history.append(entry)
-        for name, baseline_returns in self.baseline_returns.items():
-            if name not in self.first_beat and returns.mean() > baseline_returns.mean():
-                self.first_beat[name] = {"timesteps": entry["timesteps"], "wall_time_s": entry["wall_time_s"]}
+        entry, paired, new_best = self.log.add(returns, self.num_timesteps)
+        wall = entry["wall_time_s"]
         self.logger.record("eval/mean_return", entry["mean_return"])
         self.logger.record(f"eval/difference_vs_{self.bar}", paired.mean)
         self.logger.record(f"eval/difference_vs_{self.bar}_low", paired.low)
-        new_best = returns.mean() > self.best_mean
         if new_best:
-            self.best_mean = float(returns.mean())
             self.on_new_best.on_step()
         if self.verbose:
             print(
@@ -206,23 +291,13 @@ class SeededEvaluation(BaseCallback):
 
     def summary(self) -> dict[str, Any]:
         """What the run's ``best/evaluations.json`` holds."""
-        return {
-            "env_id": self.env_id,
-            "seeds": [self.seeds[0], self.seeds[-1]],
-            "baselines": {name: float(r.mean()) for name, r in self.baseline_returns.items()},
-            "bar": self.bar,
-            "best_mean_return": None if not self.history else self.best_mean,
-            "first_beat": self.first_beat,
-            "training": self.finished,
-            "evaluations": self.history,
-        }
+        return self.log.summary()
 
     def finish(self, timesteps: int) -> None:
         """Record the end of training (``timesteps`` trained, wall time since the command started)
         and write the log."""
-        self.finished = {"timesteps": int(timesteps), "wall_time_s": round(time.perf_counter() - self.started, 2)}
+        self.log.finish(timesteps)
         self.write()
 
     def write(self) -> None:
-        self.log_dir.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(self.log_dir / EVALUATIONS_FILE, json.dumps(self.summary(), indent=1) + "\n")
+        self.log.write(self.log_dir)

@@ -120,9 +120,6 @@ SETTINGS = 4
 #: Every column number above, in one tuple: the kernels of other modules that read these tables
 #: hold it in their closure, which numba's cache hashes, so that a change here recompiles them
 #: (the cache watches only the file a kernel is written in).
-#: SHA-256 of this file: kernels of other modules that compile these into their own cached code
-#: key their cache on it (numba keys a cache only on the file of the kernel itself).
-SOURCE_SHA256 = hashlib.sha256((Path(__file__).resolve().parent / "_kernels.py").read_bytes()).hexdigest()
 LAYOUT = (
     (MASS, DAMPING, REFERENCE, POSITION, HALF_STEP_VELOCITY, VELOCITY, INTERNAL_FORCE, PREVIOUS_FORCE),
     (APPLIED_FORCE, NODE_COLUMNS),
@@ -132,6 +129,9 @@ LAYOUT = (
     (CLUSTER_COLUMNS, STATUS, SUBSTEPS, COUNTER_COLUMNS),
     (SAFETY_FACTOR, MAX_STEP, MAX_SUBSTEPS, LINEARISED, SETTINGS),
 )
+#: SHA-256 of this file: kernels of other modules that compile these into their own cached code
+#: key their cache on it (numba keys a cache only on the file of the kernel itself).
+SOURCE_SHA256 = hashlib.sha256((Path(__file__).resolve().parent / "_kernels.py").read_bytes()).hexdigest()
 
 # Status codes of a cluster in a batch.
 STATUS_OK = 0
@@ -655,7 +655,7 @@ def _advance_pair(
     """
     alone = b < 0
     if alone:
-        b = a  # its tables are read (not stepped) so that both chains have values of one type
+        b = a  # read, never stepped, so both chains have values of one type (its peaks restart at the same tensions)
     fixed_a, running_a = _begin_advance(settings, nodes[a], cables[a], clusters[a])
     fixed_b, running_b = _begin_advance(settings, nodes[b], cables[b], clusters[b])
     done_a = False
