@@ -1,0 +1,59 @@
+"""tether_gym._optional: a missing optional module fails with the extra that installs it."""
+
+from __future__ import annotations
+
+import sys
+import types
+
+import pytest
+
+from tether_gym._optional import MissingExtraError, available, install_line, require
+
+
+def test_require_returns_an_installed_module() -> None:
+    assert require("json", "train", "a test") is sys.modules["json"]
+
+
+def test_a_missing_module_names_the_extra_and_the_purpose(monkeypatch: pytest.MonkeyPatch) -> None:
+    # None in sys.modules makes `import yaml` fail as if it were not installed.
+    monkeypatch.setitem(sys.modules, "yaml", None)
+    with pytest.raises(MissingExtraError) as caught:
+        require("yaml", "train", "reading the hyperparameter files")
+    message = str(caught.value)
+    assert 'pip install "tether-gym[train]"' in message
+    assert "reading the hyperparameter files" in message
+    assert "pyyaml" in message  # the pip name, not the import name
+    assert caught.value.name == "yaml" and caught.value.extra == "train"
+    # Code that catches ImportError or ModuleNotFoundError keeps working.
+    assert isinstance(caught.value, ModuleNotFoundError)
+
+
+def test_a_missing_parent_package_of_a_submodule(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    monkeypatch.delitem(sys.modules, "matplotlib.pyplot", raising=False)
+    with pytest.raises(MissingExtraError, match=r"matplotlib is not installed.*tether-gym\[plots\]"):
+        require("matplotlib.pyplot", "plots", "the plots")
+
+
+def test_a_broken_install_is_not_blamed_on_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A module that is installed but imports something absent: the extra would not fix that.
+    broken = types.ModuleType("tether_gym_test_broken")
+    monkeypatch.setitem(sys.modules, "tether_gym_test_missing_dependency", None)
+
+    def fail_inside() -> None:
+        import tether_gym_test_missing_dependency  # noqa: F401
+
+    with pytest.raises(ModuleNotFoundError) as caught:
+        monkeypatch.setattr("importlib.import_module", lambda name: fail_inside())
+        require(broken.__name__, "train", "a test")
+    assert not isinstance(caught.value, MissingExtraError)
+
+
+def test_available(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert available("json")
+    monkeypatch.setitem(sys.modules, "yaml", None)
+    assert not available("yaml")
+
+
+def test_install_line_is_quoted_for_the_shell() -> None:
+    assert install_line("multiagent") == 'pip install "tether-gym[multiagent]"'
