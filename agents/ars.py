@@ -188,8 +188,9 @@ def observation_statistics(env_id: str, residual_on: str, seeds: list[int]) -> N
     """Mean and variance of the observations the baseline's closed loop visits on ``seeds``, as
     fixed normalisation statistics (no reward scaling)."""
     import gymnasium as gym
+    from gymnasium.vector import AutoresetMode
 
-    envs = gym.make_vec(env_id, num_envs=len(seeds))
+    envs = gym.make_vec(env_id, num_envs=len(seeds), autoreset_mode=AutoresetMode.SAME_STEP)
     baseline = make_baseline(residual_on, envs)
     observation, _ = envs.reset(seed=seeds)
     alive = np.ones(len(seeds), dtype=bool)

@@ -79,11 +79,12 @@ def trajectory_observations(
     """A function ``n -> (n, obs_dim)`` env observations along the trajectories of ``act`` (a batch
     of observations -> a batch of actions), 8 episodes in parallel, seeds 0-7."""
     import gymnasium as gym
+    from gymnasium.vector import AutoresetMode
 
     import tether_gym  # noqa: F401 - registers the ids
 
     def observations(count: int) -> np.ndarray:
-        envs = gym.make_vec(env_id, num_envs=8, **dict(env_kwargs or {}))
+        envs = gym.make_vec(env_id, num_envs=8, **{"autoreset_mode": AutoresetMode.SAME_STEP, **dict(env_kwargs or {})})
         try:
             obs, _ = envs.reset(seed=list(range(8)))
             rows = [obs]

@@ -16,6 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import scipy.stats
+from gymnasium.vector import AutoresetMode
 
 import tether_gym  # noqa: F401 - registers the ids
 from tether_gym.envs.contract import Scalar
@@ -82,7 +83,8 @@ def rollout(
     count = seeds.size
     if count == 0:
         raise ValueError("seeds must name at least one episode")
-    envs = gym.make_vec(env_id, num_envs=count, **dict(env_kwargs or {}))
+    # Same-step autoreset, as the rollout was written against: an ended sub-env runs on unobserved.
+    envs = gym.make_vec(env_id, num_envs=count, **{"autoreset_mode": AutoresetMode.SAME_STEP, **dict(env_kwargs or {})})
     task = envs.unwrapped.task
     if not 0 <= satellite < task.cluster.num_nodes:
         raise ValueError(f"satellite must be in 0..{task.cluster.num_nodes - 1}; got {satellite}")

@@ -19,6 +19,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 import tether_gym
 from tether_gym._cli import program
@@ -49,8 +50,12 @@ def single_env_steps_per_second(env_id: str, steps: int, policy: str, seed: int 
 
 def vector_env_steps_per_second(env_id: str, num_envs: int, steps: int, sync: bool = False, **kwargs: Any) -> float:
     """Env steps/s (sub-env steps summed) of ``gym.make_vec`` with random actions."""
-    mode = "sync" if sync else None
-    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **kwargs)
+    # Same-step autoreset, the mode SB3 trains in and the one the recorded figures were taken in.
+    autoreset = {"autoreset_mode": AutoresetMode.SAME_STEP}
+    if sync:
+        envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync", vector_kwargs=autoreset, **kwargs)
+    else:
+        envs = gym.make_vec(env_id, num_envs=num_envs, **autoreset, **kwargs)
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (8,) + tuple(envs.action_space.shape or ())).astype(np.float32)
     envs.reset(seed=0)

@@ -5,7 +5,8 @@ from Gymnasium's :class:`gymnasium.vector.VectorEnv`. :class:`SB3VecEnv` is that
 purpose: one ``venv.step`` per SB3 step, no per-env Python loop except over the sub-envs that
 ended in that step. It is what you want for the native batch
 :class:`~tether_gym.envs.TetherClusterVectorEnv` (``gym.make_vec(id, num_envs=N)``), which steps
-N clusters in one process far faster than SB3's ``DummyVecEnv`` over N single envs::
+N clusters in one process far faster than SB3's ``DummyVecEnv`` over N single envs.
+:func:`make_sb3_vec_env` builds it in the same-step autoreset mode that SB3 needs::
 
     from stable_baselines3 import PPO
     from tether_gym.sb3 import make_sb3_vec_env
@@ -18,10 +19,11 @@ How the two APIs are matched (N = ``num_envs``):
 * **Autoreset.** SB3 expects a sub-env that ends to be reset within the same ``step`` and the
   last observation of the old episode to be in ``info["terminal_observation"]``. That is
   Gymnasium's *same-step* autoreset (``metadata["autoreset_mode"] == AutoresetMode.SAME_STEP``),
-  and only such vector envs are accepted. Gymnasium's own ``SyncVectorEnv`` and
-  ``AsyncVectorEnv`` default to next-step autoreset; build them with
-  ``autoreset_mode=AutoresetMode.SAME_STEP`` (``gym.make_vec(..., vector_kwargs={"autoreset_mode":
-  AutoresetMode.SAME_STEP})``) to use them here.
+  and only such vector envs are accepted. Gymnasium's vector envs, the native one included,
+  default to next-step autoreset; :func:`make_sb3_vec_env` asks for same-step itself. By hand:
+  ``gym.make_vec(id, num_envs=N, autoreset_mode=AutoresetMode.SAME_STEP)`` for the native env,
+  ``gym.make_vec(..., vectorization_mode="sync", vector_kwargs={"autoreset_mode":
+  AutoresetMode.SAME_STEP})`` for Gymnasium's ``SyncVectorEnv`` and ``AsyncVectorEnv``.
 * **Step outputs.** ``obs`` as the vector env returns it ((N, *obs_shape)); ``rewards`` (N,)
   float32; ``dones`` (N,) bool = ``terminated | truncated``; ``infos``, a list of N dicts.
 * **Info dicts.** To keep a step cheap at N = 1024, the dict of a sub-env that did *not* end is
@@ -165,8 +167,9 @@ class SB3VecEnv(VecEnv):
     VecMonitor and the other SB3 ``VecEnvWrapper`` classes on top.
 
     Args:
-        venv: the vector env, e.g. ``gym.make_vec("TetherTetrahedron-v0", num_envs=N)``. Its
-            ``metadata["autoreset_mode"]`` must be ``AutoresetMode.SAME_STEP``. The adapter
+        venv: the vector env, e.g. ``gym.make_vec("tether_gym:TetherTetrahedron-v0", num_envs=N,
+            autoreset_mode=AutoresetMode.SAME_STEP)``. Its ``metadata["autoreset_mode"]`` must be
+            ``AutoresetMode.SAME_STEP``. The adapter
             owns it: :meth:`close` closes it.
 
     Attributes:
@@ -193,8 +196,10 @@ class SB3VecEnv(VecEnv):
                 "AutoresetMode.SAME_STEP): SB3 expects an ended sub-env to be reset within the same step, "
                 "with its last observation in info['terminal_observation']; "
                 f"{type(venv).__name__} {declared}. "
-                "Gymnasium's SyncVectorEnv/AsyncVectorEnv take autoreset_mode=AutoresetMode.SAME_STEP "
-                "(gym.make_vec(..., vector_kwargs={'autoreset_mode': AutoresetMode.SAME_STEP}))."
+                "tether_gym.sb3.make_sb3_vec_env(id, num_envs) builds one; by hand, the native vector env takes "
+                "gym.make_vec(id, num_envs=N, autoreset_mode=AutoresetMode.SAME_STEP), and Gymnasium's "
+                "SyncVectorEnv/AsyncVectorEnv gym.make_vec(..., vector_kwargs={'autoreset_mode': "
+                "AutoresetMode.SAME_STEP})."
             )
         self.venv = venv
         self.vector_infos: dict[str, Any] = {}
@@ -390,7 +395,12 @@ class SB3VecEnv(VecEnv):
 
 
 def make_sb3_vec_env(env_id: str, num_envs: int, seed: int | None = None, **kwargs: Any) -> SB3VecEnv:
-    """``SB3VecEnv(gym.make_vec(env_id, num_envs=num_envs, **kwargs))``, seeded.
+    """``SB3VecEnv(gym.make_vec(env_id, num_envs=num_envs, **kwargs))`` in same-step autoreset, seeded.
+
+    The vector env is asked for same-step autoreset, which SB3 needs: through the native env's
+    ``autoreset_mode`` argument, or ``vector_kwargs`` for ``vectorization_mode="sync"``/``"async"``.
+    An explicit mode in ``kwargs`` (or ``vector_kwargs``) is passed on as given, and one other than
+    same-step is refused by :class:`SB3VecEnv`.
 
     Args:
         env_id: a registered id, e.g. ``"TetherTetrahedron-v0"``.
@@ -400,6 +410,10 @@ def make_sb3_vec_env(env_id: str, num_envs: int, seed: int | None = None, **kwar
         **kwargs: passed to ``gym.make_vec`` and through it to the env, e.g.
             ``max_episode_steps=100``, ``preset_kwargs={...}``, ``observation_noise=0.01``.
     """
+    if kwargs.get("vectorization_mode") in (None, "vector_entry_point", gym.VectorizeMode.VECTOR_ENTRY_POINT):
+        kwargs.setdefault("autoreset_mode", AutoresetMode.SAME_STEP)
+    else:
+        kwargs["vector_kwargs"] = {"autoreset_mode": AutoresetMode.SAME_STEP, **dict(kwargs.get("vector_kwargs") or {})}
     env = SB3VecEnv(gym.make_vec(env_id, num_envs=num_envs, **kwargs))
     env.seed(seed)
     return env

@@ -146,13 +146,16 @@ def test_reset_clears_a_pending_autoreset() -> None:
 
 
 def test_modes_are_per_instance_and_parsed() -> None:
-    next_step = gym.make_vec("TetherHub-v0", num_envs=2, autoreset_mode="NEXT_STEP")
+    same_step = gym.make_vec("TetherHub-v0", num_envs=2, autoreset_mode="SAME_STEP")
     default = gym.make_vec("TetherHub-v0", num_envs=2)
-    assert next_step.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
-    assert default.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
-    assert TetherClusterVectorEnv.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    assert same_step.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    # Gymnasium's own default, which its vector wrappers assume.
+    assert default.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+    assert TetherClusterVectorEnv.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
     for spelling in ("NextStep", "nextstep", "next_step", AutoresetMode.NEXT_STEP):
         assert TetherClusterVectorEnv(1, autoreset_mode=spelling).metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+    for spelling in ("SameStep", "same_step", AutoresetMode.SAME_STEP):
+        assert TetherClusterVectorEnv(1, autoreset_mode=spelling).metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
 
 
 @pytest.mark.parametrize(

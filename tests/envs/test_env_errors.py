@@ -468,7 +468,7 @@ def test_a_runaway_reward_ends_the_episode_as_diverged_with_a_finite_reward(how:
 
 @pytest.mark.parametrize("how", ["huge", "infinite"])
 def test_vector_and_sb3_runaways_end_with_finite_rewards(how: str) -> None:
-    envs = gym.make_vec(ENV_ID, num_envs=3)
+    envs = gym.make_vec(ENV_ID, num_envs=3, autoreset_mode="same_step")
     envs.reset(seed=0)
     single = gym.make(ENV_ID)
     single.reset(seed=1)
@@ -503,7 +503,7 @@ def test_sb3_refuses_rewards_that_are_not_finite_in_float32() -> None:
 
     from tether_gym.sb3 import SB3VecEnv
 
-    env = SB3VecEnv(Loud(num_envs=2))
+    env = SB3VecEnv(Loud(num_envs=2, autoreset_mode="same_step"))
     env.reset()
     env.step_async(np.zeros((2, 12), np.float32))
     with pytest.raises(ValueError, match="not finite in float32"):

@@ -87,7 +87,7 @@ def test_reset_and_step_shapes_dtypes_and_infos() -> None:
 
 def test_terminal_observation_exactly_for_ended_envs() -> None:
     env = make_sb3_vec_env(ENV_ID, 8, seed=0, **MIXED)
-    raw = gym.make_vec(ENV_ID, num_envs=8, **MIXED)
+    raw = gym.make_vec(ENV_ID, num_envs=8, autoreset_mode="same_step", **MIXED)
     env.reset()
     raw.reset(seed=0)
     zero = np.zeros((8, ACT_SIZE), np.float32)
@@ -120,7 +120,7 @@ def test_terminal_observation_exactly_for_ended_envs() -> None:
 def test_failure_on_the_last_step_is_not_a_time_limit_truncation() -> None:
     # seed 0, max_deviation 0.3: sub-env 3 loses the formation on step 4, the time limit's step
     env = make_sb3_vec_env(ENV_ID, 8, seed=0, max_episode_steps=4, max_deviation=0.3)
-    raw = gym.make_vec(ENV_ID, num_envs=8, max_episode_steps=4, max_deviation=0.3)
+    raw = gym.make_vec(ENV_ID, num_envs=8, autoreset_mode="same_step", max_episode_steps=4, max_deviation=0.3)
     env.reset()
     raw.reset(seed=0)
     zero = np.zeros((8, ACT_SIZE), np.float32)
@@ -135,7 +135,7 @@ def test_failure_on_the_last_step_is_not_a_time_limit_truncation() -> None:
 
 def test_trajectories_equal_the_raw_vector_env() -> None:
     env = make_sb3_vec_env(ENV_ID, 6, seed=11, max_episode_steps=4)
-    raw = gym.make_vec(ENV_ID, num_envs=6, max_episode_steps=4)
+    raw = gym.make_vec(ENV_ID, num_envs=6, autoreset_mode="same_step", max_episode_steps=4)
     obs = env.reset()
     raw_obs, raw_infos = raw.reset(seed=11)
     np.testing.assert_array_equal(obs, raw_obs)
@@ -348,7 +348,21 @@ def test_rejects_next_step_autoreset() -> None:
     with pytest.raises(ValueError, match="same-step autoreset"):
         SB3VecEnv(sync(AutoresetMode.DISABLED))
     with pytest.raises(ValueError, match="same-step autoreset"):
-        make_sb3_vec_env(ENV_ID, 2, vectorization_mode="sync")  # Gymnasium's default is next-step
+        SB3VecEnv(gym.make_vec(ENV_ID, num_envs=2))  # the native env's default is next-step, as Gymnasium's
+    with pytest.raises(ValueError, match="same-step autoreset"):
+        make_sb3_vec_env(ENV_ID, 2, autoreset_mode="next_step")  # an explicit mode is passed on as given
+
+
+def test_make_sb3_vec_env_asks_for_same_step() -> None:
+    """The adapter's builder asks for same-step itself, natively and for Gymnasium's vector envs."""
+    assert make_sb3_vec_env(ENV_ID, 2).venv.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    for mode in ("sync", "async"):
+        env = make_sb3_vec_env(ENV_ID, 2, seed=0, vectorization_mode=mode)
+        try:
+            assert env.venv.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+            np.testing.assert_array_equal(env.reset(), make_sb3_vec_env(ENV_ID, 2, seed=0).reset())
+        finally:
+            env.close()
 
 
 def test_rejects_a_single_env() -> None:

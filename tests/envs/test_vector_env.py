@@ -14,7 +14,7 @@ from tether_gym.envs import TetherClusterVectorEnv
 def test_make_vec_returns_the_native_vector_env() -> None:
     envs = gym.make_vec("TetherHub-v0", num_envs=3, max_thrust=2.0)
     assert isinstance(envs.unwrapped, TetherClusterVectorEnv)
-    assert envs.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    assert envs.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP  # Gymnasium's default
     assert envs.max_episode_steps == 300 and envs.num_envs == 3
     assert envs.observation_space.shape == (3, 54) and envs.action_space.shape == (3, 21)
     assert np.all(envs.task.max_thrust == 2.0)
@@ -56,7 +56,7 @@ FAULTY = dict(
     ],
 )
 def test_vector_env_equals_single_envs_across_autoresets(env_id: str, num_envs: int, kwargs: dict) -> None:
-    envs = gym.make_vec(env_id, num_envs=num_envs, **kwargs)
+    envs = gym.make_vec(env_id, num_envs=num_envs, autoreset_mode="same_step", **kwargs)
     singles = [gym.make(env_id, **kwargs) for _ in range(num_envs)]
     obs, infos = envs.reset(seed=10)
     for i, env in enumerate(singles):
@@ -89,11 +89,11 @@ def test_vector_env_equals_single_envs_across_autoresets(env_id: str, num_envs: 
 
 
 def test_an_ending_sub_env_resets_alone() -> None:
-    envs = TetherClusterVectorEnv(num_envs=4, max_episode_steps=None)
+    envs = TetherClusterVectorEnv(num_envs=4, max_episode_steps=None, autoreset_mode="same_step")
     stretched = np.stack([envs.cluster.positions] * 4)
     stretched[2] *= 1.04  # cables 4 m too long: 2 kN > 1.5 kN breaking load at once
     envs.reset(seed=0, options={"positions": stretched})
-    reference = TetherClusterVectorEnv(num_envs=4, max_episode_steps=None)
+    reference = TetherClusterVectorEnv(num_envs=4, max_episode_steps=None, autoreset_mode="same_step")
     reference.reset(seed=0, options={"positions": np.stack([envs.cluster.positions] * 4)})
     actions = np.zeros((4, 12))
     obs, _, terminated, truncated, infos = envs.step(actions)

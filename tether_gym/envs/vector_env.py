@@ -64,23 +64,24 @@ class TetherClusterVectorEnv(VectorEnv):
     - **Divergence.** A sub-env that diverges or ends leaves the others untouched.
 
     **Autoreset** follows the ``autoreset_mode`` argument; ``metadata["autoreset_mode"]`` says
-    which mode is in force. With ``SAME_STEP`` (the default), a sub-env that terminates or is
-    truncated is reset within the same ``step``:
+    which mode is in force. With ``NEXT_STEP`` (the default, as in Gymnasium's own vector envs,
+    whose wrappers and RLlib's env runners expect it), ``step`` returns the ended sub-env's last
+    observation and info as they are; the *next* ``step`` ignores that sub-env's action and
+    resets it, returning the new episode's first observation, reward 0,
+    ``terminated = truncated = False`` and the info of a reset.
+
+    With ``SAME_STEP``, a sub-env that terminates or is truncated is reset within the same
+    ``step``:
     - the returned observation is the new episode's first observation;
     - ``infos["final_obs"]`` (an object array) holds the last observation of the old episode;
     - ``infos["final_info"]`` (a dict of arrays) holds its last info;
     - ``infos["_final_obs"]`` and ``infos["_final_info"]`` mark which sub-envs ended.
 
-    With ``NEXT_STEP`` (Gymnasium's ``SyncVectorEnv`` default, and what RLlib's env runners
-    expect), ``step`` returns the ended sub-env's last observation and info as they are; the
-    *next* ``step`` ignores that sub-env's action and resets it, returning the new episode's
-    first observation, reward 0, ``terminated = truncated = False`` and the info of a reset.
-
-    Same-step stays the default: the SB3 adapter (:mod:`tether_gym.sb3`), the evaluation code
-    and every user's ``gym.make_vec(id, num_envs=N)`` were written against it, and it wastes no
-    step of the batch on resets. Gymnasium's own vector envs default to next-step, so code that
-    wants their semantics (RLlib, ``agents.train_rllib``) asks for it:
-    ``gym.make_vec(id, num_envs=N, autoreset_mode=AutoresetMode.NEXT_STEP)``.
+    Same-step wastes no step of the batch on resets, and it is what Stable-Baselines3 expects:
+    the SB3 adapter (:func:`tether_gym.sb3.make_sb3_vec_env`) and the project's evaluation code
+    ask for it, ``gym.make_vec(id, num_envs=N, autoreset_mode=AutoresetMode.SAME_STEP)``.
+    Gymnasium's vector wrappers (``RecordEpisodeStatistics``, ``NormalizeObservation``,
+    ``NormalizeReward``, ``ClipAction``) need next-step, the default.
 
     Infos follow Gymnasium's vector layout: every key holds an (N, ...) array, and a boolean
     ``"_key"`` array marks the sub-envs that have it. A sub-env that was just reset has only the
@@ -91,13 +92,13 @@ class TetherClusterVectorEnv(VectorEnv):
         max_episode_steps: truncation after this many steps (``gym.make_vec`` passes the id's);
             None: never. Checked whenever it is set (also through SB3's ``set_attr``).
         render_mode: must be None (the native vector env does not render).
-        autoreset_mode: ``AutoresetMode.SAME_STEP`` (default) or ``AutoresetMode.NEXT_STEP``, or
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``AutoresetMode.SAME_STEP``, or
             their string values (``"SameStep"``, ``"NextStep"``) or names (``"same_step"``).
             ``DISABLED`` is not supported.
         preset, preset_kwargs, cluster, **task: as for :class:`~tether_gym.envs.TetherClusterEnv`.
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(
         self,
@@ -107,7 +108,7 @@ class TetherClusterVectorEnv(VectorEnv):
         cluster: Cluster | None = None,
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **task: Any,
     ) -> None:
         mode = parse_autoreset_mode(autoreset_mode)
