@@ -253,8 +253,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
                 human=self.render_mode == "human",
                 exaggeration=self.render_exaggeration,
             )
+        sim = self.task.sim
         return self._viewer.draw(
-            self.task.sim.positions_[0], self.task.sim.slack[0], self.task.thrust[0], float(self.task.sim.time[0])
+            sim.positions_[0], sim.slack[0], self.task.thrust[0], float(sim.time[0]), broken=sim.broken[0]
         )
 
     def close(self) -> None:
