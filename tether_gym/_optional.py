@@ -9,12 +9,19 @@ which extra brings it, so every optional import of both packages (``tether_gym``
     yaml = require("yaml", "train", "reading the hyperparameter files")
 
 which returns the module, or raises :class:`MissingExtraError` with the line that installs it.
+Module-level imports that keep their ``from x import y`` form go in a :func:`needs_extra` block::
+
+    with needs_extra("train", "training and loading policies"):
+        import torch
+        from stable_baselines3 import PPO
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import types
+from collections.abc import Iterator
 
 # The pip name of each optional module whose import name differs from it, for the message's
 # "pip install X" alternative. Modules not listed install under their import name.
@@ -25,6 +32,11 @@ _DISTRIBUTIONS = {
     "ray": "ray[rllib]",
     "PIL": "pillow",
 }
+
+
+#: Top-level packages of this project: a module of theirs that is missing is a broken checkout or
+#: install, which no extra fixes.
+_OWN_PACKAGES = frozenset({"tether_gym", "tether_gym_agents", "agents"})
 
 
 class MissingExtraError(ModuleNotFoundError):
@@ -80,6 +92,22 @@ def require(module: str, extra: str, purpose: str) -> types.ModuleType:
         if error.name not in wanted:
             raise
         raise MissingExtraError(missing_message(module, extra, purpose), name=module, extra=extra) from error
+
+
+@contextlib.contextmanager
+def needs_extra(extra: str, purpose: str) -> Iterator[None]:
+    """A block of imports that the extra ``extra`` provides: a third-party module missing in it
+    (or in what it imports) raises :class:`MissingExtraError` naming the module, ``purpose`` and
+    ``pip install "tether-gym[<extra>]"``. A missing module of this project's own packages, and a
+    :class:`MissingExtraError` raised deeper (which names its own extra), pass unchanged."""
+    try:
+        yield
+    except MissingExtraError:
+        raise
+    except ModuleNotFoundError as error:
+        if error.name is None or error.name.partition(".")[0] in _OWN_PACKAGES:
+            raise
+        raise MissingExtraError(missing_message(error.name, extra, purpose), name=error.name, extra=extra) from error
 
 
 def available(module: str) -> bool:

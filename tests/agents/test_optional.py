@@ -7,7 +7,7 @@ import types
 
 import pytest
 
-from tether_gym._optional import MissingExtraError, available, install_line, require
+from tether_gym._optional import MissingExtraError, available, install_line, needs_extra, require
 
 
 def test_require_returns_an_installed_module() -> None:
@@ -57,3 +57,26 @@ def test_available(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_install_line_is_quoted_for_the_shell() -> None:
     assert install_line("multiagent") == 'pip install "tether-gym[multiagent]"'
+
+
+def test_needs_extra_names_the_extra_of_a_missing_import(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "stable_baselines3", None)
+    with pytest.raises(MissingExtraError, match=r"stable_baselines3 is not installed.*tether-gym\[train\]"):
+        with needs_extra("train", "training"):
+            from stable_baselines3 import PPO  # noqa: F401
+    # Imports that succeed pass through, and an error raised deeper keeps its own extra.
+    with needs_extra("train", "training"):
+        import json  # noqa: F401
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    with pytest.raises(MissingExtraError) as caught:
+        with needs_extra("train", "training"):
+            require("matplotlib", "plots", "the plots")
+    assert caught.value.extra == "plots"
+
+
+def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "tether_gym.no_such_module", None)
+    with pytest.raises(ModuleNotFoundError) as caught:
+        with needs_extra("train", "training"):
+            import tether_gym.no_such_module  # noqa: F401
+    assert not isinstance(caught.value, MissingExtraError)
