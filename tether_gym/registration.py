@@ -62,8 +62,14 @@ class EnvDoc:
     version_history: tuple[str, ...]
 
 
-_FREE_SPACE_V0 = ("v0: initial release, with the single-cluster environments (issue 3, commit `f1e1c8d`).",)
-_TURNING_FRAME_V0 = ("v0: initial release, with the turning frames (issue 6, commit `4490cf3`).",)
+#: A change of every id's vector env, recorded in each id's version history (the single env and
+#: both modes' trajectories are unchanged, so the ids keep version 0).
+_NEXT_STEP_DEFAULT = (
+    "v0, vector env: `gym.make_vec` autoresets on the next step by default, as Gymnasium's own vector envs "
+    '(whose wrappers assume it); same-step, the default before, is `autoreset_mode="same_step"`.'
+)
+_FREE_SPACE_V0 = ("v0: initial release, with the single-cluster environments (commit `f1e1c8d`).", _NEXT_STEP_DEFAULT)
+_TURNING_FRAME_V0 = ("v0: initial release, with the turning frames (commit `4490cf3`).", _NEXT_STEP_DEFAULT)
 
 #: id -> its documentation beyond the class docstring (see :class:`EnvDoc`); one entry per id of
 #: :data:`ENV_IDS`.
