@@ -28,6 +28,9 @@ ARROW_HEAD_ANGLE = math.radians(15.0)
 
 TAUT_COLOUR, SLACK_COLOUR, BROKEN_COLOUR, THRUST_COLOUR = "tab:blue", "tab:orange", "0.3", "tab:red"
 
+#: The second line of the title, the key to the colours.
+KEY = "blue: taut, orange dashed: slack, grey dotted: broken, red: thrust"
+
 
 def arrow_segments(tails: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """Line segments of 3-D arrows drawn like ``Axes3D.quiver(..., pivot="tail")``.
@@ -130,8 +133,15 @@ class ClusterRenderer:
             depthshade=False,
             animated=animated,
         )
-        self._title = ax.set_title("", fontsize=9)
-        self._title.set_animated(animated)
+        # The title's two lines. Off screen the key, which never changes, is drawn with the axes
+        # (as the second line of the axes' title), and the status line above it, which changes
+        # every frame, is a text of the same font and place whose second line is blank: text is
+        # most of what a blitted frame costs, so only the line that changes is drawn each time.
+        self._key = ax.set_title(" \n" + KEY, fontsize=9)
+        self._status = self.figure.text(
+            0.5, 1.0, "", fontsize=9, ha="center", va="baseline", transform=self._key.get_transform()
+        )
+        self._status.set_animated(animated)
         self._background: Any = None
         self._background_key: tuple[int, int, int] | None = None
         self._limits_key: tuple[int, int, int] = (0, 0, 0)
@@ -188,24 +198,26 @@ class ClusterRenderer:
         # of the last projection as the satellites' own.
         self._satellites._offsets3d = tuple(shown.T)
         cut = f"   broken {int(broken.sum())}" if broken.any() else ""
-        self._title.set_text(
+        status = (
             f"{self.cluster.name}  t = {time:6.2f} s   slack {int(loose.sum())}/{slack.size}{cut}"
-            f"   displacements x{self.exaggeration:g}\n"
-            "blue: taut, orange dashed: slack, grey dotted: broken, red: thrust"
+            f"   displacements x{self.exaggeration:g}"
         )
         key = self._centre_key(centre)
         if key != self._limits_key:
             self._set_limits(key)
-        if self.human:
+        if self.human:  # every draw is a full one: the title holds both lines
+            self._key.set_text(f"{status}\n{KEY}")
             self._canvas.draw_idle()
             self._plt.pause(1e-3)
             return None
         if self._background is None or self._background_key != key:
             self._canvas.draw()  # the axes alone: the moving artists are animated
+            self._status.set_position(self._key.get_position())  # where the axes placed their title
             self._background = self._canvas.copy_from_bbox(self.figure.bbox)
             self._background_key = key
         else:
             self._canvas.restore_region(self._background)
+        self._status.set_text(f"{status}\n ")
         self._draw_moving_artists()
         return np.asarray(self._canvas.buffer_rgba())[..., :3].copy()
 
@@ -222,7 +234,7 @@ class ClusterRenderer:
         # one (NaN depth) has nothing to draw.
         for artist in sorted(depth, key=lambda a: -depth[a] if np.isfinite(depth[a]) else 0.0):
             artist.draw(renderer)
-        self._title.draw(renderer)
+        self._status.draw(renderer)
 
     def close(self) -> None:
         """Close the window (``human`` mode); an off-screen figure is simply dropped."""
