@@ -6,6 +6,7 @@
   version history), its preset's docstring and signature in :mod:`tether_gym.presets`, and the
   registered spec and a freshly made env (spaces, episode length, control interval, thrust,
   initial conditions, the cluster's magnitudes). A page therefore cannot disagree with the code.
+* On each of them, the id's animation, drawn by ``scripts/figures.py``.
 * The table of ids on ``environments.md``, in place of the marker ``<!-- env-ids-table ... -->``.
 * The home page: ``README.md``, with its ``docs/`` links made relative to the site, in place of
   the placeholder ``docs/index.md``.
@@ -20,9 +21,11 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import importlib.util
 import inspect
 import math
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -350,7 +353,7 @@ def env_page(env_id: str) -> str:
             + "\nAny argument below can be passed to `gym.make` or `gym.make_vec`.\n"
         ),
     }
-    page = [f"# {env_id}\n", doc.summary + "\n", table(("", ""), glance)]
+    page = [f"# {env_id}\n", doc.summary + "\n", table(("", ""), glance), animation(facts)]
     for title, body in shared.items():
         page.append(f"## {title}\n")
         if title == "Version History":
@@ -362,6 +365,38 @@ def env_page(env_id: str) -> str:
     source = "`tether_gym/envs/cluster_env.py`, `tether_gym/registration.py` and `tether_gym/presets.py`"
     page.append(f"---\n\n*Generated from {source} when the site was built.*\n")
     return "\n".join(page)
+
+
+@functools.cache
+def figures_script() -> Any:
+    """scripts/figures.py, the producer of the animations: the page says what it drew."""
+    spec = importlib.util.spec_from_file_location("docs_figures", ROOT / "scripts" / "figures.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["docs_figures"] = module  # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def animation(facts: EnvFacts) -> str:
+    """The id's animation (written by ``bash scripts/figures.sh``) and its caption, in Markdown
+    relative to its page."""
+    figures = figures_script()
+    path = f"img/{figures.env_animation(facts.env_id)}"
+    if not (ROOT / "docs" / path).is_file():
+        raise DocsBuildError(
+            f"docs/{path} is missing: run `bash scripts/figures.sh --only env_animations`, which draws one "
+            f"animation per registered id"
+        )
+    left, right = figures.ANIMATED_CONTROLLERS
+    interval = number(facts.settings["control_interval"])
+    return (
+        f"![{facts.env_id}: {left} and {right} from the same initial state](../{path})\n\n"
+        f"*{left} (left) and the shipped `{right}` policy (right) from the same reset (seed "
+        f"{figures.ANIMATION_SEED}), {figures.ANIMATION_STEPS} control steps of {interval} s, one frame each; "
+        f"blue cables are taut, orange dashed ones slack, red arrows the thrust. Drawn by "
+        f"`bash scripts/figures.sh`.*\n"
+    )
 
 
 def ids_table_rows() -> list[tuple[str, str, int, int, int, float]]:
