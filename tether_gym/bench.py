@@ -23,6 +23,7 @@ from gymnasium.vector import AutoresetMode
 
 import tether_gym
 from tether_gym._cli import program
+from tether_gym._optional import available, install_line, needs_extra
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 
@@ -78,8 +79,9 @@ def ppo_env_share(env_id: str, num_envs: int, timesteps: int) -> tuple[float, fl
     runs is the issue's definition, but on a busy 2-core machine it is within the timing noise
     (it can come out negative), so the time inside the env is measured directly too.  PPO uses
     SB3's default hyperparameters (batch 64, 10 epochs) but for a rollout of 128 steps per env."""
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+    with needs_extra("train", "the benchmark's PPO measurement"):
+        from stable_baselines3 import PPO
+        from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
     from tether_gym.sb3 import make_sb3_vec_env
 
@@ -196,10 +198,8 @@ def main(argv: list[str] | None = None) -> None:
                 for _ in range(args.repeats)
             )
             print(f"{env_id:<24}{label:<38}{n:>6}{best:>14,.0f}")
-    try:
-        import stable_baselines3  # noqa: F401
-    except ImportError:
-        print("\nPPO share: stable-baselines3 is not installed (pip install -e '.[train]')")
+    if not available("stable_baselines3"):
+        print(f"\nPPO share: stable-baselines3 is not installed ({install_line('train')})")
         return
     num_envs, timesteps = 16, 16 * 128 * 4
     with_env, zero_cost, inside, share = ppo_env_share(DEFAULT_ENV_ID, num_envs, timesteps)

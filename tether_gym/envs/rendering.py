@@ -80,7 +80,7 @@ class ClusterRenderer:
     """
 
     def __init__(self, cluster: Cluster, max_thrust: float, human: bool = False, exaggeration: float = 1.0) -> None:
-        purpose = "drawing the env (render_mode='rgb_array' or 'human')"
+        purpose = f"drawing the env (render_mode={'human' if human else 'rgb_array'!r})"
         matplotlib = require("matplotlib", "plots", purpose)
         if not human:
             matplotlib.use("Agg", force=False)

@@ -8,7 +8,11 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from pettingzoo import ParallelEnv
+
+from tether_gym._optional import needs_extra
+
+with needs_extra("multiagent", "the PettingZoo multi-agent env (tether_gym.multiagent.parallel_env)"):
+    from pettingzoo import ParallelEnv
 
 from tether_gym.envs.arguments import OBSERVATION_LIMIT, EnvArgumentError, as_real_array, check_seed
 from tether_gym.envs.task import RESET_OPTION_KEYS

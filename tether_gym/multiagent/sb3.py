@@ -40,8 +40,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from stable_baselines3.common.vec_env import VecEnv
-from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
+
+from tether_gym._optional import needs_extra
+
+with needs_extra("train", "the shared-policy SB3 VecEnv of the multi-agent env (AgentVecEnv)"):
+    from stable_baselines3.common.vec_env import VecEnv
+    from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 from tether_gym.envs.arguments import OBSERVATION_LIMIT, EnvArgumentError, as_real_array
 from tether_gym.multiagent.engine import AgentBatch
