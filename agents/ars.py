@@ -47,15 +47,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from tether_gym._optional import needs_extra, require
+
+from . import cli
 from .baselines import BASELINES, make_baseline
-from .commands import command_line, description, program
+from .commands import command_line, program
 from .files import OutputError, atomic_write_text
 from .residual import residual_actions
 from .safe_format import NormalizationStatistics, PolicyFormatError, save_policy
 from .selection import EvaluationLog, baseline_returns, episode_returns, evaluation_seeds
 from .settings import load_settings
+
+with needs_extra("train", "the ARS settings files"):
+    import yaml
 
 __all__ = [
     "ARS_SETTINGS_FILE",
@@ -376,7 +381,7 @@ def _progress_bar(total: int, label: str, enabled: bool) -> Callable[[str | None
     """An update function: ``update(None)`` advances one iteration, ``update(text)`` sets the postfix."""
     if not enabled:
         return lambda text: None
-    from tqdm import tqdm
+    tqdm = require("tqdm", "train", "the progress bar (or pass --no-progress)").tqdm
 
     bar = tqdm(total=total, desc=label, unit="it")
 
@@ -392,17 +397,9 @@ def _progress_bar(total: int, label: str, enabled: bool) -> Callable[[str | None
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=program("ars"), description=description(__doc__))
-    parser.add_argument("--env", default="TetherTetrahedron-v0", metavar="ID", help="env id")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/ars_seed<seed>")
-    parser.add_argument(
-        "--hyperparams", help="YAML file instead of agents/hyperparams/ars.yml, or a run's config.yml (reproduces it)"
-    )
-    parser.add_argument("--iterations", type=int, help="override the number of ARS iterations")
-    parser.add_argument("--force", action="store_true", help="replace an earlier run with the same --out, env and seed")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar (for logs)")
-    return parser
+    """The command line of ``ars`` (defined in :mod:`agents.cli`, which the console script parses
+    with before this module's slow imports)."""
+    return cli.build_parser("ars")
 
 
 def main(argv: list[str] | None = None) -> Path:

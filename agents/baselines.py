@@ -24,10 +24,13 @@ import math
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
+from tether_gym._optional import needs_extra
 from tether_gym.analysis import axial_damping_matrix, frame_stiffness, gyroscopic_matrix, tangent_stiffness
 from tether_gym.envs.task import DampingTask
+
+with needs_extra("train", "the LQR baseline's Riccati solver"):
+    import scipy.linalg
 
 __all__ = [
     "BASELINES",

@@ -83,15 +83,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import scipy.stats
 
+from tether_gym._optional import needs_extra, require
 from tether_gym.limits import is_whole_number
 from tether_gym.registration import ENV_IDS
 
+from . import cli
 from .baselines import BASELINES
-from .cli import int_at_least
+from .cli import HELD_OUT_SEED, REFERENCE
 from .commands import command_line, program
-from .compare import HELD_OUT_SEED
 from .evaluate import EpisodeRecord, rollout, summarise
 from .files import (
     OutputError,
@@ -100,8 +100,11 @@ from .files import (
     prepare_table_outputs,
 )
 from .pickled import PickleNotTrustedError
-from .policies import make_controller, shipped_models
+from .policies import OtherIdError, make_controller, shipped_models
 from .safe_format import PolicyFormatError
+
+with needs_extra("train", "the benchmark's statistics"):
+    import scipy.stats
 
 __all__ = [
     "REFERENCE",
@@ -118,8 +121,6 @@ __all__ = [
 
 #: The controller that scores 0: doing nothing.
 ZERO = "passive"
-#: The controller that scores 100 by default: the model-predictive reference.
-REFERENCE = "mpc"
 #: Confidence level of every interval.
 CONFIDENCE = 0.95
 #: Bootstrap resamples of each per-id score interval.
@@ -278,13 +279,8 @@ def score_interval(
 
 def _rliable() -> tuple[Any, Any]:
     """rliable's ``library`` and ``metrics`` modules, or an ImportError that says how to get them."""
-    try:
-        from rliable import library, metrics
-    except ImportError as error:
-        raise ImportError(
-            "the benchmark's aggregate needs rliable: pip install 'tether-gym[train]' (or pip install "
-            f"rliable==1.2.0 'pandas<3'); import failed with: {error}"
-        ) from error
+    library = require("rliable.library", "train", "the benchmark's aggregate over ids (rliable==1.2.0, pandas<3)")
+    metrics = require("rliable.metrics", "train", "the benchmark's aggregate over ids (rliable==1.2.0, pandas<3)")
     return library, metrics
 
 
@@ -496,6 +492,7 @@ def benchmark(
     force: bool = False,
     plots: bool = True,
     trust_pickle: bool = False,
+    allow_other_id: bool = False,
     reference: str = REFERENCE,
     bootstrap_reps: int = 50_000,
     env_kwargs: dict[str, Any] | None = None,
@@ -515,6 +512,8 @@ def benchmark(
         out: output directory; an earlier benchmark there is replaced only with ``force``.
         plots: write the PNG plots (needs matplotlib).
         trust_pickle: allow pickle-based SB3 model paths in ``controllers``.
+        allow_other_id: run a policy directory of ``controllers`` on every id of its observation
+            shape, not only on the id it was trained on (with a warning).
         reference: the controller that scores 100 (default ``mpc``). Another name gives a
             differently anchored score, labelled as such in every table.
         bootstrap_reps: bootstrap replications of the aggregate's intervals.
@@ -565,9 +564,13 @@ def benchmark(
         missing[env_id] = []
         for name in candidates:
             try:
-                controller = make_controller(name, probe, trust_pickle=trust_pickle)
+                controller = make_controller(name, probe, trust_pickle=trust_pickle, allow_other_id=allow_other_id)
             except (PolicyFormatError, PickleNotTrustedError):
                 raise  # a corrupted model or an untrusted pickle is an error, not a missing controller
+            except OtherIdError as error:
+                reason = f"trained on {error.trained}; --allow-other-id runs it on other ids"
+                missing[env_id].append({"controller": name, "reason": reason})
+                continue
             except (ValueError, FileNotFoundError) as error:
                 elsewhere = [other for other in ids if name in shipped[other]]
                 reason = (
@@ -1023,12 +1026,8 @@ def _write_outputs(
 
 
 def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    require("matplotlib", "plots", "the benchmark's plots (or pass --no-plots)").use("Agg")
+    return require("matplotlib.pyplot", "plots", "the benchmark's plots (or pass --no-plots)")
 
 
 def _save(fig: Any, path: Path) -> None:
@@ -1228,59 +1227,9 @@ def plot_aggregate(results: dict[str, Any], path: Path) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=program("benchmark"),
-        description="Every id, every scripted baseline, the mpc reference and every shipped model on "
-        "held-out seeds: mean returns, paired differences against the best scripted baseline, "
-        "normalised scores (0 = passive, 100 = mpc), and rliable's aggregate over ids.",
-        epilog="Trust: shipped models load without running code; a pickle-based SB3 model path in "
-        "--controllers is refused unless --trust-pickle is given.",
-    )
-    parser.add_argument(
-        "--envs",
-        nargs="+",
-        choices=list(ENV_IDS),
-        metavar="ID",
-        help=f"ids to run (default: all {len(ENV_IDS)}: {', '.join(ENV_IDS)})",
-    )
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        metavar="NAME",
-        help="baseline names, mpc, shipped model names or policy directories, run on every "
-        "id that has them (default: every baseline, mpc and every shipped model of each "
-        "id; passive is always added)",
-    )
-    parser.add_argument(
-        "--episodes", type=int_at_least(2), default=64, help="held-out episodes per controller and id (default 64)"
-    )
-    parser.add_argument(
-        "--seed",
-        type=int_at_least(0),
-        default=HELD_OUT_SEED,
-        help=f"first held-out seed (default {HELD_OUT_SEED}); also seeds the bootstrap",
-    )
-    parser.add_argument("--out", default="outputs/benchmark", help="output directory (default outputs/benchmark)")
-    parser.add_argument(
-        "--reference",
-        default=REFERENCE,
-        help=f"the controller that scores 100 (default {REFERENCE}; another one anchors a "
-        "different score, labelled as such)",
-    )
-    parser.add_argument(
-        "--bootstrap-reps",
-        type=int_at_least(100),
-        default=50_000,
-        help="bootstrap replications of the aggregate's intervals (default 50000, as in rliable)",
-    )
-    parser.add_argument("--no-plots", action="store_true")
-    parser.add_argument("--force", action="store_true", help="replace an earlier benchmark in --out")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)",
-    )
-    return parser
+    """The command line of ``benchmark`` (defined in :mod:`agents.cli`, which the console script parses
+    with before this module's slow imports)."""
+    return cli.build_parser("benchmark")
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -1295,6 +1244,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         force=args.force,
         plots=not args.no_plots,
         trust_pickle=args.trust_pickle,
+        allow_other_id=args.allow_other_id,
         reference=args.reference,
         bootstrap_reps=args.bootstrap_reps,
         command=command_line("benchmark", arguments),

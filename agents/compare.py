@@ -32,12 +32,14 @@ from typing import Any
 
 import numpy as np
 
+from tether_gym._optional import require
 from tether_gym.limits import is_whole_number
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
+from . import cli
 from .baselines import BASELINES
-from .cli import add_env_argument, int_at_least
-from .commands import description, program
+from .cli import HELD_OUT_SEED
+from .commands import program
 from .evaluate import METRICS, EpisodeRecord, rollout, summarise
 from .files import (
     OutputError,
@@ -50,9 +52,6 @@ from .policies import make_controller, shipped_models
 from .safe_format import PolicyFormatError
 
 __all__ = ["compare", "main"]
-
-#: First held-out seed.
-HELD_OUT_SEED = 10_000
 
 
 def _progress_printer(name: str) -> Any:
@@ -93,6 +92,7 @@ def compare(
     env_kwargs: dict[str, Any] | None = None,
     force: bool = False,
     trust_pickle: bool = False,
+    allow_other_id: bool = False,
 ) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
     """Evaluate ``controllers`` (names or model paths; default: every baseline and shipped
     model) on ``episodes`` episodes seeded ``seed, seed+1, ...``; write the table and plots to
@@ -101,7 +101,8 @@ def compare(
     Before any rollout it checks the arguments, the output directory (``OutputError`` for a
     file, a symlink, a path inside a file or an unwritable place; ``OutputExistsError`` for an
     earlier comparison there unless ``force``) and loads every controller (pickle-based model
-    files only with ``trust_pickle``)."""
+    files only with ``trust_pickle``; a policy trained on another id than ``env_id`` only with
+    ``allow_other_id``, else :class:`agents.policies.OtherIdError`)."""
     import gymnasium as gym
 
     if env_id not in ENV_IDS:
@@ -123,7 +124,9 @@ def compare(
     num_nodes = probe.unwrapped.task.cluster.num_nodes
     if satellite >= num_nodes:
         raise ValueError(f"satellite must be in 0..{num_nodes - 1} for {env_id}; got {satellite}")
-    policies = [make_controller(name, probe, trust_pickle=trust_pickle) for name in names]
+    policies = [
+        make_controller(name, probe, trust_pickle=trust_pickle, allow_other_id=allow_other_id) for name in names
+    ]
     probe.close()
     seeds = list(range(seed, seed + episodes))
     print(f"{env_id}: {len(names)} controllers x {episodes} episodes (seeds {seed}..{seed + episodes - 1})")
@@ -181,12 +184,15 @@ def write_csv(path: Path, records: list[EpisodeRecord], summaries: list[dict[str
     atomic_write_text(path, stream.getvalue())
 
 
+def _pyplot() -> Any:
+    """matplotlib's pyplot on the Agg backend (files only, no display needed)."""
+    require("matplotlib", "plots", "the comparison's plots (or pass --no-plots)").use("Agg")
+    return require("matplotlib.pyplot", "plots", "the comparison's plots (or pass --no-plots)")
+
+
 def plot_energy(records: list[EpisodeRecord], path: Path, env_id: str) -> None:
     """E(t)/E0: median line and interquartile band per controller, log scale."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     fig, ax = plt.subplots(figsize=(8, 4.8))
     for record in records:
@@ -211,10 +217,7 @@ def plot_energy(records: list[EpisodeRecord], path: Path, env_id: str) -> None:
 
 def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, satellite: int) -> None:
     """Satellite ``satellite``'s displacement components over time in the first episode."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     fig, axes = plt.subplots(3, 1, figsize=(8, 6.5), sharex=True)
     for record in records:
@@ -233,32 +236,9 @@ def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, sat
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=program("compare"),
-        description=description(__doc__),
-        epilog="Trust: shipped and agents.train models are JSON + safetensors and load without running code. "
-        "A pickle-based SB3 model (.zip + vecnormalize.pkl) runs any code a crafted file contains when "
-        f"loaded: it is refused unless --trust-pickle is given ({program('convert')} makes a safe copy).",
-    )
-    add_env_argument(parser)
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        help="baseline names, shipped model names or policy directories "
-        "(default: every baseline and every shipped model of the id)",
-    )
-    parser.add_argument("--episodes", type=int_at_least(2), default=64)
-    parser.add_argument("--seed", type=int_at_least(0), default=HELD_OUT_SEED, help="first held-out seed")
-    parser.add_argument("--satellite", type=int_at_least(0), default=0, help="satellite of the displacement plot")
-    parser.add_argument("--out", default="outputs/compare", help="output directory (default outputs/compare)")
-    parser.add_argument("--no-plots", action="store_true")
-    parser.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)",
-    )
-    return parser
+    """The command line of ``compare`` (defined in :mod:`agents.cli`, which the console script parses
+    with before this module's slow imports)."""
+    return cli.build_parser("compare")
 
 
 def main(argv: list[str] | None = None) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
@@ -273,6 +253,7 @@ def main(argv: list[str] | None = None) -> tuple[list[EpisodeRecord], list[dict[
         plots=not args.no_plots,
         force=args.force,
         trust_pickle=args.trust_pickle,
+        allow_other_id=args.allow_other_id,
     )
 
 

@@ -28,10 +28,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
-from .cli import int_at_least
-from .commands import description, program
+from tether_gym._optional import needs_extra
+
+from . import cli
+from .cli import REFERENCE_FILE
+from .commands import program
 from .files import OutputError, atomic_write_bytes, check_output_files, prepare_output_dir
 from .pickled import (
     PickleNotTrustedError,
@@ -51,9 +53,10 @@ from .safe_format import (
     write_manifest,
 )
 
-__all__ = ["REFERENCE_FILE", "convert", "main"]
+with needs_extra("train", "converting SB3 models"):
+    import torch
 
-REFERENCE_FILE = "reference_actions.safetensors"
+__all__ = ["REFERENCE_FILE", "convert", "main"]
 
 
 def _original_actions(model: Any, normalizer: Any, observations: np.ndarray) -> np.ndarray:
@@ -140,7 +143,13 @@ def convert(
     check_output_files(destination, outputs, force=force, argument="DST", what="an earlier conversion")
 
     model, normalizer, config, files = load_pickled_model(source, trust_pickle=True, best=best, algo=algo)
-    env_id = env_id or config.get("env_id")
+    recorded = config.get("env_id")
+    if env_id is not None and recorded is not None and env_id != recorded:
+        raise ValueError(
+            f"--env {env_id} differs from the id SRC's config.yml records ({recorded}): the converted policy would "
+            "carry the wrong id; leave out --env"
+        )
+    env_id = env_id or recorded
     if env_id is not None:
         import tether_gym
 
@@ -213,31 +222,9 @@ def _sha256(path: Path) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=program("convert"),
-        description=description(__doc__),
-        epilog="Converting unpickles SRC: a crafted SRC runs arbitrary code. Convert only files you trust.",
-    )
-    parser.add_argument("source", metavar="SRC", help="SB3 run directory or model .zip")
-    parser.add_argument("destination", metavar="DST", help="directory for the safe format (may be SRC's directory)")
-    parser.add_argument(
-        "--trust-pickle", action="store_true", help="required: SRC is unpickled, which runs any code it contains"
-    )
-    parser.add_argument("--best", action="store_true", help="convert SRC/best/best_model.zip")
-    parser.add_argument("--algo", choices=["ppo", "sac", "td3"], help="algorithm, if SRC has no config.yml")
-    parser.add_argument("--env", help="env id, if SRC has no config.yml")
-    parser.add_argument("--training-state", action="store_true", help="keep the optimizer states (for --resume)")
-    parser.add_argument(
-        "--check-observations",
-        type=int_at_least(16),
-        default=512,
-        help="observations on which the actions must be bit-identical (default 512)",
-    )
-    parser.add_argument(
-        "--reference", action="store_true", help=f"keep those observations and actions in DST/{REFERENCE_FILE}"
-    )
-    parser.add_argument("--force", action="store_true", help="replace an earlier conversion in DST")
-    return parser
+    """The command line of ``convert`` (defined in :mod:`agents.cli`, which the console script parses
+    with before this module's slow imports)."""
+    return cli.build_parser("convert")
 
 
 def main(argv: list[str] | None = None) -> Path:

@@ -15,12 +15,15 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import scipy.stats
 from gymnasium.vector import AutoresetMode
 
 import tether_gym  # noqa: F401 - registers the ids
+from tether_gym._optional import needs_extra
 from tether_gym.envs.contract import Scalar
 from tether_gym.limits import is_whole_number
+
+with needs_extra("train", "the evaluation's confidence intervals"):
+    import scipy.stats
 
 __all__ = ["EpisodeRecord", "METRICS", "rollout", "summarise"]
 

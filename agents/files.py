@@ -18,6 +18,8 @@ import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from tether_gym._optional import require
+
 __all__ = [
     "OutputError",
     "OutputExistsError",
@@ -169,13 +171,8 @@ def prepare_table_outputs(
     matplotlib is there when plots are asked for, ``out`` is a usable directory (``--out``), and
     none of its ``tables`` (and ``plots``) would overwrite ``what`` without ``force`` or write
     through a symlink. Returns the directory."""
-    if with_plots:
-        try:
-            import matplotlib  # noqa: F401 - checked now, not after every rollout
-        except ImportError as error:
-            raise ImportError(
-                "the plots need matplotlib: pip install 'tether-gym[plots]', or pass --no-plots (plots=False)"
-            ) from error
+    if with_plots:  # checked now, not after every rollout
+        require("matplotlib", "plots", "the plots (or pass --no-plots; plots=False in Python)")
     directory = prepare_output_dir(out, argument="--out")
     check_output_files(
         directory, tuple(tables) + (tuple(plots) if with_plots else ()), force=force, argument="--out", what=what

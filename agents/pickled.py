@@ -15,9 +15,12 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-import yaml
-from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+from tether_gym._optional import needs_extra
+
+with needs_extra("train", "loading pickle-based SB3 models"):
+    import yaml
+    from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from .commands import program
 from .safe_format import ALGORITHMS, METADATA_FILE

@@ -8,6 +8,7 @@ pickle-based SB3 files (``model.zip`` + ``vecnormalize.pkl``) are loaded only wi
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,16 @@ from .baselines import BASELINES, make_baseline
 from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted
 from .safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
 
-__all__ = ["MODELS_DIR", "TrainedPolicy", "is_shipped", "make_controller", "shipped_models"]
+__all__ = [
+    "MODELS_DIR",
+    "OtherIdError",
+    "OtherIdWarning",
+    "TrainedPolicy",
+    "env_id_of",
+    "is_shipped",
+    "make_controller",
+    "shipped_models",
+]
 
 #: Where the repository keeps its trained models: ``<env id>/<name>/policy.json`` and the rest of
 #: the safe format, with a ``MANIFEST.sha256`` that every load verifies.
@@ -34,6 +44,35 @@ def is_shipped(directory: str | Path) -> bool:
     return True
 
 
+class OtherIdError(ValueError):
+    """A trained policy attached to an env of another id than the one it was trained on (without
+    the opt-in ``allow_other_id``): ids of the same observation shape differ in masses, cables,
+    frames and disturbances, so the policy would run, but on a task it never saw.
+
+    Attributes: ``trained`` is the policy's id, ``running`` the env's.
+    """
+
+    def __init__(self, message: str, trained: str, running: str) -> None:
+        super().__init__(message)
+        self.trained, self.running = trained, running
+
+
+class OtherIdWarning(UserWarning):
+    """A trained policy runs on another id than its own (``allow_other_id=True``), or records no
+    id at all, so that only its observation shape could be checked."""
+
+
+def env_id_of(env: Any) -> str | None:
+    """The registered id of ``env`` (a Gymnasium env or vector env, possibly wrapped, or the
+    PettingZoo env of :mod:`tether_gym.multiagent`), or None when it has none (a hand-built env)."""
+    for candidate in (env, getattr(env, "unwrapped", None)):
+        spec_id = getattr(getattr(candidate, "spec", None), "id", None)
+        if isinstance(spec_id, str):
+            return spec_id
+    own = getattr(env, "env_id", None)
+    return own if isinstance(own, str) else None
+
+
 class TrainedPolicy:
     """A trained SB3 policy with its ``VecNormalize`` observation statistics, as a policy with the
     baselines' interface (``predict(observation, deterministic=True)``, for one observation or a
@@ -48,6 +87,9 @@ class TrainedPolicy:
         name: the name shown in tables (default: the algorithm, e.g. ``"ppo"``).
         trust_pickle: allow loading pickle-based SB3 files, which can run arbitrary code; a
             :class:`agents.pickled.PickleTrustWarning` is emitted when it happens.
+        allow_other_id: let :meth:`attach` put the policy on an env of another id than the one
+            it was trained on (``env_id``), with an :class:`OtherIdWarning`; without it that is an
+            :class:`OtherIdError`.
 
     Raises:
         FileNotFoundError: nothing loadable at ``path``.
@@ -57,8 +99,14 @@ class TrainedPolicy:
     """
 
     def __init__(
-        self, path: str | Path, best: bool = False, name: str | None = None, trust_pickle: bool = False
+        self,
+        path: str | Path,
+        best: bool = False,
+        name: str | None = None,
+        trust_pickle: bool = False,
+        allow_other_id: bool = False,
     ) -> None:
+        self.allow_other_id = bool(allow_other_id)
         path = Path(path)
         if path.is_file() and is_policy_dir(path.parent) and path.suffix not in (".zip", ".pkl"):
             path = path.parent  # policy.json, policy.safetensors, ...: their directory
@@ -118,16 +166,28 @@ class TrainedPolicy:
         (a ``VecNormalize`` or None), e.g. the model being trained; nothing is copied, so it acts
         with the weights and statistics they hold when ``predict`` is called."""
         self = cls.__new__(cls)
+        self.allow_other_id = False
         self.policy, self.normalizer, self.algo, self.env_id = policy, normalizer, algo, env_id
         self.metadata = {"algo": algo, "env_id": env_id, "residual_on": residual_on, "multiagent": multiagent}
         self.path = Path(f"<in-memory {algo} policy>")
         self._adopt(name)
         return self
 
-    def attach(self, env: Any) -> None:
-        """Build the baseline a residual policy adds its corrections to, or the local observer of
-        a decentralised policy (:class:`agents.decentralised.LocalObserver`), from ``env`` (a
-        tether-gym env of the policy's id); nothing to do for a plain policy."""
+    def attach(self, env: Any, allow_other_id: bool | None = None) -> None:
+        """Check that ``env`` (a tether-gym env or vector env) is of the id the policy was trained
+        on, then build the baseline a residual policy adds its corrections to, or the local
+        observer of a decentralised policy (:class:`agents.decentralised.LocalObserver`), from it.
+
+        Args:
+            env: the env the policy will act in.
+            allow_other_id: run on another id than the policy's own, with an
+                :class:`OtherIdWarning` (default: the ``allow_other_id`` the policy was loaded
+                with).
+
+        Raises:
+            OtherIdError: ``env`` is of another id, without ``allow_other_id``.
+        """
+        self.check_env_id(env, self.allow_other_id if allow_other_id is None else allow_other_id)
         if self.multiagent is not None:
             from .decentralised import LocalObserver
 
@@ -141,6 +201,36 @@ class TrainedPolicy:
             from .baselines import make_baseline
 
             self.baseline = make_baseline(self.residual_on, env)
+
+    def check_env_id(self, env: Any, allow_other_id: bool = False) -> None:
+        """Refuse ``env`` when its id is not the one the policy was trained on, unless
+        ``allow_other_id`` (then warn). A policy that records no id (an old or hand-made file)
+        and an env without one are let through with a warning: only shapes can be compared."""
+        trained, running = self.env_id, env_id_of(env)
+        if trained is None or running is None:
+            missing = f"{self.path} records no env id" if trained is None else "the env has no registered id"
+            warnings.warn(
+                f"{missing}: cannot check that the policy runs on the id it was trained on; only its observation "
+                "shape is checked",
+                OtherIdWarning,
+                stacklevel=3,
+            )
+            return
+        if trained == running:
+            return
+        if not allow_other_id:
+            raise OtherIdError(
+                f"{self.path} was trained on {trained}, not {running}: pass a model trained on {running}, or opt in "
+                f"to run it on another id with --allow-other-id (allow_other_id=True in Python)",
+                trained,
+                running,
+            )
+        warnings.warn(
+            f"{self.path} was trained on {trained} and runs on {running} (allow_other_id): its results there are "
+            "not those of a policy trained on that id",
+            OtherIdWarning,
+            stacklevel=3,
+        )
 
     @property
     def saturation_fraction(self) -> float:
@@ -222,14 +312,16 @@ def shipped_models(env_id: str) -> dict[str, Path]:
     }
 
 
-def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
+def make_controller(spec: str, env: Any, trust_pickle: bool = False, allow_other_id: bool = False) -> Any:
     """A controller from a name: a baseline (``passive``, ``velocity_feedback``, ``lqr``,
     ``tension_aware``), the privileged model-predictive reference ``mpc`` (agents.mpc), a
     shipped model of the env's id (e.g. ``ppo``), or a path to a policy directory (a
-    pickle-based SB3 model only with ``trust_pickle``).
+    pickle-based SB3 model only with ``trust_pickle``; a policy trained on another id than
+    ``env``'s only with ``allow_other_id``, which the returned policy keeps for later attaches).
 
     Raises ValueError naming ``spec`` when it is none of these, or when the policy's
-    observations do not fit ``env``'s."""
+    observations do not fit ``env``'s; :class:`OtherIdError` (a ValueError) for a policy of
+    another id without ``allow_other_id``."""
     if not isinstance(spec, str) or not spec:
         raise ValueError(f"controller must be a non-empty name or path; got {spec!r}")
     if spec in BASELINES:
@@ -241,11 +333,11 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False) -> Any:
     env_id = getattr(getattr(env, "spec", None), "id", None)
     shipped = shipped_models(env_id) if env_id is not None else {}
     if spec in shipped:
-        controller = TrainedPolicy(shipped[spec], name=spec)
+        controller = TrainedPolicy(shipped[spec], name=spec, allow_other_id=allow_other_id)
     elif Path(spec).exists():
         if is_pickle_model(spec) and not trust_pickle:
             refuse_untrusted(spec, opt_in="--trust-pickle")
-        controller = TrainedPolicy(spec, trust_pickle=trust_pickle)
+        controller = TrainedPolicy(spec, trust_pickle=trust_pickle, allow_other_id=allow_other_id)
     else:
         known = sorted(BASELINES) + ["mpc"] + sorted(shipped)
         raise ValueError(

@@ -14,9 +14,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from tether_gym._optional import needs_extra
 
 from .baselines import BASELINES, make_baseline
+
+with needs_extra("train", "residual policies"):
+    from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 __all__ = ["ResidualVecEnv", "check_residual_on", "residual_actions"]
 

@@ -41,15 +41,19 @@ from typing import Any
 
 import gymnasium
 import numpy as np
-import torch
-from stable_baselines3 import PPO, SAC, TD3
-from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
-from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.torch_layers import FlattenExtractor
-from stable_baselines3.common.vec_env import VecNormalize
+
+from tether_gym._optional import needs_extra, require
 
 from .files import atomic_write_bytes, atomic_write_text
+
+with needs_extra("train", "the policy files"):
+    import torch
+    from stable_baselines3 import PPO, SAC, TD3
+    from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+    from stable_baselines3.common.policies import BasePolicy
+    from stable_baselines3.common.torch_layers import FlattenExtractor
+    from stable_baselines3.common.vec_env import VecNormalize
 
 __all__ = [
     "ACTIVATIONS",
@@ -126,14 +130,7 @@ class ChecksumError(PolicyFormatError):
 
 def _safetensors() -> Any:
     """The ``safetensors.torch`` module, with an install hint when it is missing."""
-    try:
-        import safetensors.torch
-    except ImportError as error:  # pragma: no cover - the train extra installs it
-        raise ImportError(
-            "tether-gym policies are stored as safetensors: install it with pip install 'tether-gym[train]' "
-            "(or pip install safetensors)"
-        ) from error
-    return safetensors.torch
+    return require("safetensors.torch", "train", "the policy files (stored as safetensors)")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -34,9 +34,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+
+from tether_gym._optional import needs_extra
 
 from .files import atomic_write_text
+
+with needs_extra("train", "evaluating policies during training"):
+    from stable_baselines3.common.callbacks import BaseCallback
 
 __all__ = [
     "EVALUATIONS_FILE",

@@ -13,7 +13,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
+from tether_gym._optional import needs_extra
+
+with needs_extra("train", "reading the settings files"):
+    import yaml
 
 __all__ = ["load_settings"]
 

@@ -1,5 +1,5 @@
 """Choose the model to ship for each id from several training runs, and record every run's result:
-``python -m agents.ship RUN [RUN ...] --out agents/models``.
+``python -m agents.ship RUN [RUN ...]`` (into ``--out``, by default the checkout's ``agents/models``).
 
 Each ``RUN`` is a run directory of ``agents.train`` (its ``best/`` policy is the candidate), or a
 policy directory (a checkpoint, or a model shipped earlier). Every candidate is rolled out on the
@@ -29,10 +29,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from .cli import int_at_least
-from .commands import command_line, description, program
+from tether_gym._optional import needs_extra
+
+from . import cli
+from .commands import command_line, program
 from .files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
 from .safe_format import (
     METADATA_FILE,
@@ -45,6 +46,9 @@ from .safe_format import (
     write_manifest,
 )
 from .selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
+
+with needs_extra("train", "shipping models"):
+    import yaml
 
 __all__ = ["evaluate_candidates", "main", "reproduce_command", "ship"]
 
@@ -336,12 +340,9 @@ def _write_runs_table(out: Path, candidates: Sequence[dict[str, Any]], command: 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=program("ship"), description=description(__doc__))
-    parser.add_argument("runs", nargs="+", metavar="RUN", help="run directories of agents.train, or policy directories")
-    parser.add_argument("--out", default="agents/models", help="where shipped models go (default agents/models)")
-    parser.add_argument("--episodes", type=int_at_least(2), default=64, help="evaluation episodes (default 64)")
-    parser.add_argument("--force", action="store_true", help="replace shipped models")
-    return parser
+    """The command line of ``ship`` (defined in :mod:`agents.cli`, which the console script parses
+    with before this module's slow imports)."""
+    return cli.build_parser("ship")
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:

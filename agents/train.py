@@ -48,17 +48,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
-from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList
-from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 import tether_gym
+from tether_gym._optional import needs_extra
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
-from .cli import add_env_argument, int_at_least
-from .commands import command_line, description, program
+from . import cli
+from .commands import command_line, program
 from .files import (
     OutputError,
     OutputExistsError,
@@ -88,6 +85,12 @@ from .safe_format import (
     save_policy,
 )
 from .selection import EVALUATIONS_FILE, SeededEvaluation
+
+with needs_extra("train", "training"):
+    import yaml
+    from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+    from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 __all__ = [
     "ACTIVATIONS",
@@ -996,6 +999,8 @@ def train(
     cls = ALGORITHMS[algo]
     model = _build_model(cls, hyperparams, venv, seed, verbose, run, resume_kind, resume_path)
     venv = model.get_env()  # a pickle resume wraps the statistics it loaded around the env
+    total = _whole_rollouts(model, total, "--timesteps" if timesteps is not None else "n_timesteps")
+    hyperparams["n_timesteps"] = total  # config.yml records what runs, and reproduces it
     if force:
         _clear_earlier_run(run, algo, keep)
     atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
@@ -1037,6 +1042,17 @@ def train(
         tb_log_name=algo,
         reset_num_timesteps=resume_kind is None,
     )
+    if not evaluation.history:
+        # best/ is chosen among evaluations: a run shorter than --eval-freq would leave none.
+        print(
+            f"no evaluation ran in {total:,} steps (--eval-freq {eval_freq:,}): evaluating the final policy "
+            f"for {run / 'best'}",
+            flush=True,
+        )
+        evaluation.num_timesteps = model.num_timesteps
+        evaluation.evaluate()
+    record["num_timesteps"] = int(model.num_timesteps)  # counted from the start of a resumed run
+    atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
     save_policy(
         run,
         model,
@@ -1057,6 +1073,37 @@ def train(
     print_evaluation_summary(evaluation)
     venv.close()
     return run
+
+
+def rollout_steps(model: BaseAlgorithm) -> tuple[int, str] | None:
+    """The env steps (over all rows of the vector env) that one iteration of ``model.learn``
+    collects, and how they come about, for a message; None when it varies (an off-policy
+    ``train_freq`` counted in episodes). ``learn`` stops only between iterations, so it trains a
+    whole number of them: at least one, whatever ``total_timesteps`` asks."""
+    from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+    from stable_baselines3.common.type_aliases import TrainFrequencyUnit
+
+    if isinstance(model, OnPolicyAlgorithm):
+        return model.n_steps * model.n_envs, f"rollouts of n_steps {model.n_steps} x {model.n_envs} envs"
+    train_freq = getattr(model, "train_freq", None)
+    if train_freq is None or train_freq.unit != TrainFrequencyUnit.STEP:
+        return None
+    return train_freq.frequency * model.n_envs, f"train_freq {train_freq.frequency} steps x {model.n_envs} envs"
+
+
+def _whole_rollouts(model: BaseAlgorithm, total: int, source: str) -> int:
+    """``total`` env steps rounded up to whole iterations of ``model.learn`` (see
+    :func:`rollout_steps`), which is what it would train anyway; says so when it rounds."""
+    chunk = rollout_steps(model)
+    if chunk is None or total % chunk[0] == 0:
+        return total
+    rounded = -(-total // chunk[0]) * chunk[0]
+    print(
+        f"{source} {total:,} rounded up to {rounded:,} env steps: training runs whole {chunk[1]} "
+        f"= {chunk[0]:,} steps (give a multiple of {chunk[0]:,} to train exactly that)",
+        flush=True,
+    )
+    return rounded
 
 
 def print_evaluation_summary(evaluation: SeededEvaluation) -> None:
@@ -1127,59 +1174,9 @@ def _algo_of(cls: type[BaseAlgorithm]) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=program("train"),
-        description=description(__doc__),
-        epilog="Trust: runs are written as JSON + safetensors, which load without running code. "
-        "--resume from an SB3 .zip/.pkl unpickles it, which runs any code a crafted file contains: "
-        "it needs --trust-pickle.",
-    )
-    parser.add_argument("--algo", default="ppo", choices=sorted(ALGORITHMS))
-    add_env_argument(parser)
-    parser.add_argument("--seed", type=int_at_least(0), default=0)
-    parser.add_argument(
-        "--multiagent",
-        action="store_true",
-        help="train one shared decentralised policy (every satellite its own agent, local observations); "
-        "hyperparameters from agents/hyperparams/<algo>_multiagent.yml unless --hyperparams is given",
-    )
-    parser.add_argument("--out", default="runs", help="parent of the run directory <out>/<env>/<algo>_seed<seed>")
-    parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps")
-    parser.add_argument("--n-envs", type=int_at_least(1), help="override n_envs")
-    parser.add_argument(
-        "--hyperparams",
-        help="YAML file instead of agents/hyperparams/<algo>.yml, or a run's "
-        "config.yml (reproduces that run's hyperparameters)",
-    )
-    parser.add_argument("--resume", help="checkpoint directory (or run directory, or best/) to continue from")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow --resume from a pickle-based SB3 .zip + .pkl (unpickling runs any code they hold)",
-    )
-    parser.add_argument(
-        "--force", action="store_true", help="replace an earlier run with the same --out, env, algorithm and seed"
-    )
-    parser.add_argument(
-        "--curriculum",
-        nargs=2,
-        type=float,
-        metavar=("START", "FRACTION"),
-        help="raise the difficulty from START to 1 over the first FRACTION of the run",
-    )
-    parser.add_argument("--eval-freq", type=int_at_least(1), default=50_000, help="env steps between evaluations")
-    parser.add_argument(
-        "--eval-episodes",
-        type=int_at_least(1),
-        default=32,
-        help="evaluation episodes, the same seeds (1 000 000 up) at every evaluation",
-    )
-    parser.add_argument(
-        "--checkpoint-freq", type=int_at_least(1), default=250_000, help="env steps between checkpoints"
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar (for logs)")
-    parser.add_argument("--verbose", type=int_at_least(0), default=0)
-    return parser
+    """The command line of ``train`` (defined in :mod:`agents.cli`, which the console script parses
+    with before this module's slow imports)."""
+    return cli.build_parser("train")
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any] | None:

@@ -53,14 +53,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 import tether_gym
+from tether_gym._optional import needs_extra
 from tether_gym.envs.arguments import MAX_NUM_ENVS
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from .cli import add_env_argument, int_at_least
-from .commands import command_line, description, program
+from . import cli
+from .cli import RLLIB_ALGO as ALGO  # the run directory's prefix and config.yml's algo
+from .commands import command_line, program
 from .files import OutputError, atomic_write_text
 from .pickled import PickleNotTrustedError
 from .safe_format import PolicyFormatError
@@ -78,6 +79,9 @@ from .train import (
     read_hyperparameter_entry,
 )
 
+with needs_extra("rllib", "training on RLlib"):
+    import yaml
+
 __all__ = [
     "ALGO",
     "RayUnavailableError",
@@ -87,8 +91,6 @@ __all__ = [
     "train_rllib",
 ]
 
-#: The run's algorithm name: the run directory's prefix and ``config.yml``'s ``algo``.
-ALGO = "rllib_ppo"
 #: RLlib's checkpoints mark themselves with this file.
 CHECKPOINT_MARKER = "rllib_checkpoint.json"
 #: Seconds to wait for a cluster's head node to answer on ``--address`` before giving up.
@@ -660,7 +662,18 @@ def train_rllib(
         }
         atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
         _train_loop(
-            algo, run, env_id, hyperparams, seed, total, eval_freq, eval_episodes, checkpoint_freq, command, started
+            algo,
+            run,
+            env_id,
+            hyperparams,
+            seed,
+            total,
+            eval_freq,
+            eval_episodes,
+            checkpoint_freq,
+            command,
+            started,
+            record,
         )
         algo.stop()
     finally:
@@ -681,9 +694,11 @@ def _train_loop(
     checkpoint_freq: int,
     command: str | None,
     started: float,
+    record: dict[str, Any],
 ) -> None:
     """Train until ``total`` env steps, evaluating, checkpointing and logging on the way; export
-    the final policy into ``run``."""
+    the final policy into ``run``, with ``record`` (the run's ``config.yml``) completed by the
+    env steps that actually ran."""
     from .safe_format import save_policy
     from .selection import SeededEvaluation
     from .train import SafePolicySaver
@@ -729,6 +744,15 @@ def _train_loop(
             next_checkpoint = steps + checkpoint_freq
         vessel.logger.dump(steps)
     export_policy(algo, vessel, steps)
+    if steps > total:
+        # RLlib trains whole iterations (train_batch_size_per_learner steps each): say so, and record it.
+        print(
+            f"trained {steps - first:,} env steps for the {total - first:,} asked: RLlib trains whole iterations "
+            f"of about {hyperparams.get('train_batch_size_per_learner', 'train_batch_size_per_learner')} steps",
+            flush=True,
+        )
+    record["num_timesteps"] = int(steps)
+    atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
     save_policy(
         run,
         vessel,
@@ -773,48 +797,9 @@ def _lifetime_steps(algo: Any) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=program("train_rllib"),
-        description=description(__doc__),
-        epilog="Needs the rllib extra. The policy is exported as JSON + safetensors, which load without running "
-        "code; RLlib's checkpoints hold pickles, so --resume needs --trust-pickle.",
-    )
-    add_env_argument(parser)
-    parser.add_argument("--seed", type=int_at_least(0), default=0)
-    parser.add_argument(
-        "--multiagent",
-        action="store_true",
-        help=f"train one shared decentralised policy (every satellite its own agent, local observations); "
-        f"hyperparameters from agents/hyperparams/{ALGO}_multiagent.yml unless --hyperparams is given",
-    )
-    parser.add_argument("--out", default="runs", help=f"parent of the run directory <out>/<env>/{ALGO}_seed<seed>")
-    parser.add_argument("--timesteps", type=int_at_least(1), help="override n_timesteps (total env steps)")
-    parser.add_argument(
-        "--num-env-runners", type=int_at_least(0), default=0, help="env runner processes (0: sample in the driver)"
-    )
-    parser.add_argument("--envs-per-runner", type=int_at_least(1), help="override num_envs_per_env_runner")
-    parser.add_argument(
-        "--address", help="join the Ray cluster at HOST:PORT (or 'auto'); default: start a local Ray instance"
-    )
-    parser.add_argument("--num-cpus", type=int_at_least(1), help="CPUs of the local Ray instance (default: all)")
-    parser.add_argument(
-        "--hyperparams", help=f"YAML file instead of agents/hyperparams/{ALGO}.yml, or a run's config.yml"
-    )
-    parser.add_argument("--resume", help="RLlib checkpoint (<run>/checkpoints/iter_<n>) or run directory (its latest)")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow --resume (RLlib checkpoints hold pickles, which can run code)",
-    )
-    parser.add_argument("--force", action="store_true", help="replace an earlier run with the same --out, env and seed")
-    parser.add_argument("--eval-freq", type=int_at_least(1), default=50_000, help="env steps between evaluations")
-    parser.add_argument(
-        "--eval-episodes", type=int_at_least(1), default=32, help="evaluation episodes (seeds 1 000 000 up)"
-    )
-    parser.add_argument(
-        "--checkpoint-freq", type=int_at_least(1), default=250_000, help="env steps between checkpoints"
-    )
-    return parser
+    """The command line of ``train_rllib`` (defined in :mod:`agents.cli`, which the console script parses
+    with before this module's slow imports)."""
+    return cli.build_parser("train_rllib")
 
 
 def main(argv: list[str] | None = None) -> Path:

@@ -647,6 +647,14 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
             lambda: make_controller(
                 str(shipped_models("TetherSpinningTriangle-v0")["ppo"]), gym.make_vec(ENV, num_envs=1)
             ),
+            "trained on TetherSpinningTriangle-v0, not TetherTetrahedron-v0: .*--allow-other-id",
+        ),
+        (
+            lambda: make_controller(
+                str(shipped_models("TetherSpinningTriangle-v0")["ppo"]),
+                gym.make_vec(ENV, num_envs=1),
+                allow_other_id=True,
+            ),
             "takes observations of shape .21,., but TetherTetrahedron-v0 gives .30,.",
         ),
     ]

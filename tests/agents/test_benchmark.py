@@ -184,10 +184,10 @@ def _without_mpc(monkeypatch: pytest.MonkeyPatch) -> None:
     """Make ``mpc`` unknown, as it is until the reference controller lands (and stays so for
     these tests after it has: they check how a missing controller is reported)."""
 
-    def make(spec: str, env: Any, trust_pickle: bool = False) -> Any:
+    def make(spec: str, env: Any, trust_pickle: bool = False, allow_other_id: bool = False) -> Any:
         if spec == "mpc":
             raise ValueError("unknown controller 'mpc' (test: as if it did not exist)")
-        return make_controller(spec, env, trust_pickle=trust_pickle)
+        return make_controller(spec, env, trust_pickle=trust_pickle, allow_other_id=allow_other_id)
 
     monkeypatch.setattr(agents.benchmark, "make_controller", make)
 

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import subprocess
 import sys
 import types
+from pathlib import Path
 
 import pytest
 
 from tether_gym._optional import MissingExtraError, available, install_line, needs_extra, require
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_require_returns_an_installed_module() -> None:
@@ -80,3 +84,44 @@ def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.M
         with needs_extra("train", "training"):
             import tether_gym.no_such_module  # noqa: F401
     assert not isinstance(caught.value, MissingExtraError)
+
+
+@pytest.mark.parametrize(
+    ("blocked", "code", "expected"),
+    [
+        ("stable_baselines3", "import agents.train", ["stable_baselines3", 'pip install "tether-gym[train]"']),
+        ("torch", "import agents.policies", ["torch", 'pip install "tether-gym[train]"']),
+        ("yaml", "import agents.settings", ["yaml", "pyyaml", 'pip install "tether-gym[train]"']),
+        ("scipy", "import agents.baselines", ["scipy", "LQR", 'pip install "tether-gym[train]"']),
+        (
+            "matplotlib",
+            "import agents.files, tempfile; agents.files.prepare_table_outputs(tempfile.mkdtemp(), [], [], True, "
+            "False, 'x')",
+            ["matplotlib", "--no-plots", 'pip install "tether-gym[plots]"'],
+        ),
+    ],
+)
+def test_the_agents_name_the_extra_of_a_missing_module(blocked: str, code: str, expected: list[str]) -> None:
+    """Each optional module made unimportable (None in sys.modules) before anything is imported."""
+    probe = (
+        f"import sys\nsys.modules[{blocked!r}] = None\n"
+        "from tether_gym._optional import MissingExtraError\n"
+        f"try:\n    {code}\nexcept MissingExtraError as error:\n    print(error)\nelse:\n    print('imported')\n"
+    )
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert result.returncode == 0, result.stderr[-2000:]
+    for text in expected:
+        assert text in result.stdout, (text, result.stdout)
+
+
+def test_a_console_script_reports_a_missing_extra_without_a_traceback() -> None:
+    probe = (
+        "import sys\nsys.modules['stable_baselines3'] = None\n"
+        "sys.argv = ['tether-gym-train', '--timesteps', '64']\n"
+        "from agents import commands\ncommands.train()\n"
+    )
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    assert result.stderr.startswith("tether-gym-train: error: stable_baselines3 is not installed")
+    assert 'pip install "tether-gym[train]"' in result.stderr
