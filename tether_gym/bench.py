@@ -52,7 +52,7 @@ def single_env_steps_per_second(env_id: str, steps: int, policy: str, seed: int 
 def vector_env_steps_per_second(env_id: str, num_envs: int, steps: int, sync: bool = False, **kwargs: Any) -> float:
     """Env steps/s (sub-env steps summed) of ``gym.make_vec`` with random actions."""
     # Same-step autoreset, the mode SB3 trains in and the one the recorded figures were taken in.
-    autoreset = {"autoreset_mode": AutoresetMode.SAME_STEP}
+    autoreset: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP}
     if sync:
         envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync", vector_kwargs=autoreset, **kwargs)
     else:
