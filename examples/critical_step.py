@@ -210,7 +210,7 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: Path, cases: int) -> N
     left.set_ylabel("estimated critical step (s)")
     left.legend(fontsize=7.5, loc="lower right", markerscale=2.5)
     left.grid(alpha=0.3, which="both")
-    left.set_title(f"{len(true)} random configurations ({cases} per preset, 5 presets)", fontsize=10)
+    left.set_title(f"{len(true)} random configurations ({cases} per preset, {len(results)} presets)", fontsize=10)
 
     names = list(METHODS)
     ratios = [merged[name] / true for name in names]

@@ -54,7 +54,8 @@ def test_the_reference_pages_name_only_modules_that_exist() -> None:
     sys.path.insert(0, str(ROOT))
     targets = []
     for page in sorted((ROOT / "docs" / "api").glob("*.md")):
-        targets += [line[4:].strip() for line in page.read_text(encoding="utf-8").splitlines() if line.startswith("::: ")]
+        lines = page.read_text(encoding="utf-8").splitlines()
+        targets += [line[4:].strip() for line in lines if line.startswith("::: ")]
     assert len(targets) > 30
     for target in targets:
         module_name, _, attribute = target.rpartition(".")
