@@ -135,3 +135,45 @@ def test_the_comparison_tables_are_the_comparisons_output() -> None:
             f"the table of {env_id} in docs/agents.md is out of date: run bash scripts/figures.sh --only "
             f"compare_{env_id}"
         )
+
+
+def test_the_benchmark_entry_redraws_the_plots_from_a_benchmark_json_and_copies_finished_ones(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A small real benchmark (one id, two baselines, 4 episodes, about 5 s) without plots: the
+    entry draws both plots from its benchmark.json; with the benchmark's own plots there, it
+    copies them; with neither, it says what the directory lacks."""
+    import argparse
+
+    from PIL import Image
+
+    from agents.benchmark import main as benchmark_main
+
+    figures = load_figures()
+    run = tmp_path / "benchmark"
+    benchmark_main(
+        ["--envs", "TetherTriangle-v0", "--controllers", "lqr", "velocity_feedback", "--episodes", "4"]
+        + ["--reference", "lqr", "--bootstrap-reps", "200", "--no-plots", "--out", str(run)]
+    )
+    img = tmp_path / "img"
+    img.mkdir()
+    monkeypatch.setattr(figures, "IMG", img)
+    figures.make_benchmark(argparse.Namespace(benchmark_dir=str(run)))
+    for name in ("benchmark_scores.png", "benchmark_paired.png"):
+        with Image.open(img / name) as picture:
+            assert picture.width > 100 and picture.height > 100
+    (run / "normalised_scores.png").write_bytes(b"the benchmark's own plot")
+    (run / "paired_differences.png").write_bytes(b"the benchmark's own paired plot")
+    figures.make_benchmark(argparse.Namespace(benchmark_dir=str(run)))
+    assert (img / "benchmark_scores.png").read_bytes() == b"the benchmark's own plot"
+    assert (img / "benchmark_paired.png").read_bytes() == b"the benchmark's own paired plot"
+    with pytest.raises(SystemExit, match="neither the benchmark's plots nor its benchmark.json"):
+        figures.make_benchmark(argparse.Namespace(benchmark_dir=str(tmp_path / "img")))
+
+
+def test_an_env_page_without_its_animation_fails_the_build_with_the_fix(monkeypatch: pytest.MonkeyPatch) -> None:
+    hook = load_hook()
+    figures = hook.figures_script()
+    monkeypatch.setattr(figures, "env_animation", lambda env_id: f"envs/{env_id}-not-drawn.gif")
+    with pytest.raises(hook.DocsBuildError, match="scripts/figures.sh --only env_animations"):
+        hook.env_page(next(iter(ENV_IDS)))
