@@ -1,0 +1,208 @@
+"""Scoring a policy against reference scores (``agents.scoring``): the converter from a
+benchmark.json, the statistics of :func:`score_policy` against the benchmark's own numbers, and
+its errors.
+
+The tests run on a small benchmark of their own (one id, 8 episodes of 20 steps, with mpc), so
+that they take seconds; tests/agents/test_reference_scores.py checks the shipped file.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from agents.baselines import BASELINES
+from agents.benchmark import benchmark
+from agents.compare import HELD_OUT_SEED
+from agents.files import OutputExistsError
+from agents.policies import TrainedPolicy, shipped_models
+from agents.scoring import (
+    FORMAT,
+    ReferenceDataError,
+    load_reference,
+    main,
+    reference_from_benchmark,
+    score_policy,
+    score_returns,
+    write_reference,
+)
+
+ENV_ID = "TetherTetrahedron-v0"
+#: Enough episodes that the bootstrap's percentiles depend on its seed (4 give too few distinct resamples).
+EPISODES = 8
+SMALL_CONTROLLERS = ["passive", "lqr", "local_tension_aware", "mpc", "ars"]
+
+
+@pytest.fixture(scope="module")
+def small_benchmark(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A benchmark.json of one id, 8 held-out episodes of 20 steps, with mpc (the score's 100)."""
+    out = tmp_path_factory.mktemp("benchmark")
+    benchmark(
+        env_ids=[ENV_ID],
+        controllers=SMALL_CONTROLLERS,
+        episodes=EPISODES,
+        env_kwargs={"max_episode_steps": 20},
+        bootstrap_reps=100,
+        plots=False,
+        out=out,
+    )
+    return out / "benchmark.json"
+
+
+@pytest.fixture(scope="module")
+def small_reference(small_benchmark: Path) -> dict[str, Any]:
+    return reference_from_benchmark(json.loads(small_benchmark.read_text()), "abc1234", "2026-01-01T00:00:00Z", "test")
+
+
+def _benchmark_entry(path: Path, name: str) -> dict[str, Any]:
+    return json.loads(path.read_text())["per_id"][ENV_ID]["controllers"][name]
+
+
+@pytest.mark.parametrize("name", SMALL_CONTROLLERS)
+def test_scoring_a_benchmark_controller_reproduces_its_numbers(
+    name: str, small_benchmark: Path, small_reference: dict[str, Any]
+) -> None:
+    """A fresh rollout of each controller through score_policy gives the benchmark's numbers
+    exactly (the rollouts are deterministic, the statistics are the benchmark's)."""
+    expected = _benchmark_entry(small_benchmark, name)
+    score = score_policy(name, ENV_ID, reference=small_reference)
+    assert score.returns.tolist() == expected["returns"]
+    assert score.mean_return == expected["mean_return"]
+    assert score.return_ci95 == expected["return_ci95"]
+    assert score.failures == expected["failures"]
+    assert score.normalised_score == expected["normalised_score"]["mean"]
+    assert (score.normalised_score_low, score.normalised_score_high) == (
+        expected["normalised_score"]["low"],
+        expected["normalised_score"]["high"],
+    )
+    best = small_reference["per_id"][ENV_ID]["best_baseline"]
+    if name == best:
+        assert expected["paired_vs_best"] is None
+    else:
+        assert dataclasses.asdict(score.paired_vs_best) == expected["paired_vs_best"]
+    # The definitions, spelled out: paired mean and score of the means from the reference's returns.
+    returns = {c: np.array(e["returns"]) for c, e in small_reference["per_id"][ENV_ID]["controllers"].items()}
+    assert score.paired_vs_best.mean == pytest.approx(np.mean(returns[name] - returns[best]), abs=1e-12)
+    gap = returns["mpc"].mean() - returns["passive"].mean()
+    assert score.normalised_score == pytest.approx(100 * (returns[name].mean() - returns["passive"].mean()) / gap)
+
+
+def test_the_best_baseline_against_itself_and_the_anchors(small_reference: dict[str, Any]) -> None:
+    best = small_reference["per_id"][ENV_ID]["best_baseline"]
+    assert best in BASELINES
+    paired = score_policy(best, ENV_ID, reference=small_reference).paired_vs_best
+    assert (paired.mean, paired.low, paired.high, paired.wins, paired.episodes) == (0.0, 0.0, 0.0, 0, EPISODES)
+    mpc = score_policy("mpc", ENV_ID, reference=small_reference)
+    # 100 up to rounding: the mean of per-episode scores, and each resample's ratio of equal means.
+    assert (mpc.normalised_score, mpc.normalised_score_low, mpc.normalised_score_high) == pytest.approx(
+        (100.0, 100.0, 100.0), abs=1e-12
+    )
+
+
+def test_a_zero_action_function_scores_as_passive(small_reference: dict[str, Any]) -> None:
+    """A function policy of zero thrust is passive: score 0 with the interval [0, 0], and worse
+    than the best baseline on every seed."""
+
+    def do_nothing(observation: np.ndarray) -> np.ndarray:
+        assert observation.shape == (EPISODES, 30)  # 4 satellites x 6, 6 cables
+        return np.zeros((observation.shape[0], 12))
+
+    score = score_policy(do_nothing, ENV_ID, reference=small_reference)
+    assert score.name == "do_nothing"
+    assert score.returns.tolist() == small_reference["per_id"][ENV_ID]["controllers"]["passive"]["returns"]
+    assert (score.normalised_score, score.normalised_score_low, score.normalised_score_high) == (0.0, 0.0, 0.0)
+    assert score.paired_vs_best.mean < 0 and score.paired_vs_best.wins == 0 and not score.beats_best_baseline
+    assert "normalised score: 0.0 [0.0, 0.0]" in score.summary()
+
+
+def test_objects_with_predict_score_as_their_names(small_reference: dict[str, Any]) -> None:
+    """A TrainedPolicy (and so an SB3-style predict) scores as the shipped model of that name."""
+    policy = TrainedPolicy(shipped_models(ENV_ID)["ars"], name="my ars")
+    score = score_policy(policy, ENV_ID, reference=small_reference)
+    assert score.name == "my ars"
+    assert score.returns.tolist() == small_reference["per_id"][ENV_ID]["controllers"]["ars"]["returns"]
+
+
+def test_a_subset_of_the_seeds_gives_the_same_episodes(small_reference: dict[str, Any]) -> None:
+    """Episode returns do not depend on which other seeds run beside them, so a subset is
+    paired with the reference's returns of the same seeds."""
+    seeds = [HELD_OUT_SEED + 3, HELD_OUT_SEED + 1]
+    score = score_policy("lqr", ENV_ID, seeds=seeds, reference=small_reference)
+    full = small_reference["per_id"][ENV_ID]["controllers"]["lqr"]["returns"]
+    assert score.seeds == tuple(seeds)
+    assert score.returns.tolist() == [full[3], full[1]]
+    first = score_policy("lqr", ENV_ID, episodes=2, reference=small_reference)
+    assert first.seeds == (HELD_OUT_SEED, HELD_OUT_SEED + 1) and first.returns.tolist() == full[:2]
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        ({"episodes": EPISODES + 1}, "from 2 (for an interval) to 8"),
+        ({"episodes": 1}, "from 2 (for an interval) to 8"),
+        ({"seeds": [HELD_OUT_SEED, 5]}, "hold no returns for seeds [5]"),
+        ({"seeds": [HELD_OUT_SEED, HELD_OUT_SEED]}, "at least 2 distinct"),
+        ({"episodes": 2, "seeds": [HELD_OUT_SEED, HELD_OUT_SEED + 1]}, "not both"),
+    ],
+)
+def test_seeds_the_reference_does_not_hold_are_refused(
+    arguments: dict[str, Any], message: str, small_reference: dict[str, Any]
+) -> None:
+    def never(observation: np.ndarray) -> np.ndarray:
+        raise AssertionError("the request is refused before any rollout")
+
+    with pytest.raises(ReferenceDataError) as error:
+        score_policy(never, ENV_ID, reference=small_reference, **arguments)
+    assert message in str(error.value)
+
+
+def test_bad_policies_and_ids_are_refused(small_reference: dict[str, Any]) -> None:
+    with pytest.raises(ReferenceDataError, match="hold no id 'TetherChain-v0'; they hold TetherTetrahedron-v0"):
+        score_policy("lqr", "TetherChain-v0", reference=small_reference)
+    with pytest.raises(ValueError, match=r"must return \(8, 12\)"):
+        score_policy(lambda observation: np.zeros(12), ENV_ID, reference=small_reference)
+    with pytest.raises(TypeError, match="policy must be a function"):
+        score_policy(42, ENV_ID, reference=small_reference)
+    with pytest.raises(ValueError, match="returns must be 8 finite numbers"):
+        score_returns([1.0, 2.0], ENV_ID, [HELD_OUT_SEED + e for e in range(EPISODES)], reference=small_reference)
+
+
+def test_the_converter_refuses_numbers_its_returns_do_not_give(small_benchmark: Path) -> None:
+    results = json.loads(small_benchmark.read_text())
+    tampered = copy.deepcopy(results)
+    tampered["per_id"][ENV_ID]["controllers"]["lqr"]["returns"][0] += 1e-9
+    with pytest.raises(ReferenceDataError, match="lqr: the statistics of its returns"):
+        reference_from_benchmark(tampered, "abc1234", "2026-01-01T00:00:00Z")
+    wrong_best = copy.deepcopy(results)
+    wrong_best["per_id"][ENV_ID]["best_baseline"] = "passive"
+    with pytest.raises(ReferenceDataError, match="the best baseline is"):
+        reference_from_benchmark(wrong_best, "abc1234", "2026-01-01T00:00:00Z")
+    with pytest.raises(ReferenceDataError, match="commit must be a git commit hash"):
+        reference_from_benchmark(results, "HEAD", "2026-01-01T00:00:00Z")
+    del results["settings"]["seeds"]
+    with pytest.raises(ReferenceDataError, match=r"lacks \['seeds'\]"):
+        reference_from_benchmark(results, "abc1234", "2026-01-01T00:00:00Z")
+
+
+def test_the_command_writes_a_file_that_loads(small_benchmark: Path, tmp_path: Path) -> None:
+    out = tmp_path / "reference.json"
+    written = main([str(small_benchmark), "--commit", "abc1234", "--out", str(out), "--machine", "test machine"])
+    loaded = load_reference(out)
+    assert loaded == written
+    assert (loaded["format"], loaded["commit"], loaded["machine"]) == (FORMAT, "abc1234", "test machine")
+    assert loaded["command"].startswith("agents.benchmark.benchmark(") and loaded["date"].endswith("Z")
+    assert loaded["env_kwargs"] == {"max_episode_steps": 20}
+    with pytest.raises(OutputExistsError, match="pass --force"):
+        write_reference(small_benchmark, "abc1234", out)
+    write_reference(small_benchmark, "abc1234", out, force=True)
+    out.write_text(json.dumps({"format": "something else"}))
+    with pytest.raises(ReferenceDataError, match="is not a 'tether-gym reference scores' file"):
+        load_reference(out)
+    with pytest.raises(FileNotFoundError, match="python -m agents.scoring BENCHMARK_JSON"):
+        load_reference(tmp_path / "absent.json")
