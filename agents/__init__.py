@@ -1,8 +1,11 @@
 """Controllers for the tether-gym damping task: scripted baselines, RL training and comparison.
 
-The package is ``agents`` in a checkout (``python -m agents.train``) and ``tether_gym_agents``
-when installed from a wheel (``python -m tether_gym_agents.train``, or the console script
-``tether-gym-train``); see :mod:`agents.commands`. Its modules import each other relatively.
+Installed (the ``train`` extra: ``pip install "tether-gym[train]"``), the package is
+``tether_gym_agents`` (``from tether_gym_agents.baselines import make_baseline``) and its commands
+are console scripts (``tether-gym-train``, ``tether-gym-compare``, ``tether-gym-benchmark``, ...,
+or ``python -m tether_gym_agents.train``). In a checkout it is also importable as ``agents``
+(``python -m agents.train``), the name the module references below use; see
+:mod:`agents.commands`. Its modules import each other relatively.
 
 * :mod:`agents.baselines`: passive, velocity feedback, LQR and a tension-aware energy law, each
   a policy with Stable-Baselines3's ``predict`` interface.

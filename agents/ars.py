@@ -33,7 +33,8 @@ never the benchmark's held-out seeds) with ``best/evaluations.json``, and the fi
 policy is stored in the safe format (:mod:`agents.safe_format`) as the linear actor of SB3's
 ``ActorCriticPolicy`` (``net_arch: {pi: [], vf: []}``) with ``algo: ars``, so ``agents.compare``,
 ``agents.benchmark`` and ``agents.ship`` load it like any trained model. Settings per id are in
-``agents/hyperparams/ars.yml``.
+the package's ``hyperparams/ars.yml`` (``agents/hyperparams`` in a checkout). Console script:
+``tether-gym-train-ars``.
 """
 
 from __future__ import annotations
@@ -129,7 +130,7 @@ class ARSSettings:
 
 
 def load_ars_settings(env_id: str | None, path: str | Path | None = None, **overrides: Any) -> ARSSettings:
-    """The ARS settings of ``env_id``: its entry of ``agents/hyperparams/ars.yml`` (or of ``path``,
+    """The ARS settings of ``env_id``: its entry of the package's ``hyperparams/ars.yml`` (or of ``path``,
     which may also be a run's ``config.yml``), else the file's ``default`` entry, with keyword
     ``overrides`` on top."""
     file = Path(path) if path is not None else ARS_SETTINGS_FILE

@@ -1,7 +1,7 @@
 """Compare controllers side by side: ``python -m agents.compare`` (the project's main job).
 
 Every controller (by default the four scripted baselines and every model shipped in
-``agents/models/<env id>/``) runs the same held-out episodes: episode e starts from the reset
+the package's ``models/<env id>/``) runs the same held-out episodes: episode e starts from the reset
 seeded ``seed + e``. The command prints a table, and writes to ``--out``:
 
 * ``comparison.md`` and ``comparison.csv``: the table (see :data:`agents.evaluate.METRICS`);

@@ -26,7 +26,7 @@ dynamics. At every control step, for each environment of the batch it controls:
 
 It is **privileged**: it reads the environment's true state and model, not the observation. It
 is the "best achievable" anchor of the benchmark, not a deployable controller. Its settings are
-tuned per id in ``agents/hyperparams/mpc.yml``. ``seconds_per_step`` reports its compute per
+tuned per id in the package's ``hyperparams/mpc.yml``. ``seconds_per_step`` reports its compute per
 environment and control step.
 """
 
@@ -116,7 +116,7 @@ class MPCSettings:
 
 
 def load_mpc_settings(env_id: str | None, path: str | Path | None = None, **overrides: Any) -> MPCSettings:
-    """The ``mpc`` settings of ``env_id``: its entry of ``agents/hyperparams/mpc.yml`` (or of
+    """The ``mpc`` settings of ``env_id``: its entry of the package's ``hyperparams/mpc.yml`` (or of
     ``path``), else the file's ``default`` entry, with keyword ``overrides`` on top."""
     file = Path(path) if path is not None else MPC_SETTINGS_FILE
     return load_settings(MPCSettings, file, env_id, "mpc", overrides)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from .baselines import BASELINES, make_baseline
+from .commands import program
 from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted
 from .safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
 
@@ -133,7 +134,8 @@ class TrainedPolicy:
             self.path = files[0]
         elif path.exists():
             raise FileNotFoundError(
-                f"{directory} holds no trained policy: pass a directory written by agents.train or agents.convert "
+                f"{directory} holds no trained policy: pass a directory written by {program('train')} or "
+                f"{program('convert')} "
                 f"(it has {METADATA_FILE})"
             )
         else:

@@ -44,6 +44,7 @@ import numpy as np
 
 from tether_gym._optional import needs_extra, require
 
+from .commands import program
 from .files import atomic_write_bytes, atomic_write_text
 
 with needs_extra("train", "the policy files"):
@@ -907,7 +908,7 @@ def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer:
     if not metadata["training_state"]:
         raise PolicyFormatError(
             f"{directory} holds a policy for inference only (no optimizer state): resume from a checkpoint "
-            f"directory that agents.train wrote (checkpoints/<algo>_<steps>_steps, best/ or the run directory)"
+            f"directory that {program('train')} wrote (checkpoints/<algo>_<steps>_steps, best/ or the run directory)"
         )
     ours = encode_policy_kwargs(policy_constructor_kwargs(model), model.policy_class)
     differing = sorted(

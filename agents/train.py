@@ -1,6 +1,8 @@
 """Train an SB3 agent on a tether-gym id: ``python -m agents.train --algo ppo --env TetherTetrahedron-v0``.
 
-Hyperparameters come from ``agents/hyperparams/<algo>.yml``, keyed by env id (rl-zoo style, plain
+Console script: ``tether-gym-train`` (``python -m tether_gym_agents.train`` when installed).
+Hyperparameters come from the package's ``hyperparams/<algo>.yml`` (``agents/hyperparams`` in a
+checkout, ``tether_gym_agents/hyperparams`` installed), keyed by env id (rl-zoo style, plain
 YAML, nothing evaluated). Every entry is checked before training starts: an unknown key, a missing
 ``n_timesteps`` or a string where a number belongs is an error that names the key. Training runs
 on the native vector env through the SB3 adapter, with ``VecNormalize`` when configured and
@@ -147,7 +149,7 @@ RUN_CONFIG_KEYS = frozenset({"algo", "env_id", "hyperparams"})
 
 def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
     """The checked hyperparameters of ``algo`` for ``env_id``: the id's entry of the YAML file, or
-    its ``default`` entry. ``path`` overrides ``agents/hyperparams/<algo>.yml``; it may also be a
+    its ``default`` entry. ``path`` overrides the package's ``hyperparams/<algo>.yml``; it may also be a
     run's ``config.yml`` (as every run directory and shipped model holds), whose recorded
     hyperparameters are then used as they are.
 
@@ -196,7 +198,7 @@ def _run_config_hyperparameters(
     algo: str, env_id: str, file: Path, config: dict[str, Any]
 ) -> tuple[dict[str, Any], str]:
     """The hyperparameters recorded in a run's (or a shipped model's) ``config.yml``: training with
-    them reproduces that run whatever ``agents/hyperparams`` says today."""
+    them reproduces that run whatever the package's ``hyperparams`` files say today."""
     for key, wanted in (("algo", algo), ("env_id", env_id)):
         if config[key] != wanted:
             option = "--algo" if key == "algo" else "--env"
@@ -409,7 +411,7 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
         elif key in parameters:
             checked[key] = _check_algorithm_key(algo, key, value, parameters, where)
         else:
-            raise _unknown_key(key, accepted, where, f"{algo} (with agents.train)")
+            raise _unknown_key(key, accepted, where, f"{algo} (with {program('train')})")
         _check_range(key, checked[key], where)
     return checked
 
@@ -894,7 +896,8 @@ def _resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: st
         if not metadata["training_state"]:
             raise PolicyFormatError(
                 f"--resume {path} holds a policy for inference only (no optimizer state): resume from a checkpoint "
-                f"that agents.train wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run directory)"
+                f"that {program('train')} wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run "
+                "directory)"
             )
         return "safe", path, {path}
     if is_pickle_model(path):

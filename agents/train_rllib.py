@@ -8,7 +8,8 @@ node, ``ray start --address HEAD:6379`` on the others; docs/rllib.md); without i
 instance is started, and stopped at the end. It needs the ``rllib`` extra
 (``pip install 'tether-gym[rllib]'``).
 
-Hyperparameters come from ``agents/hyperparams/rllib_ppo.yml``, keyed by env id as the SB3 files
+Console script: ``tether-gym-train-rllib``. Hyperparameters come from the package's
+``hyperparams/rllib_ppo.yml`` (``agents/hyperparams`` in a checkout), keyed by env id as the SB3 files
 are, with RLlib's names; every entry is checked before Ray starts. A run directory
 ``<out>/<env>/rllib_ppo_seed<seed>/`` receives:
 
@@ -28,7 +29,7 @@ are, with RLlib's names; every entry is checked before Ray starts. A run directo
 ``--multiagent`` trains one shared decentralised policy instead (issue 15): every satellite with a
 thruster is an RLlib agent of :func:`tether_gym.multiagent.parallel_env` (through Ray's
 ``ParallelPettingZooEnv``), and all agents map to one module, ``"shared"`` (parameter sharing).
-Its hyperparameters come from ``agents/hyperparams/rllib_ppo_multiagent.yml``, whose
+Its hyperparameters come from the package's ``hyperparams/rllib_ppo_multiagent.yml``, whose
 ``multiagent`` entry holds the options of :mod:`tether_gym.multiagent` as ``agents.train
 --multiagent`` takes them; the run directory is ``rllib_ppo_multiagent_seed<seed>/``, and the
 shared module is exported as the SB3 multi-agent runs are (``multiagent`` in ``policy.json``), so
@@ -138,8 +139,8 @@ def _ray() -> Any:
         import ray
     except ModuleNotFoundError as error:
         raise RayUnavailableError(
-            "agents.train_rllib needs Ray RLlib: pip install 'tether-gym[rllib]' (or bash scripts/test_rllib.sh, "
-            "which builds .venv-rllib with it)"
+            f'{program("train_rllib")} needs Ray RLlib, which is not installed: pip install "tether-gym[rllib]" '
+            "(in a checkout: bash scripts/test_rllib.sh, which builds .venv-rllib with it)"
         ) from error
     return ray
 
@@ -150,7 +151,7 @@ def _ray() -> Any:
 
 
 def load_rllib_hyperparameters(env_id: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The checked hyperparameters for ``env_id`` from ``agents/hyperparams/rllib_ppo.yml`` (or
+    """The checked hyperparameters for ``env_id`` from the package's ``hyperparams/rllib_ppo.yml`` (or
     ``path``: another file of that form, or an RLlib run's ``config.yml``). Raises
     :class:`~agents.train.HyperparameterError` naming the file, entry and key."""
     file = Path(path) if path is not None else HYPERPARAMS_DIR / f"{ALGO}.yml"
@@ -163,7 +164,7 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
     checked: dict[str, Any] = {}
     for key, value in entry.items():
         if key not in KEYS:
-            raise _unknown_key(str(key), list(KEYS), where, "agents.train_rllib")
+            raise _unknown_key(str(key), list(KEYS), where, program("train_rllib"))
         checked[key] = _check_entry_value(str(key), value, where)
     if "n_timesteps" not in checked:
         raise HyperparameterError(f"{where}: 'n_timesteps' is missing (the total env steps to train)")

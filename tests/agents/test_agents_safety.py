@@ -369,6 +369,14 @@ def test_converter_output_matches_sb3_load(sb3_run: Path, tmp_path: Path) -> Non
     TrainedPolicy(target)
 
 
+def test_converter_refuses_an_env_that_contradicts_the_run(sb3_run: Path, tmp_path: Path) -> None:
+    """The converted policy.json records the id the policy runs on: --env cannot relabel a run."""
+    other = next(env_id for env_id in ENV_IDS if env_id != ENV)
+    with pytest.warns(PickleTrustWarning), pytest.raises(ValueError, match=f"--env {other} differs .*{ENV}"):
+        convert(sb3_run, tmp_path / "relabelled", trust_pickle=True, env_id=other)
+    assert not (tmp_path / "relabelled" / "policy.json").exists()
+
+
 SHIPPED = [(env_id, name) for env_id in ENV_IDS for name in shipped_models(env_id)]
 
 
