@@ -46,6 +46,7 @@ CHROMIUM_FLAGS = (
 SCREENSHOTS = {
     "index.html": "index.png",
     "envs/TetherTetrahedron-v0.html": "env_TetherTetrahedron-v0.png",
+    "agents.html": "agents.png",
     "benchmark.html": "benchmark.png",
     "tutorial.html": "tutorial.png",
     "api/tether_gym.html": "api_tether_gym.png",
