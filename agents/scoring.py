@@ -52,6 +52,8 @@ from typing import Any
 
 import numpy as np
 
+from tether_gym.limits import is_whole_number
+
 from .benchmark import (
     SCORE_BOOTSTRAP_REPS,
     PairedDifference,
@@ -164,10 +166,12 @@ class Score:
                 f"({self.score_note})"
             )
         failures = "" if self.failures is None else f", {self.failures}/{self.episodes} failed"
+        first, last = self.seeds[0], self.seeds[-1]
+        span = f"seeds {first}..{last}" if self.seeds == tuple(range(first, last + 1)) else "chosen seeds"
         return "\n".join(
             [
                 f"{self.name} on {self.env_id}, {self.episodes} held-out episodes "
-                f"(seeds {self.seeds[0]}..{self.seeds[-1]}; reference scores of commit {self.reference_commit})",
+                f"({span}; reference scores of commit {self.reference_commit})",
                 f"  return: {self.mean_return:.1f} ± {self.return_ci95:.1f} (95 % t interval){failures}",
                 f"  vs best baseline {self.best_baseline}: {paired.mean:+.2f} [{paired.low:+.2f}, {paired.high:+.2f}] "
                 f"(paired, 95 % t interval), better on {paired.wins}/{paired.episodes} episodes",
@@ -191,6 +195,8 @@ def _held_out_seeds(entry: dict[str, Any], env_id: str, episodes: int | None, se
                 f"{env_id} hold {span}; got {episodes!r}"
             )
         return held[: int(count)]
+    if isinstance(seeds, (str, bytes)) or not all(is_whole_number(seed) for seed in seeds):
+        raise ReferenceDataError(f"seeds must be a list of integer seeds; got {seeds!r}")
     chosen = [int(seed) for seed in seeds]
     foreign = [seed for seed in chosen if seed not in held]
     if foreign:

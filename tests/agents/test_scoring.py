@@ -137,6 +137,7 @@ def test_a_subset_of_the_seeds_gives_the_same_episodes(small_reference: dict[str
     full = small_reference["per_id"][ENV_ID]["controllers"]["lqr"]["returns"]
     assert score.seeds == tuple(seeds)
     assert score.returns.tolist() == [full[3], full[1]]
+    assert "lqr on TetherTetrahedron-v0, 2 held-out episodes (chosen seeds;" in score.summary()
     first = score_policy("lqr", ENV_ID, episodes=2, reference=small_reference)
     assert first.seeds == (HELD_OUT_SEED, HELD_OUT_SEED + 1) and first.returns.tolist() == full[:2]
 
@@ -148,6 +149,7 @@ def test_a_subset_of_the_seeds_gives_the_same_episodes(small_reference: dict[str
         ({"episodes": 1}, "from 2 (for an interval) to 8"),
         ({"seeds": [HELD_OUT_SEED, 5]}, "hold no returns for seeds [5]"),
         ({"seeds": [HELD_OUT_SEED, HELD_OUT_SEED]}, "at least 2 distinct"),
+        ({"seeds": [HELD_OUT_SEED + 0.5, HELD_OUT_SEED + 1]}, "a list of integer seeds"),
         ({"episodes": 2, "seeds": [HELD_OUT_SEED, HELD_OUT_SEED + 1]}, "not both"),
     ],
 )
