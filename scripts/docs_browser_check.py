@@ -31,8 +31,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Chromium's flags for a quiet, isolated, headless run: no GPU, sandbox, QUIC, first-run UI,
-#: background traffic, component updates or sync. Playwright adds ``--headless`` and the
-#: ``--user-data-dir`` (a fresh temporary one) itself.
+#: background traffic, component updates or sync, and shared memory in /tmp rather than
+#: /dev/shm (a container's is often too small for a renderer). Playwright adds ``--headless``
+#: and the ``--user-data-dir`` (a fresh temporary one) itself.
 CHROMIUM_FLAGS = (
     "--no-sandbox",
     "--disable-gpu",
@@ -41,6 +42,7 @@ CHROMIUM_FLAGS = (
     "--disable-background-networking",
     "--disable-component-update",
     "--disable-sync",
+    "--disable-dev-shm-usage",
 )
 #: Pages screenshotted, relative to the site root (the env page is the default id's).
 SCREENSHOTS = {
