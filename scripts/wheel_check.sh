@@ -1,17 +1,20 @@
 #!/usr/bin/env bash
-# The installed package, checked as a user gets it: build the sdist and the wheel from it (as
-# `python -m build` does), install the wheel with the train extra into a clean venv outside the
-# checkout, and from a directory outside the checkout: every id through gym.make, the shipped
-# models and settings read from site-packages, every console script's --help, a short training
-# run and the comparison with a shipped model through the console scripts. Anything missing stops
-# it with a non-zero exit and the step it failed in.
-# Usage: bash scripts/wheel_check.sh  (PYTHON: an interpreter with `build`, default .venv/bin/python)
+# The installed package, checked as a user gets it, by the README's own lines: in a fresh copy of
+# the checkout (the files git knows) and with a new, empty HOME, it runs the README's "Install as a
+# package" block as written (a venv in ~, the CPU build of torch, the wheel built with
+# `python -m build` and installed with the train extra, tether-gym-compile, the comparison), then
+# every Python snippet of the README with that venv's interpreter from a directory outside the
+# checkout. Then, from there too: every id through gym.make, the shipped models and settings read
+# from site-packages, every console script's --help, a short training run and the comparison with
+# its model through the console scripts. Anything missing stops it with a non-zero exit and the
+# step it failed in.
+# Usage: bash scripts/wheel_check.sh  (PYTHON: an interpreter for the helper scripts, default .venv/bin/python)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 checkout=$PWD
-builder=${PYTHON:-$checkout/.venv/bin/python}
+helper=${PYTHON:-$checkout/.venv/bin/python}
 # Nothing of the checkout may reach the installed package's interpreter.
-unset PYTHONPATH PYTHONHOME
+unset PYTHONPATH PYTHONHOME VIRTUAL_ENV
 work=$(mktemp -d "${TMPDIR:-/tmp}/tether-gym-wheel-check.XXXXXX")
 trap 'rm -rf "$work"' EXIT
 started=$SECONDS
@@ -32,43 +35,61 @@ logged() {
     fi
 }
 
-step "checking the builder"
-if ! "$builder" -c "import build" 2>/dev/null; then
-    echo "wheel check: $builder cannot run 'python -m build': install the dev extra (bash scripts/install.sh)" \
-        "or set PYTHON to an interpreter that has it" >&2
-    exit 1
-fi
-# The same CPU build of torch as scripts/install.sh, read from it so that the two cannot drift.
-torch=$(sed -n 's/.*"\(torch==[0-9][0-9.]*\)".*/\1/p' scripts/install.sh)
-if [ "$(printf '%s\n' "$torch" | grep -c .)" != 1 ]; then
-    echo "wheel check: expected one \"torch==X.Y.Z\" in scripts/install.sh, found: '$torch'" >&2
-    exit 1
-fi
+step "reading the README's install lines and Python snippets"
+mkdir "$work/source" "$work/run" "$work/home" "$work/snippets"
+"$helper" - README.md "$work" <<'EOF_PY'
+import re, sys
+from pathlib import Path
+text = Path(sys.argv[1]).read_text(encoding="utf-8")
+work = Path(sys.argv[2])
+section = text.split("## Install as a package", 1)[1].split("\n## ", 1)[0]
+install = re.findall(r"^```bash\n(.*?)^```", section, re.MULTILINE | re.DOTALL)
+assert len(install) == 1, f"expected one bash block under 'Install as a package', found {len(install)}"
+(work / "install.sh").write_text(install[0], encoding="utf-8")
+# The README installs the same CPU build of torch as scripts/install.sh, so that the two cannot drift.
+pins = set(re.findall(r"torch==[0-9][0-9.]*[0-9]", Path("scripts/install.sh").read_text(encoding="utf-8")))
+assert len(pins) == 1 and pins <= set(re.findall(r"torch==[0-9][0-9.]*[0-9]", install[0])), (
+    f"the README's install lines must pin scripts/install.sh's torch {sorted(pins)}")
+snippets = re.findall(r"^```python\n(.*?)^```", text, re.MULTILINE | re.DOTALL)
+assert snippets, "the README has no Python snippet"
+for index, snippet in enumerate(snippets, start=1):
+    (work / "snippets" / f"snippet_{index}.py").write_text(snippet, encoding="utf-8")
+print(f"  {len(install[0].splitlines())} install lines, {len(snippets)} Python snippets")
+EOF_PY
 
-step "building the sdist and the wheel from it"
+step "running the README's install lines as written, in a fresh copy of the checkout with an empty HOME"
 # From a copy of the files git knows (ignored ones left out), so that nothing is written into the checkout.
-mkdir "$work/source" "$work/run"
 git ls-files -z --cached --others --exclude-standard \
     | tar --null --files-from=- --ignore-failed-read -cf - 2>/dev/null | tar -xf - -C "$work/source"
-logged "$builder" -m build --outdir "$work/dist" "$work/source"
-wheel=$(echo "$work"/dist/*.whl)
-"$builder" - "$wheel" <<'EOF'
+# The new HOME keeps the machine's own pip configuration (its package indexes) and, where Python
+# comes from pyenv, pyenv's root, which both default to places under the real HOME.
+if [ -d "$HOME/.config/pip" ]; then
+    mkdir -p "$work/home/.config" && cp -r "$HOME/.config/pip" "$work/home/.config/"
+fi
+if command -v pyenv >/dev/null 2>&1; then
+    export PYENV_ROOT=${PYENV_ROOT:-$(pyenv root)}
+fi
+(cd "$work/source" && logged env HOME="$work/home" bash -euo pipefail "$work/install.sh")
+venv=$(echo "$work"/home/*/bin)
+[ -x "$venv/python" ] || { echo "wheel check: the README's install lines made no venv under ~" >&2; false; }
+wheel=$(echo "$work"/source/dist/*.whl)
+"$helper" - "$wheel" <<'EOF_PY'
 import collections, sys, zipfile
 names = zipfile.ZipFile(sys.argv[1]).namelist()
-folders = collections.Counter(name.rsplit("/", 1)[0] if "/ppo/" not in name else "*/models/<id>/ppo" for name in names)
+folders = collections.Counter(name.rsplit("/", 1)[0] if "/models/" not in name else "*/models/<id>/<model>" for name in names)
 print(f"  {sys.argv[1].rsplit('/', 1)[1]}: {len(names)} files;",
       ", ".join(f"{folder} {count}" for folder, count in sorted(folders.items())))
-EOF
-
-step "installing it with [train] into a clean venv ($torch first, as scripts/install.sh)"
-python3 -m venv "$work/venv"
-venv=$work/venv/bin
-logged "$venv/python" -m pip install --upgrade pip
-# --no-compile: the venv is used once, and Python compiles what it imports.
-logged "$venv/python" -m pip install --no-compile "$torch"
-logged "$venv/python" -m pip install --no-compile "$wheel[train]"
+EOF_PY
+grep -qF "| passive |" "$work/source/compare/comparison.md" || { echo "wheel check: the README's comparison wrote no table" >&2; false; }
 
 cd "$work/run"
+step "running the README's Python snippets with the installed package, outside the checkout"
+for snippet in "$work"/snippets/snippet_*.py; do
+    begun=$SECONDS
+    logged env HOME="$work/home" "$venv/python" -I "$snippet"
+    echo "  $(basename "$snippet"): $((SECONDS - begun)) s"
+done
+
 step "using the installed packages: every id, the shipped models and settings, the console scripts"
 # -I: isolated mode, neither the environment nor the current directory adds anything to sys.path.
 "$venv/python" -I - "$checkout" <<'EOF'
