@@ -39,6 +39,11 @@ the package's ``hyperparams/ars.yml`` (``agents/hyperparams`` in a checkout). Co
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # --help and bad options answered before the slow imports below
+    from .cli import parse_before_imports
+
+    parse_before_imports("ars")
+
 import argparse
 import dataclasses
 import sys
@@ -299,6 +304,9 @@ def train_ars(
     s = settings if settings is not None else load_ars_settings(env_id)
     if s.iterations * s.seeds_per_direction > SEEDS_PER_RUN:
         raise ValueError(f"iterations x seeds_per_direction must be <= {SEEDS_PER_RUN:,} (the run's block of seeds)")
+    require("tensorboard", "train", "the training's TensorBoard logs")  # SB3's logger would only assert
+    if progress:
+        require("tqdm", "train", "the progress bar (or pass --no-progress)")
     run = _prepare_run_dir(out, env_id, "ars", seed, force)
     if force:
         _clear_earlier_run(run, "ars", set())

@@ -69,6 +69,11 @@ runs a rollout, and writes every file atomically.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # --help and bad options answered before the slow imports below
+    from .cli import parse_before_imports
+
+    parse_before_imports("benchmark")
+
 import argparse
 import csv
 import dataclasses

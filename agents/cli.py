@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -28,6 +29,7 @@ __all__ = [
     "add_env_argument",
     "build_parser",
     "int_at_least",
+    "parse_before_imports",
 ]
 
 #: First held-out seed of the comparison and the benchmark (10 000 up; training evaluates on
@@ -418,6 +420,13 @@ _PARSERS: dict[str, Callable[[], argparse.ArgumentParser]] = {
     "train_rllib": train_rllib_parser,
     "ars": ars_parser,
 }
+
+
+def parse_before_imports(command: str) -> None:
+    """Parse the command line (``sys.argv``) with ``command``'s parser and drop the result: argparse
+    exits for ``--help`` and for bad arguments. A command module run as ``__main__`` calls it
+    before its slow imports, so that ``python -m agents.<command> --help`` answers at once."""
+    build_parser(command).parse_args(sys.argv[1:])
 
 
 def build_parser(command: str) -> argparse.ArgumentParser:

@@ -92,7 +92,7 @@ def _run(command: str) -> None:
     _running_script = SCRIPTS[command]
     from .cli import build_parser
 
-    build_parser(command).parse_args(sys.argv[1:])
+    build_parser(command).parse_args(sys.argv[1:])  # as the module's __main__ does first too
     try:
         runpy.run_module(f"{__package__}.{command}", run_name="__main__", alter_sys=True)
     except MissingExtraError as error:  # the message names the extra to install: no traceback needed

@@ -22,6 +22,11 @@ callback use (0 and up, and 1 000 000 and up).
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # --help and bad options answered before the slow imports below
+    from .cli import parse_before_imports
+
+    parse_before_imports("compare")
+
 import argparse
 import csv
 import io

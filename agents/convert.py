@@ -19,6 +19,11 @@ continues training.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # --help and bad options answered before the slow imports below
+    from .cli import parse_before_imports
+
+    parse_before_imports("convert")
+
 import argparse
 import shutil
 import sys

@@ -144,6 +144,8 @@ class TrainedPolicy:
 
     def _adopt(self, name: str | None) -> None:
         self.name = name or self.algo
+        # The other ids this policy was warned about: once per id, not at every attach.
+        self._other_ids_warned: set[str | None] = set()
         self.observation_shape: tuple[int, ...] = tuple(self.policy.observation_space.shape)
         self.observation_size = int(np.prod(self.observation_shape))
         #: The baseline whose actions the policy corrects (agents.residual), or None.
@@ -209,30 +211,30 @@ class TrainedPolicy:
         ``allow_other_id`` (then warn). A policy that records no id (an old or hand-made file)
         and an env without one are let through with a warning: only shapes can be compared."""
         trained, running = self.env_id, env_id_of(env)
-        if trained is None or running is None:
-            missing = f"{self.path} records no env id" if trained is None else "the env has no registered id"
-            warnings.warn(
-                f"{missing}: cannot check that the policy runs on the id it was trained on; only its observation "
-                "shape is checked",
-                OtherIdWarning,
-                stacklevel=3,
-            )
+        if trained is not None and trained == running:
             return
-        if trained == running:
-            return
-        if not allow_other_id:
+        if trained is not None and running is not None and not allow_other_id:
             raise OtherIdError(
                 f"{self.path} was trained on {trained}, not {running}: pass a model trained on {running}, or opt in "
                 f"to run it on another id with --allow-other-id (allow_other_id=True in Python)",
                 trained,
                 running,
             )
-        warnings.warn(
-            f"{self.path} was trained on {trained} and runs on {running} (allow_other_id): its results there are "
-            "not those of a policy trained on that id",
-            OtherIdWarning,
-            stacklevel=3,
-        )
+        if running in self._other_ids_warned:
+            return  # said once for this id: not again at every attach
+        self._other_ids_warned.add(running)
+        if trained is None or running is None:
+            missing = f"{self.path} records no env id" if trained is None else "the env has no registered id"
+            message = (
+                f"{missing}: cannot check that the policy runs on the id it was trained on; only its observation "
+                "shape is checked"
+            )
+        else:
+            message = (
+                f"{self.path} was trained on {trained} and runs on {running} (allow_other_id): its results there are "
+                "not those of a policy trained on that id"
+            )
+        warnings.warn(message, OtherIdWarning, stacklevel=3)
 
     @property
     def saturation_fraction(self) -> float:

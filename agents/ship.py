@@ -18,6 +18,11 @@ other ids or algorithms are kept, so runs can be shipped id by id.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # --help and bad options answered before the slow imports below
+    from .cli import parse_before_imports
+
+    parse_before_imports("ship")
+
 import argparse
 import hashlib
 import json

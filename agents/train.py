@@ -37,6 +37,11 @@ evaluation episodes are always at difficulty 1.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # --help and bad options answered before the slow imports below
+    from .cli import parse_before_imports
+
+    parse_before_imports("train")
+
 import argparse
 import difflib
 import inspect
@@ -52,7 +57,7 @@ from typing import Any
 import numpy as np
 
 import tether_gym
-from tether_gym._optional import needs_extra
+from tether_gym._optional import needs_extra, require
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
@@ -963,6 +968,11 @@ def train(
     _positive_int("eval_episodes", eval_episodes)
     _positive_int("checkpoint_freq", checkpoint_freq)
     _positive_int("verbose", verbose, minimum=0)
+    # SB3 finds these missing only when training starts, and then names its own extra, not ours.
+    require("tensorboard", "train", "the training's TensorBoard logs")
+    if progress_bar:
+        for module in ("tqdm", "rich"):
+            require(module, "train", "the progress bar (or pass --no-progress)")
     hyperparams = load_hyperparameters(algo, env_id, hyperparams_file)
     hyperparams.update(overrides or {})
     if timesteps is not None:

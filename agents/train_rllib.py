@@ -45,6 +45,11 @@ statistics, so the exported policy's deterministic actions are the RLlib module'
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # --help and bad options answered before the slow imports below
+    from .cli import parse_before_imports
+
+    parse_before_imports("train_rllib")
+
 import argparse
 import socket
 import sys

@@ -94,6 +94,16 @@ def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.M
         ("yaml", "import agents.settings", ["yaml", "pyyaml", 'pip install "tether-gym[train]"']),
         ("scipy", "import agents.baselines", ["scipy", "LQR", 'pip install "tether-gym[train]"']),
         (
+            "tensorboard",
+            "import agents.train, tempfile; agents.train.train('ppo', out=tempfile.mkdtemp(), timesteps=64)",
+            ["tensorboard", "TensorBoard logs", 'pip install "tether-gym[train]"'],
+        ),
+        (
+            "rich",
+            "import agents.train, tempfile; agents.train.train('ppo', out=tempfile.mkdtemp(), timesteps=64)",
+            ["rich", "--no-progress", 'pip install "tether-gym[train]"'],
+        ),
+        (
             "matplotlib",
             "import agents.files, tempfile; agents.files.prepare_table_outputs(tempfile.mkdtemp(), [], [], True, "
             "False, 'x')",
