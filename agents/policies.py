@@ -4,6 +4,12 @@ Trained policies are read from the safe format of :mod:`agents.safe_format` (JSO
 safetensors weights, JSON normalisation statistics), which cannot run code on load. The
 pickle-based SB3 files (``model.zip`` + ``vecnormalize.pkl``) are loaded only with
 ``trust_pickle=True`` (see :mod:`agents.pickled`).
+
+A trained policy records the id it was trained on (``policy.json``'s ``env_id``), and runs only
+on envs of that id: ids of the same observation shape (the triangle and the spinning triangle)
+are different tasks. :meth:`TrainedPolicy.attach` refuses another id with :class:`OtherIdError`
+unless the user opts in (``allow_other_id=True``; ``--allow-other-id`` on the command line),
+and then warns (:class:`OtherIdWarning`).
 """
 
 from __future__ import annotations

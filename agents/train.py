@@ -9,12 +9,15 @@ on the native vector env through the SB3 adapter, with ``VecNormalize`` when con
 ``VecMonitor`` for episode statistics. A run directory ``<out>/<env>/<algo>_seed<seed>/`` receives,
 all of it in the safe policy format (:mod:`agents.safe_format`: JSON and safetensors, no pickle):
 
-* ``config.yml``: the resolved hyperparameters, env id, seed and command line;
+* ``config.yml``: the resolved hyperparameters, env id, seed and command line, and the steps
+  trained (``num_timesteps``). SB3 trains whole rollouts (PPO: ``n_steps`` x ``n_envs`` steps),
+  so ``n_timesteps`` is rounded up to a whole number of them, with a message, and recorded so;
 * ``tensorboard/``: TensorBoard logs (``tensorboard --logdir <run>/tensorboard``);
 * ``checkpoints/<algo>_<steps>_steps/``: the policy, its ``VecNormalize`` statistics and the
   optimizer state every ``--checkpoint-freq`` steps;
 * ``best/``: the best policy on the evaluation episodes (with its statistics and optimizer
-  state), and ``evaluations.json``: every evaluation's returns and paired difference from the
+  state; a run shorter than ``--eval-freq`` evaluates its final policy once, so that ``best/``
+  always holds one), and ``evaluations.json``: every evaluation's returns and paired difference from the
   best scripted baseline on the same seeds, and when training first beat it
   (:mod:`agents.selection`);
 * ``policy.json``, ``policy.safetensors``, ``normalization.json``, ``training.*`` and
@@ -949,7 +952,8 @@ def train(
 ) -> Path:
     """Train ``algo`` on ``env_id`` and return the run directory (see the module docstring).
 
-    ``timesteps`` and ``num_envs`` override the file's ``n_timesteps``/``n_envs``; ``overrides``
+    ``timesteps`` and ``num_envs`` override the file's ``n_timesteps``/``n_envs`` (the steps are
+    rounded up to whole rollouts, see :func:`rollout_steps`); ``overrides``
     replaces any other entries (and is checked like the file). ``eval_freq`` and
     ``checkpoint_freq`` count total env steps (over all envs). ``command`` is recorded in
     ``config.yml`` (the command line, when run as ``python -m agents.train``). ``force``
