@@ -3,8 +3,8 @@
 The tutorial (``docs/tutorial.md``) walks through this script step by step, and shows its
 output, which ``bash scripts/figures.sh`` writes there from a real run. Every number it prints
 comes from the simulation; nothing in it depends on the machine's speed, so a rerun prints the
-same lines. Run from the repository root (about 20 s, most of it loading the compiled kernels
-and torch)::
+same lines. Run it from the repository root (about 20 s, most of it loading the compiled kernels
+and torch), or from any directory with a Python that has the wheel installed::
 
     .venv/bin/python examples/getting_started.py
 
@@ -77,7 +77,7 @@ def env_step() -> None:
 
 
 def comparison_step() -> None:
-    """Step 3: the same controllers on 16 held-out episodes at once, as agents.compare does."""
+    """Step 3: the same controllers on 16 held-out episodes at once, as tether-gym-compare does."""
     seeds = range(10_000, 10_016)
     print(f"3. {len(seeds)} held-out episodes (seeds {seeds[0]}..{seeds[-1]}), on the native vector env")
     probe = gym.make_vec(tg.DEFAULT_ENV_ID, num_envs=1)

@@ -293,7 +293,7 @@ def env_page(env_id: str) -> str:
         ("Action Space", f"`{facts.action_space}`"),
         ("Observation Space", f"`{facts.observation_space}`"),
         ("Make", f'`gym.make("tether_gym:{env_id}")`'),
-        ("Make a vector env", f'`gym.make_vec("{env_id}", num_envs=N)`'),
+        ("Make a vector env", f'`gym.make_vec("tether_gym:{env_id}", num_envs=N)`'),
         ("Cluster", f"preset `{facts.preset}`: {cluster.num_nodes} satellites, {cluster.num_cables} cables"),
         ("Frame", frame_text(cluster)),
         ("Control interval", f"{interval} s"),
@@ -324,7 +324,7 @@ def env_page(env_id: str) -> str:
             + preset_summary
             + "\n"
             + table(("quantity", "value"), magnitudes)
-            + f'\n### The preset\'s parameters\n\n`gym.make("{env_id}", preset_kwargs={{...}})` overrides '
+            + f'\n### The preset\'s parameters\n\n`gym.make("tether_gym:{env_id}", preset_kwargs={{...}})` overrides '
             f"them (defaults from `tether_gym.presets.{facts.preset}`):\n\n"
             + table(("parameter", "default", "meaning"), [(f"`{n}`", f"`{d}`", m) for n, d, m in preset_rows])
             + "\n### The task (every id)\n"
