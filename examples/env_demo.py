@@ -55,6 +55,7 @@ import numpy as np  # noqa: E402
 from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
 import tether_gym  # noqa: E402  (registers the environment ids)
+from tether_gym.envs.rendering import BROKEN_COLOUR, SLACK_COLOUR, TAUT_COLOUR, THRUST_COLOUR  # noqa: E402
 
 DOCS_IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 ENV_ID = tether_gym.DEFAULT_ENV_ID
@@ -64,8 +65,8 @@ FEEDBACK_GAIN = 2.0
 #: GIF files larger than this are re-encoded with smaller frames.
 MAX_GIF_BYTES = 3_000_000
 
-#: Colours the renderer draws with (satellites, taut and slack cables, thrust), kept exact in the GIF.
-KEY_COLOURS = ("black", "tab:blue", "tab:orange", "tab:red")
+#: Colours the renderer draws with (satellites; taut, slack and broken cables; thrust), kept exact in the GIF.
+KEY_COLOURS = ("black", TAUT_COLOUR, SLACK_COLOUR, BROKEN_COLOUR, THRUST_COLOUR)
 
 #: A controller maps an observation to an action in [-1, 1].
 Controller = Callable[[np.ndarray], np.ndarray]
@@ -265,7 +266,7 @@ def render_episode(name: str, seed: int, steps: int) -> tuple[list[np.ndarray], 
 def render_frames(seed: int, steps: int, names: tuple[str, ...] = ("zero", "feedback")) -> list[Image.Image]:
     """Side-by-side frames of ``names`` run from the same initial state (reset and ``steps`` steps).
 
-    Drawing a 3-D frame takes about 0.1 s, so the episodes are rendered in parallel processes.
+    Each episode renders in a process of its own, so the controllers' episodes draw in parallel.
     """
     workers = min(len(names), os.cpu_count() or 1)
     if workers > 1:
