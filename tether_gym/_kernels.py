@@ -298,8 +298,21 @@ _cable_forces_undamped = _make_cable_forces(False)
 
 
 # ---------------------------------------------------------------------------------------------
-# The integrator's pieces, inlined into it.  ``nodes`` and ``cables`` are one cluster's node
-# and cable tables, ``cluster`` its row of the cluster table.
+# The integrator's pieces.  ``nodes`` and ``cables`` are one cluster's node and cable tables,
+# ``cluster`` its row of the cluster table.
+#
+# Inlined or called, chosen by measurement (first-use compilation and sub-steps/s, this 2-core
+# machine).  Pieces marked ``inline="always"`` are copied into their caller by numba: the
+# sub-step and what it runs on every sub-step, so that the two clusters of :func:`_advance_pair`
+# keep their chains in one loop body (calling :func:`_substep` instead cost 20-25 % of the
+# sub-steps/s).  The others are compiled once and called: numba copies an inlined function's IR
+# at every call site, at a cost that grows faster than its size, and the sub-step was inlined
+# twice into a pair inlined once more into the driver: compiling the integrator took 10-20 s.
+# Calling the kicks away from a fresh state or in a turning frame, the velocity synchronisation,
+# the per-interval start and end and the pair itself cut that to about 4 s (CPU time), at the
+# same sub-steps/s or slightly more.  The arithmetic is the same either way, so are the bits.
+
+
 @njit(inline="always", error_model="numpy")
 def _largest_tidal(cluster: np.ndarray) -> float:
     """``max |T_d|`` of a frame's tidal diagonal, 1/s^2: the frame's share of omega_max^2."""
@@ -366,7 +379,7 @@ def _step_size(
     return remaining / steps_left, False
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy")  # called, not inlined: see above
 def _kick_from_rest(nodes: np.ndarray, cluster: np.ndarray, h: float) -> None:
     """The first half step after a reset, ``v_{1/2} = v_0 + h/2 a_0`` (uniformly accelerated
     motion, paper section 2), with the frame's terms at the initial state."""
@@ -418,7 +431,7 @@ def _kick(nodes: np.ndarray, h_mid: float, blend: float) -> None:
             ) * inverse_lhs
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy")  # called, not inlined: see above
 def _kick_turning(nodes: np.ndarray, cluster: np.ndarray, h_mid: float, blend: float) -> None:
     """:func:`_kick` in a turning frame: with the frame's force ``M T u_n`` and the Coriolis force
     taken at the centred velocity (a 2x2 solve per satellite)."""
@@ -457,7 +470,7 @@ def _drift(nodes: np.ndarray, h: float, work: float, dissipated: float) -> tuple
     return work, dissipated
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy")  # called, not inlined: see above
 def _synchronise_velocity(nodes: np.ndarray, cluster: np.ndarray, h_last: float) -> None:
     """The velocity at the end of the interval, consistent with the force just applied:
     ``(M + h/2 C) v_n + h M Omega x v_n = M v_{n-1/2} + h/2 (p - f_int(u_n) + M T u_n)``."""
@@ -504,20 +517,23 @@ def _hold_cluster(cables: np.ndarray, cluster: np.ndarray, counters: np.ndarray)
         cables[c, PEAK_TENSION] = cables[c, TENSION]
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy")  # called, not inlined: see above
 def _begin_advance(settings: np.ndarray, nodes: np.ndarray, cables: np.ndarray, cluster: np.ndarray) -> tuple:
     """What stays fixed over one cluster's interval, ``(tidal_max, turning, viscous, h_damping)``,
     and the running values its sub-steps carry, ``(elapsed, count, h_lo, h_hi, work, dissipated,
     h_last)``; also starts each cable's ``PEAK_TENSION`` at its tension."""
     tidal_max = _largest_tidal(cluster)
     turning = cluster[FRAME_RATE] != 0.0 or tidal_max != 0.0
-    viscous = False
+    # np.bool_ and np.int64 rather than the literals False and 0: numba types a literal as a
+    # type of its own until the loop's values widen it, and a called function would be compiled
+    # once more for that first guess.
+    viscous = np.bool_(False)
     for c in range(cables.shape[0]):
         viscous = viscous or cables[c, AXIAL_DAMPING] > 0.0
         cables[c, PEAK_TENSION] = cables[c, TENSION]
     h_damping = _damping_step(nodes, settings[SAFETY_FACTOR])
     fixed = (tidal_max, turning, viscous, h_damping)
-    running = (0.0, 0, math.inf, 0.0, cluster[WORK], cluster[DISSIPATED], cluster[LAST_STEP])
+    running = (0.0, np.int64(0), math.inf, 0.0, cluster[WORK], cluster[DISSIPATED], cluster[LAST_STEP])
     return fixed, running
 
 
@@ -578,7 +594,7 @@ def _substep(
     return done, (elapsed, count, h_lo, h_hi, work, dissipated, h_last)
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy")  # called, not inlined: see above
 def _end_advance(duration: float, nodes: np.ndarray, cluster: np.ndarray, counters: np.ndarray, running: tuple) -> None:
     """Store a cluster's measurements of the interval, and its velocity at the end of it."""
     _, count, h_lo, h_hi, work, dissipated, h_last = running
@@ -598,7 +614,7 @@ def _end_advance(duration: float, nodes: np.ndarray, cluster: np.ndarray, counte
         cluster[TIME] += duration
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy")  # called, not inlined: see above
 def _advance_pair(
     duration: float,
     settings: np.ndarray,
@@ -617,9 +633,9 @@ def _advance_pair(
     Their sub-steps are taken in turn: each sub-step is a chain of dependent square roots and
     divisions (step size, kick, cable lengths), and two independent chains in one loop let the
     processor overlap them.  Each cluster goes through exactly its own operations, so the bits
-    are those of a cluster integrated alone.  (The body appears twice; a separate loop for a lone
-    cluster, or for the one left when the other ends first, made the first compilation seconds
-    longer.)
+    are those of a cluster integrated alone.  (The sub-step appears twice; a separate loop for a
+    lone cluster, or for the one left when the other ends first, made the first compilation
+    seconds longer.)
 
     Central differences in half-step (leapfrog) form, valid for variable steps::
 
@@ -714,9 +730,9 @@ def _advance_clusters(
     It is the one-thread driver, and :func:`advance_parallel` calls it on chunks: compiled once
     for both (inlined into the parallel driver, it made that take seconds longer to compile), and
     one call per chunk (a call per cluster cost more than a short interval's work)."""
-    # One call site of the inlined pair: each copy of its body costs seconds of compilation.
+    # One call site of the pair, whose two inlined sub-steps are most of the integrator's code.
     batch = nodes.shape[0]
-    waiting = -1  # a healthy cluster waiting for a partner
+    waiting = np.int64(-1)  # a healthy cluster waiting for a partner (not a literal: see _begin_advance)
     for b in range(batch + 1):
         if b < batch and not (active[b] and counters[b, STATUS] == STATUS_OK):
             _hold_cluster(cables[b], clusters[b], counters[b])

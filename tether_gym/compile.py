@@ -18,7 +18,7 @@ import numpy as np
 import tether_gym
 from tether_gym import _kernels
 from tether_gym._cli import program
-from tether_gym._compilation import COMPILATIONS
+from tether_gym._compilation import COMPILATIONS, GROUPS, group_of
 from tether_gym.envs import _task_kernels
 from tether_gym.envs.config import TaskConfig
 from tether_gym.envs.task import DampingTask
@@ -56,33 +56,47 @@ def _task(batch: int, step: bool, thrust_noise: float = 0.0) -> Callable[[], Non
     return build
 
 
-def _action_checks() -> None:
+def _initial_states_and_actions() -> None:
+    _initial_states()
     for shape in ((3,), (1, 3)):  # a single env's action and a vector env's
         _kernels.all_finite(np.zeros(shape))
 
 
-#: What to compile, in order: (kernel, what it does, a call that needs it and little else).
+def _parallel_task() -> None:
+    task = DampingTask(make_cluster(_CLUSTER), PARALLEL_MIN_BATCH, TaskConfig())
+    task.evaluate()  # a vector env's reset
+    task.step(np.zeros((PARALLEL_MIN_BATCH, task.action_size)), rngs=[np.random.default_rng(0)] * PARALLEL_MIN_BATCH)
+
+
+#: What to compile, in order: (kernel, its qualified name, by which ``tether_gym._compilation``
+#: finds its group, a call that needs it and little else).  Each line compiles what it names: the
+#: fused step after the three kernels it calls, the parallel kernels after the serial ones they
+#: call on chunks.
 KERNELS: tuple[tuple[str, str, Callable[[], None]], ...] = (
-    ("evaluate_forces", "cable forces of resets and queries", _queries),
-    ("advance_serial", "the integrator, one thread", _advance(1)),
-    ("advance_parallel", "the integrator, all threads (vector envs)", _advance(PARALLEL_MIN_BATCH)),
-    ("remove_rigid_velocity", "the task's initial states", _initial_states),
-    ("evaluate_serial", "the task's observation and reward, one thread", _task(1, step=False)),
-    ("evaluate_parallel", "the task's observation and reward, all threads", _task(PARALLEL_MIN_BATCH, step=False)),
-    # Before the fused step, which calls it: each line then compiles what it names.
-    ("command_forces", "the thrust commands of steps with disturbances", _task(1, step=True, thrust_noise=0.1)),
-    ("step_serial", "a whole task step, one thread", _task(1, step=True)),
-    ("step_parallel", "a whole task step, all threads", _task(PARALLEL_MIN_BATCH, step=True)),
-    ("all_finite", "the envs' check of the actions", _action_checks),
+    ("evaluate_forces", "evaluate_forces", _queries),
+    ("advance_serial", "_advance_clusters", _advance(1)),
+    ("advance_parallel", "advance_parallel", _advance(PARALLEL_MIN_BATCH)),
+    ("remove_rigid_velocity", "remove_rigid_velocity", _initial_states_and_actions),
+    ("evaluate_serial", "_compile_cluster_evaluation.<locals>.evaluate_clusters", _task(1, step=False)),
+    ("command_forces", "_compile_command_forces.<locals>.command_forces", _task(1, step=True, thrust_noise=0.1)),
+    ("step_serial", "_compile_step.<locals>.step_clusters", _task(1, step=True)),
+    ("parallel_task", "_compile_parallel_task.<locals>.parallel_task", _parallel_task),
 )
+
+
+def _what(qualified_name: str) -> str:
+    group = group_of(qualified_name)
+    assert group is not None, f"{qualified_name} is in no group of tether_gym._compilation.GROUPS"
+    return GROUPS[group][0]
 
 
 def warm(report: Callable[[str], None] = print) -> list[tuple[str, int, float]]:
     """Compile (or load from numba's cache) every kernel of :data:`KERNELS`, reporting a line per
     kernel through ``report``; returns ``(kernel, functions compiled, seconds)`` per kernel."""
-    COMPILATIONS.announced = True  # this command reports its own progress
+    COMPILATIONS.quiet = True  # this command reports its own progress
     results = []
-    for index, (name, what, call) in enumerate(KERNELS, start=1):
+    for index, (name, qualified_name, call) in enumerate(KERNELS, start=1):
+        what = _what(qualified_name)
         before = len(COMPILATIONS.compiled)
         start = time.perf_counter()
         call()

@@ -406,7 +406,10 @@ def _reward(
     return reason
 
 
-@njit(inline="always", error_model="numpy")
+# Compiled once and called, its pieces inlined into it: inlined into the driver as well, numba
+# copied all of that IR once more, and the evaluation took about 2.4 s to compile instead of 1.8
+# (this 2-core machine); one call per cluster costs nothing next to the evaluation.
+@njit(error_model="numpy")
 def _evaluate_cluster(
     settings: np.ndarray,
     topology: np.ndarray,
@@ -551,45 +554,6 @@ def _compile_command_forces(foreign_layout: tuple) -> Callable[..., Any]:  # a n
     return command_forces
 
 
-def _compile_parallel_evaluation(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
-    """Compile :func:`evaluate_serial` on all threads, a chunk of clusters each (the same bits).
-    ``foreign_layout`` as for :func:`_compile_command_forces`."""
-
-    @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-    def evaluate_parallel(
-        settings: np.ndarray,
-        topology: np.ndarray,
-        observed: np.ndarray,
-        nodes: np.ndarray,
-        cables: np.ndarray,
-        clusters: np.ndarray,
-        counters: np.ndarray,
-        task_nodes: np.ndarray,
-        task_clusters: np.ndarray,
-        end_reason: np.ndarray,
-    ) -> None:  # pragma: no cover - compiled
-        """:func:`evaluate_serial` on all threads, a chunk of clusters each (the same bits)."""
-        foreign_layout  # noqa: B018 - part of the cache key
-        batch = nodes.shape[0]
-        chunks = min(batch, PARALLEL_CHUNKS)
-        for k in prange(chunks):
-            lo, hi = k * batch // chunks, (k + 1) * batch // chunks
-            _evaluate_clusters(
-                settings,
-                topology,
-                observed,
-                nodes[lo:hi],
-                cables[lo:hi],
-                clusters[lo:hi],
-                counters[lo:hi],
-                task_nodes[lo:hi],
-                task_clusters[lo:hi],
-                end_reason[lo:hi],
-            )
-
-    return evaluate_parallel
-
-
 def _compile_step(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
     """Compile one whole task step of every cluster of some tables: the thrust commands, the
     advance and the evaluation, on one thread (the parallel driver calls it on chunks).  The same
@@ -633,14 +597,19 @@ def _compile_step(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispa
     return step_clusters
 
 
-def _compile_parallel_step(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
-    """Compile :data:`step_serial` on all threads, a chunk of clusters each (the same bits): one
-    parallel region per step, where the three kernels made two.  Each region wakes the worker
-    threads, which tether-gym's ``GOMP_SPINCOUNT`` lets sleep between regions so that they do not
-    starve other jobs.  ``foreign_layout`` as for :func:`_compile_command_forces`."""
+def _compile_parallel_task(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
+    """Compile the task's kernel on all threads, a chunk of clusters each (the same bits): the
+    whole step of :data:`step_serial` (one parallel region per step, where separate command,
+    advance and evaluation kernels made two), or with ``evaluate_only`` the evaluation of
+    :data:`evaluate_serial` alone.  One parallel kernel for both: numba's parallel passes cost
+    each parallel kernel about a second of compilation of its own, and the flag, read once per
+    chunk, costs nothing.  Each region wakes the worker threads, which tether-gym's
+    ``GOMP_SPINCOUNT`` lets sleep between regions so that they do not starve other jobs.
+    ``foreign_layout`` as for :func:`_compile_command_forces`."""
 
     @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-    def step_parallel(
+    def parallel_task(
+        evaluate_only: bool,
         duration: float,
         actions: np.ndarray,
         active: np.ndarray,
@@ -650,7 +619,8 @@ def _compile_parallel_step(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
         task_tables: tuple,
         step_record: np.ndarray,
     ) -> None:  # pragma: no cover - compiled
-        """:data:`step_serial` on all threads, a chunk of clusters each (the same bits)."""
+        """:data:`step_serial` (or with ``evaluate_only``, :data:`evaluate_serial`) on all
+        threads, a chunk of clusters each (the same bits); the arguments as for :data:`step_serial`."""
         foreign_layout  # noqa: B018 - part of the cache key
         nodes, cables, clusters, counters = simulator_tables
         task_nodes, task_clusters, propellant, end_reason = task_tables
@@ -658,18 +628,32 @@ def _compile_parallel_step(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
         chunks = min(batch, PARALLEL_CHUNKS)
         for k in prange(chunks):
             lo, hi = k * batch // chunks, (k + 1) * batch // chunks
-            step_serial(
-                duration,
-                actions[lo:hi],
-                active[lo:hi],
-                settings,
-                indices,
-                (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi]),
-                (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi]),
-                step_record[lo:hi],
-            )
+            if evaluate_only:
+                _evaluate_clusters(
+                    settings[1],
+                    indices[0],
+                    indices[3],
+                    nodes[lo:hi],
+                    cables[lo:hi],
+                    clusters[lo:hi],
+                    counters[lo:hi],
+                    task_nodes[lo:hi],
+                    task_clusters[lo:hi],
+                    end_reason[lo:hi],
+                )
+            else:
+                step_serial(
+                    duration,
+                    actions[lo:hi],
+                    active[lo:hi],
+                    settings,
+                    indices,
+                    (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi]),
+                    (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi]),
+                    step_record[lo:hi],
+                )
 
-    return step_parallel
+    return parallel_task
 
 
 #: The task's thrust commands, on one thread: a parallel version measured slower at N = 1024, as
@@ -677,9 +661,57 @@ def _compile_parallel_step(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
 command_forces = _compile_command_forces(FOREIGN_LAYOUT)
 #: A whole task step (commands, advance, evaluation) without disturbances, on one thread.
 step_serial = _compile_step(FOREIGN_LAYOUT)
-#: The same on all threads, one parallel region per step.
-step_parallel = _compile_parallel_step(FOREIGN_LAYOUT)
 #: The task's evaluation on one thread, for small batches (its start-up cost is lower).
 evaluate_serial = _evaluate_clusters
-#: The task's evaluation on all threads.
-evaluate_parallel = _compile_parallel_evaluation(FOREIGN_LAYOUT)
+#: The task's step and evaluation on all threads, behind :func:`step_parallel` and
+#: :func:`evaluate_parallel`.
+parallel_task = _compile_parallel_task(FOREIGN_LAYOUT)
+
+# What the evaluation passes for the step's arguments it does not read: empty, writable and of
+# the step's types, so that both share the one compiled variant of ``parallel_task``.
+_NO_ACTIONS = np.zeros((0, 0))
+_NO_CLUSTERS = np.zeros(0, dtype=np.bool_)
+_NO_THRUSTERS = np.zeros(0, dtype=np.int64)
+_NO_VALUES = np.zeros(0)
+_NO_RECORD = np.zeros((0, 0))
+
+
+def step_parallel(
+    duration: float,
+    actions: np.ndarray,
+    active: np.ndarray,
+    settings: tuple[np.ndarray, np.ndarray],
+    indices: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    simulator_tables: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    task_tables: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    step_record: np.ndarray,
+) -> None:
+    """:data:`step_serial` on all threads, one parallel region per step (the same bits); the
+    arguments as for :data:`step_serial`."""
+    parallel_task(False, duration, actions, active, settings, indices, simulator_tables, task_tables, step_record)
+
+
+def evaluate_parallel(
+    settings: np.ndarray,
+    topology: np.ndarray,
+    observed: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
+    counters: np.ndarray,
+    task_nodes: np.ndarray,
+    task_clusters: np.ndarray,
+    end_reason: np.ndarray,
+) -> None:
+    """:data:`evaluate_serial` on all threads (the same bits); the arguments as for it."""
+    parallel_task(
+        True,
+        0.0,
+        _NO_ACTIONS,
+        _NO_CLUSTERS,
+        (settings, settings),
+        (topology, _NO_THRUSTERS, _NO_VALUES, observed),
+        (nodes, cables, clusters, counters),
+        (task_nodes, task_clusters, _NO_VALUES, end_reason),
+        _NO_RECORD,
+    )
