@@ -1,10 +1,11 @@
 """The agents' command lines: every command's argument parser, and the argument types they share.
 
 The parsers live here, apart from the commands' modules, because those import torch,
-Stable-Baselines3, scipy and the numba kernels, which take seconds: a console script parses its
-command line with :func:`build_parser` first (:mod:`agents.commands`), so ``--help`` and a
-mistyped option answer at once, before any of that is imported. This module imports only the
-standard library and :mod:`tether_gym.registration` (for the ids).
+Stable-Baselines3 and scipy, which take seconds: a command module run as ``__main__`` (by
+``python -m`` or its console script, :mod:`agents.commands`) first parses its command line with
+:func:`parse_before_imports`, so ``--help`` and a mistyped option answer at once, before any of
+that is imported. This module imports only the standard library and :mod:`tether_gym` (for the
+ids; the package import itself, numba included, is the 0.3 s that remain).
 
 Help texts name paths as the installed package has them (``tether_gym_agents/hyperparams/...``;
 ``agents/...`` in a checkout: ``__package__`` is whichever it is imported as).

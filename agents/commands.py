@@ -10,10 +10,10 @@ The console scripts of ``pyproject.toml`` (``tether-gym-train``, ``tether-gym-co
 ``tether-gym-benchmark``, ``tether-gym-ship``, ``tether-gym-convert``, ``tether-gym-train-rllib``,
 ``tether-gym-train-ars``)
 run their module exactly as ``python -m`` does, ``__main__`` block and its error handling
-included, so the two ways to run a command cannot drift apart. Before that they parse the
-command line with the command's parser (:func:`agents.cli.build_parser`, which imports nothing
-heavy): ``--help`` and a bad option are answered in a fraction of a second, not after the
-seconds that importing torch and Stable-Baselines3 takes.
+included, so the two ways to run a command cannot drift apart. That block starts by parsing
+the command line with the command's parser (:func:`agents.cli.parse_before_imports`, which
+imports nothing heavy): ``--help`` and a bad option are answered in a fraction of a second, not
+after the seconds that importing torch and Stable-Baselines3 takes.
 """
 
 from __future__ import annotations
@@ -86,13 +86,10 @@ def description(docstring: str | None, command: str | None = None) -> str:
 
 
 def _run(command: str) -> None:
-    """Run ``<package>.<command>`` as ``python -m`` does, as its console script, after parsing
-    the command line with its parser alone (which exits for ``--help`` and bad arguments)."""
+    """Run ``<package>.<command>`` as ``python -m`` does, as its console script; a missing
+    optional dependency ends it with the message that names its extra, without a traceback."""
     global _running_script
     _running_script = SCRIPTS[command]
-    from .cli import build_parser
-
-    build_parser(command).parse_args(sys.argv[1:])  # as the module's __main__ does first too
     try:
         runpy.run_module(f"{__package__}.{command}", run_name="__main__", alter_sys=True)
     except MissingExtraError as error:  # the message names the extra to install: no traceback needed
