@@ -17,7 +17,7 @@ from numba.core.registry import CPUDispatcher as Dispatcher
 
 from tether_gym import _kernels
 from tether_gym._compilation import GROUPS, group_of
-from tether_gym.compile import KERNELS
+from tether_gym.compile import KERNELS, warm
 from tether_gym.envs import _task_kernels
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -68,7 +68,7 @@ def test_each_kernel_group_is_announced_once_per_process(tmp_path: Path) -> None
 
 
 def test_every_cached_kernel_is_in_one_group_and_the_command_compiles_every_group() -> None:
-    named = [qualified_name for _, qualified_name, _ in KERNELS]
+    named = [qualified_name for _, qualified_name, _, _ in KERNELS]
     assert all(group_of(name) is not None for name in named), named
     assert {group_of(name) for name in named} == set(range(len(GROUPS)))
     grouped = [name for _, names in GROUPS for name in names]
@@ -104,7 +104,8 @@ def test_the_compile_command_warms_the_cache_for_every_env(tmp_path: Path) -> No
     lines = [line for line in warm.stdout.splitlines() if line.startswith("[")]
     assert len(lines) == len(KERNELS) and all("compiled" in line for line in lines), warm.stdout
     assert ANNOUNCEMENT not in warm.stderr  # the command reports its own progress
-    again = run_python(["-m", "tether_gym.compile"], tmp_path)
+    assert ("in two processes" in warm.stdout) == ((os.cpu_count() or 1) >= 2)  # the default on 2+ cores
+    again = run_python(["-m", "tether_gym.compile", "--jobs", "1"], tmp_path)
     assert again.returncode == 0 and again.stdout.count("loaded from the cache") == len(KERNELS), again.stdout
     assert f"0 compiled, {len(KERNELS)} already cached" in again.stdout
     first_use = run_python(
@@ -121,6 +122,11 @@ def test_the_compile_command_warms_the_cache_for_every_env(tmp_path: Path) -> No
     )
     assert first_use.returncode == 0, first_use.stderr
     assert ANNOUNCEMENT not in first_use.stderr, first_use.stderr
+
+
+def test_the_compile_command_takes_one_or_two_processes() -> None:
+    with pytest.raises(ValueError, match="jobs must be 1 or 2"):
+        warm(jobs=3)
 
 
 def test_the_compile_command_has_help() -> None:
