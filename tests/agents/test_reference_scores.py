@@ -1,0 +1,83 @@
+"""The shipped reference scores (``agents/reference/reference_scores.json``): they hold every id and
+controller of the benchmark on the ids' own settings, every statistic in them is what their
+returns give, and rerunning a scripted controller through :func:`agents.scoring.score_policy`
+reproduces its returns and statistics to the bit."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import pytest
+
+from agents.baselines import BASELINES
+from agents.compare import HELD_OUT_SEED
+from agents.policies import shipped_models
+from agents.scoring import REFERENCE_FILE, load_reference, reference_from_benchmark, score_policy
+from tether_gym.registration import ENV_IDS
+
+ENV_ID = "TetherTetrahedron-v0"
+
+
+def test_the_shipped_reference_holds_every_id_and_controller() -> None:
+    data = load_reference()
+    assert REFERENCE_FILE.parent.name == "reference" and REFERENCE_FILE.parent.parent.name == "agents"
+    assert data["env_kwargs"] == {}, "the reference scores are on the ids' own settings"
+    assert (data["zero"], data["reference"], data["episodes"]) == ("passive", "mpc", 64)
+    assert list(data["per_id"]) == list(ENV_IDS)
+    for env_id, entry in data["per_id"].items():
+        assert entry["seeds"] == list(range(HELD_OUT_SEED, HELD_OUT_SEED + 64))
+        assert set(entry["controllers"]) == {*BASELINES, "mpc", *shipped_models(env_id)}, env_id
+        assert entry["best_baseline"] in BASELINES
+    # Every statistic is what its returns give (the converter's check, on the file as shipped).
+    reference_from_benchmark(
+        {"per_id": data["per_id"], "aggregate": data["aggregate"], "settings": _settings_of(data)},
+        data["commit"],
+        data["date"],
+        data["machine"],
+    )
+
+
+def _settings_of(data: dict[str, Any]) -> dict[str, Any]:
+    """The benchmark settings a reference file was made from, as far as it keeps them."""
+    seeds = next(iter(data["per_id"].values()))["seeds"]
+    keys = ("command", "episodes", "reference", "zero", "confidence", "env_kwargs", "versions")
+    return {**{key: data[key] for key in keys}, "seeds": seeds, "bootstrap": data["aggregate_bootstrap"]}
+
+
+def test_scoring_lqr_reproduces_the_shipped_numbers() -> None:
+    data = load_reference()
+    expected = data["per_id"][ENV_ID]["controllers"]["lqr"]
+    score = score_policy("lqr", ENV_ID)
+    assert score.returns.tolist() == expected["returns"]
+    assert (score.mean_return, score.return_ci95, score.failures) == (
+        expected["mean_return"],
+        expected["return_ci95"],
+        expected["failures"],
+    )
+    assert score.normalised_score == expected["normalised_score"]["mean"]
+    assert (score.normalised_score_low, score.normalised_score_high) == (
+        expected["normalised_score"]["low"],
+        expected["normalised_score"]["high"],
+    )
+    best = data["per_id"][ENV_ID]["best_baseline"]
+    assert best != "lqr"  # on the tetrahedron, the local tension-aware law
+    assert dataclasses.asdict(score.paired_vs_best) == expected["paired_vs_best"]
+    # The best baseline against itself: zero, and never better.
+    itself = score_policy(best, ENV_ID, episodes=16).paired_vs_best
+    assert (itself.mean, itself.low, itself.high, itself.wins) == (0.0, 0.0, 0.0, 0)
+    # Doing nothing is passive: it scores 0 with the interval [0, 0].
+    zero = score_policy(lambda observation: np.zeros((observation.shape[0], 12)), ENV_ID, episodes=16)
+    assert (zero.normalised_score, zero.normalised_score_low, zero.normalised_score_high) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_every_baseline_and_shipped_model_reproduces_its_shipped_returns(env_id: str) -> None:
+    entry = load_reference()["per_id"][env_id]
+    for name in [*BASELINES, *shipped_models(env_id)]:
+        score = score_policy(name, env_id)
+        assert score.returns.tolist() == entry["controllers"][name]["returns"], f"{env_id} {name}"
+    best = score_policy(entry["best_baseline"], env_id).paired_vs_best
+    assert (best.mean, best.wins) == (0.0, 0)
