@@ -1,17 +1,18 @@
 """Compile tether-gym's numba kernels ahead of time: ``python -m tether_gym.compile``.
 
 Without it, the first ``gym.make(...).step`` of a fresh install compiles the kernels the single
-env needs (8.6-9.1 s from import to the first step on the project's 2-core machine), and the
-first step of a vector env of 16 or more the multi-threaded ones (about 2.5 s more); the log
-says which group of kernels is compiling.  This command compiles all of them once, with a line
-per kernel, into numba's cache (next to the package, or in ``NUMBA_CACHE_DIR``), from which
-every later process loads them: 13-14 s there.  Run it after installing, or in a container
-image build.  Exit status 0 when every kernel is in the cache.
+env needs (8.6-9.1 s from import to the first step on the project's quiet 2-core machine), and
+the first step of a vector env of 16 or more the multi-threaded ones (about 2.5 s more); the
+log says which group of kernels is compiling.  This command compiles all of them once, with a
+line per kernel, into numba's cache (next to the package, or in ``NUMBA_CACHE_DIR``), from
+which every later process loads them.  Run it after installing, or in a container image build.
+Exit status 0 when every kernel is in the cache.
 
-With ``--jobs 2`` (the default on 4 cores or more) a second process compiles the task's
-evaluation while this one compiles the integrator: numba compiles one function at a time per
-process, and the two share no kernel.  On the 2-core machine, with one core busy elsewhere, it
-gained nothing (13.9-14.5 s against 13.1-13.9 s), so one process is the default there.
+It runs two processes where there are two cores or more (``--jobs 1``: one): numba compiles one
+function at a time per process, and a second process compiles the task's evaluation while this
+one compiles the integrator (the two share no kernel).  On the quiet 2-core machine that took
+10.3-11.7 s against 13.2 s in one process; with one of its cores busy elsewhere the second
+process only shared the other (13.9-14.5 s against 13.1-13.9 s).
 """
 
 from __future__ import annotations
@@ -102,10 +103,6 @@ KERNELS: tuple[tuple[str, str, Callable[[], None], str], ...] = (
     ("parallel_task", "_compile_parallel_task.<locals>.parallel_task", _parallel_task, "last"),
 )
 
-#: Cores from which two processes are the default: with two, the second competes with whatever
-#: else runs (see the module's docstring).
-_CORES_FOR_TWO_JOBS = 4
-
 #: A line of the second process that carries one kernel's result: ``<tag> <index> <compiled> <seconds>``.
 _RESULT_TAG = "tether-gym-compile-result"
 
@@ -195,8 +192,8 @@ def main(argv: list[str] | None = None) -> None:
         "--jobs",
         type=int,
         choices=(1, 2),
-        default=2 if (os.cpu_count() or 1) >= _CORES_FOR_TWO_JOBS else 1,
-        help=f"processes (default: 2 on {_CORES_FOR_TWO_JOBS} cores or more, else 1)",
+        default=min(2, os.cpu_count() or 1),
+        help="processes (default: 2 where there are 2 cores or more)",
     )
     parser.add_argument("--kernels", help=argparse.SUPPRESS)  # the second process: these indices of KERNELS
     arguments = parser.parse_args(argv)
