@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike
 
-from tether_gym import _compilation  # noqa: F401 - announces the first compilation of a process
+from tether_gym import _compilation  # noqa: F401 - announces each kernel group as it compiles
 
 # The OpenMP layer scheduled the batched kernels 1.5-2x faster than numba's default
 # "workqueue" layer on a busy 2-core machine (N = 1024 vector env: ~0.8 M against 0.4-0.58 M
