@@ -98,7 +98,7 @@ def _hyperparams(name: str) -> str:
 def _docstring(command: str) -> str:
     """The docstring of the command's module, read from its source without importing it (the
     import is what is slow)."""
-    source = Path(__file__).with_name(f"{command}.py").read_text(encoding="utf-8")
+    source = (Path(__file__).resolve().parent / f"{command}.py").read_text(encoding="utf-8")
     docstring = ast.get_docstring(ast.parse(source), clean=False)
     return docstring or ""
 
@@ -292,16 +292,22 @@ def compare_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--satellite", type=int_at_least(0), default=0, help="satellite of the displacement plot (default 0)"
     )
-    parser.add_argument("--out", default="outputs/compare", help="output directory (default outputs/compare)")
-    parser.add_argument("--no-plots", action="store_true", help="write the table only, no PNG plots (no matplotlib)")
-    parser.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")
+    _add_report_arguments(parser, "comparison", "outputs/compare")
+    return parser
+
+
+def _add_report_arguments(parser: argparse.ArgumentParser, report: str, out: str) -> None:
+    """The options compare and benchmark share: where the ``report`` goes, whether it replaces an
+    earlier one and has plots, and which models of ``--controllers`` may load."""
+    parser.add_argument("--out", default=out, help=f"output directory (default {out})")
+    parser.add_argument("--no-plots", action="store_true", help="write the tables only, no PNG plots (no matplotlib)")
+    parser.add_argument("--force", action="store_true", help=f"replace an earlier {report} in --out")
     parser.add_argument(
         "--trust-pickle",
         action="store_true",
         help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)",
     )
     add_allow_other_id_argument(parser)
-    return parser
 
 
 def benchmark_parser() -> argparse.ArgumentParser:
@@ -340,7 +346,6 @@ def benchmark_parser() -> argparse.ArgumentParser:
         default=HELD_OUT_SEED,
         help=f"first held-out seed (default {HELD_OUT_SEED}); also seeds the bootstrap",
     )
-    parser.add_argument("--out", default="outputs/benchmark", help="output directory (default outputs/benchmark)")
     parser.add_argument(
         "--reference",
         default=REFERENCE,
@@ -353,14 +358,7 @@ def benchmark_parser() -> argparse.ArgumentParser:
         default=50_000,
         help="bootstrap replications of the aggregate's intervals (default 50000, as in rliable)",
     )
-    parser.add_argument("--no-plots", action="store_true", help="write the tables only, no PNG plots (no matplotlib)")
-    parser.add_argument("--force", action="store_true", help="replace an earlier benchmark in --out")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)",
-    )
-    add_allow_other_id_argument(parser)
+    _add_report_arguments(parser, "benchmark", "outputs/benchmark")
     return parser
 
 

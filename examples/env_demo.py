@@ -279,6 +279,11 @@ def render_frames(seed: int, steps: int, names: tuple[str, ...] = ("zero", "feed
         cropped = crop_margins([Image.fromarray(picture) for picture in pictures])
         title = CONTROLLERS[name][0]
         panels.append([_labelled(picture, title, caption) for picture, caption in zip(cropped, captions, strict=True)])
+    return side_by_side(panels)
+
+
+def side_by_side(panels: list[list[Image.Image]]) -> list[Image.Image]:
+    """Frame k of every panel (one list of frames per controller), placed left to right."""
     frames = []
     for row in zip(*panels, strict=True):
         frame = Image.new("RGB", (sum(p.width for p in row), max(p.height for p in row)), "white")

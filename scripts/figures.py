@@ -262,14 +262,7 @@ def render_animation(env_id: str) -> str:
             draw.text((8, 23), caption, fill=(60, 60, 60), font=demo._font(13))
             labelled.append(canvas)
         panels.append(labelled)
-    combined = []
-    for row in zip(*panels, strict=True):
-        frame = Image.new("RGB", (sum(p.width for p in row), max(p.height for p in row)), "white")
-        x = 0
-        for panel in row:
-            frame.paste(panel, (x, 0))
-            x += panel.width
-        combined.append(frame)
+    combined = demo.side_by_side(panels)
     # About 700 px wide: the content column's width, and a few hundred kB per id.
     scale = min(1.0, 700 / combined[0].width)
     path = IMG / env_animation(env_id)

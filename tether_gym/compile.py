@@ -195,7 +195,12 @@ def main(argv: list[str] | None = None) -> None:
         default=min(2, os.cpu_count() or 1),
         help="processes (default: 2 where there are 2 cores or more)",
     )
-    parser.add_argument("--kernels", help=argparse.SUPPRESS)  # the second process: these indices of KERNELS
+    parser.add_argument(
+        "--kernels",
+        metavar="I,J,...",
+        help="compile only these kernels (1-based places in tether_gym.compile.KERNELS, comma-separated): how the "
+        "first process hands kernels to the second",
+    )
     arguments = parser.parse_args(argv)
     if arguments.kernels:
         COMPILATIONS.quiet = True
