@@ -212,36 +212,67 @@ def _env_demo() -> ModuleType:
     return module
 
 
-def render_controller(env_id: str, controller: str) -> tuple[list[object], list[str]]:
-    """Frames (reset, then :data:`ANIMATION_STEPS` steps) of ``controller`` on ``env_id``, and captions."""
+#: The largest drawn displacement of an animation, as a share of the cluster's half-size: the
+#: exaggeration is chosen so that the liveliest satellite of either controller stays in view.
+ANIMATION_REACH = 0.4
+
+
+def _episode(env_id: str, controller: str, render: bool, exaggeration: float = 1.0) -> tuple[list[object], list[dict]]:
+    """The infos (reset, then :data:`ANIMATION_STEPS` steps) of ``controller`` on ``env_id`` from
+    the animation's reset, and with ``render`` the frames drawn at ``exaggeration``."""
     import gymnasium as gym
     from PIL import Image
 
     from agents.policies import make_controller
 
-    env = gym.make(env_id, render_mode="rgb_array")
+    env = gym.make(env_id, render_mode="rgb_array" if render else None, render_exaggeration=exaggeration)
     try:
         obs, info = env.reset(seed=ANIMATION_SEED)
         policy = make_controller(controller, env)
-        frames, captions = [Image.fromarray(env.render())], [info]
+        frames, infos = ([Image.fromarray(env.render())] if render else []), [info]
         done = False
         for _ in range(ANIMATION_STEPS):
             if not done:
                 action, _ = policy.predict(obs, deterministic=True)
                 obs, _, terminated, truncated, info = env.step(action)
                 done = terminated or truncated
-                frames.append(Image.fromarray(env.render()))
-            else:  # an episode that ends early keeps showing its last frame
+                if render:
+                    frames.append(Image.fromarray(env.render()))
+            elif render:  # an episode that ends early keeps showing its last frame
                 frames.append(frames[-1])
-            captions.append(info)
-        energy0 = captions[0]["vibration_energy"]
-        text = [
-            f"E_vib / E0 = {i['vibration_energy'] / energy0:.3f}   propellant {i['propellant_used']:.1f} N*s"
-            for i in captions
-        ]
-        return frames, text
+            infos.append(info)
+        return frames, infos
     finally:
         env.close()
+
+
+def animation_exaggeration(env_id: str) -> float:
+    """The displacement exaggeration of ``env_id``'s animation: 1, 2 or 5 times a power of ten, at
+    most the env's default of 100, with which the largest deviation from the nominal shape that
+    either controller reaches is drawn within :data:`ANIMATION_REACH` of the cluster's half-size."""
+    import gymnasium as gym
+    import numpy as np
+
+    positions = gym.make(env_id).unwrapped.cluster.positions
+    half_size = 0.5 * float(np.ptp(positions, axis=0).max())
+    largest = max(
+        info["max_deviation"] for controller in ANIMATED_CONTROLLERS for info in _episode(env_id, controller, False)[1]
+    )
+    ceiling = ANIMATION_REACH * half_size / max(largest, 1e-12)
+    nice = [m * 10.0**k for k in range(-2, 3) for m in (1, 2, 5) if m * 10.0**k <= min(ceiling, 100.0)]
+    return max(nice, default=0.01)
+
+
+def render_controller(env_id: str, controller: str, exaggeration: float) -> tuple[list[object], list[str]]:
+    """Frames (reset, then :data:`ANIMATION_STEPS` steps) of ``controller`` on ``env_id``, drawn at
+    ``exaggeration``, and captions."""
+    frames, captions = _episode(env_id, controller, True, exaggeration)
+    energy0 = captions[0]["vibration_energy"]
+    text = [
+        f"E_vib / E0 = {i['vibration_energy'] / energy0:.3f}   propellant {i['propellant_used']:.1f} N*s"
+        for i in captions
+    ]
+    return frames, text
 
 
 def render_animation(env_id: str) -> str:
@@ -250,8 +281,9 @@ def render_animation(env_id: str) -> str:
 
     demo = _env_demo()
     panels = []
+    exaggeration = animation_exaggeration(env_id)
     for controller in ANIMATED_CONTROLLERS:
-        frames, captions = render_controller(env_id, controller)
+        frames, captions = render_controller(env_id, controller, exaggeration)
         frames = demo.crop_margins(frames)
         labelled = []
         for frame, caption in zip(frames, captions, strict=True):
