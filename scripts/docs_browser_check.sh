@@ -6,14 +6,7 @@
 # Arguments go to scripts/docs_browser_check.py (--site DIR, --out DIR, --chromium PATH).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if ! command -v chromium >/dev/null 2>&1; then
-    if [ "$(id -u)" != 0 ]; then
-        echo "docs browser check: chromium is not installed; run as root, or: sudo apt-get install -y chromium" >&2
-        exit 1
-    fi
-    apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
-fi
+bash scripts/install_chromium.sh
 if [ ! -f outputs/site/index.html ]; then
     bash scripts/docs.sh
 else
