@@ -1,7 +1,12 @@
-"""Test helpers: small clusters with closed-form answers, and an independent numpy force oracle."""
+"""Test helpers: small clusters with closed-form answers, an independent numpy force oracle, and
+the loading of the repository's scripts and hooks, which are files rather than modules."""
 
 from __future__ import annotations
 
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -77,3 +82,20 @@ def assert_unchanged(before: dict[str, Any], after: dict[str, Any]) -> None:
     for key, value in before.items():
         same = np.array_equal(value, after[key]) if isinstance(value, np.ndarray) else value == after[key]
         assert same, f"a refused call changed {key}"
+
+
+#: The repository's root, where the scripts and docs hooks that the tests load live.
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def load_file(name: str, relative_path: str) -> ModuleType:
+    """The Python file at ``relative_path`` (from the repository's root) as the module ``name``,
+    loaded once per process. It is registered in ``sys.modules`` under that name before it runs,
+    as its dataclasses look their module up there (and as the docs hook finds scripts/figures.py)."""
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, ROOT / relative_path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]

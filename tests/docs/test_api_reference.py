@@ -2,26 +2,20 @@
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.helpers import load_file
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def load_extension() -> ModuleType:
     pytest.importorskip("griffe", reason="the docs extra (mkdocstrings) is not installed")
-    name = "docs_griffe_sphinx_roles"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "docs" / "hooks" / "griffe_sphinx_roles.py")
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
+    return load_file("docs_griffe_sphinx_roles", "docs/hooks/griffe_sphinx_roles.py")
 
 
 def test_roles_become_inline_code() -> None:

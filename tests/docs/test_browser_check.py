@@ -4,26 +4,19 @@ scripts/docs_browser_check.sh, which installs both, runs the check on the real s
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.helpers import load_file
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def load_checker() -> ModuleType:
-    name = "docs_browser_check"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / "docs_browser_check.py")
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
+    return load_file("docs_browser_check", "scripts/docs_browser_check.py")
 
 
 def test_the_check_reports_broken_images_404s_console_errors_and_a_missing_search(

@@ -4,14 +4,13 @@ links and anchors; these tests need no MkDocs.)"""
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.helpers import load_file
 from tether_gym.registration import ENV_DOCS, ENV_IDS
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -25,14 +24,7 @@ LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
 
 def load_hook() -> ModuleType:
     """docs/hooks/env_pages.py, the site's page generator, imported as a module."""
-    name = "tether_docs_env_pages"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "docs" / "hooks" / "env_pages.py")
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
+    return load_file("tether_docs_env_pages", "docs/hooks/env_pages.py")
 
 
 def slug(heading: str) -> str:

@@ -4,14 +4,13 @@ tutorial's own test runs the one cheap producer, examples/getting_started.py).""
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.helpers import load_file
 from tether_gym.registration import ENV_IDS
 
 from .test_docs import load_hook
@@ -25,14 +24,7 @@ IMAGE = re.compile(r"!\[[^\]]*\]\(([^)\s]+)[^)]*\)|<img\b[^>]*\bsrc=[\"']([^\"']
 
 def load_figures() -> ModuleType:
     """scripts/figures.py as a module (the docs hook imports it under the same name)."""
-    name = "docs_figures"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / "figures.py")
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
+    return load_file("docs_figures", "scripts/figures.py")
 
 
 def images_in(markdown: str, page: Path) -> list[str]:
