@@ -40,7 +40,7 @@ the package's ``hyperparams/ars.yml`` (``agents/hyperparams`` in a checkout). Co
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help and bad options answered before the slow imports below
-    from .cli import parse_before_imports
+    from .common.cli import parse_before_imports
 
     parse_before_imports("ars")
 
@@ -56,14 +56,15 @@ import numpy as np
 
 from tether_gym._optional import needs_extra, require
 
-from . import cli
 from .baselines import BASELINES, make_baseline
-from .commands import command_line, program
-from .files import OutputError, atomic_write_text
+from .common import cli
+from .common.commands import command_line, program
+from .common.data import HYPERPARAMS_DIR
+from .common.files import OutputError, atomic_write_text
+from .common.settings import load_settings
 from .residual import residual_actions
 from .safe_format import NormalizationStatistics, PolicyFormatError, save_policy
 from .selection import EvaluationLog, baseline_returns, episode_returns, evaluation_seeds
-from .settings import load_settings
 
 with needs_extra("train", "the ARS settings files"):
     import yaml
@@ -78,7 +79,7 @@ __all__ = [
 ]
 
 #: Per-id ARS settings (plain YAML, nothing evaluated).
-ARS_SETTINGS_FILE = Path(__file__).resolve().parent / "hyperparams" / "ars.yml"
+ARS_SETTINGS_FILE = HYPERPARAMS_DIR / "ars.yml"
 #: First seed of the episodes the observation statistics come from, and of the training episodes
 #: (each run and iteration takes its own block): far from the evaluation seeds (1 000 000 up), the
 #: benchmark's held-out seeds (10 000 up) and the mpc tuning seeds (2 000 up).
@@ -406,7 +407,7 @@ def _progress_bar(total: int, label: str, enabled: bool) -> Callable[[str | None
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``ars`` (defined in :mod:`agents.cli`, which the console script parses
+    """The command line of ``ars`` (defined in :mod:`agents.common.cli`, which the console script parses
     with before this module's slow imports)."""
     return cli.build_parser("ars")
 

@@ -62,7 +62,7 @@ README), ``benchmark.json`` (every number, per-episode returns included, and the
 ``scores.csv`` (per id and controller), ``episodes.csv`` (per episode), ``aggregate.csv``,
 and, unless ``--no-plots``, ``normalised_scores.png`` (per id, with the 95 % intervals),
 ``paired_differences.png`` and ``aggregate.png`` (rliable-style interval estimates). The command
-is careful with files as ``agents.compare`` is (see :mod:`agents.files`): it checks ``--out``
+is careful with files as ``agents.compare`` is (see :mod:`agents.common.files`): it checks ``--out``
 and refuses to replace an earlier benchmark without ``--force`` before it loads a controller or
 runs a rollout, and writes every file atomically.
 """
@@ -70,7 +70,7 @@ runs a rollout, and writes every file atomically.
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help and bad options answered before the slow imports below
-    from .cli import parse_before_imports
+    from .common.cli import parse_before_imports
 
     parse_before_imports("benchmark")
 
@@ -93,17 +93,17 @@ from tether_gym._optional import needs_extra, require
 from tether_gym.limits import is_whole_number
 from tether_gym.registration import ENV_IDS
 
-from . import cli
 from .baselines import BASELINES
-from .cli import HELD_OUT_SEED, REFERENCE
-from .commands import command_line, program
-from .evaluate import EpisodeRecord, rollout, summarise
-from .files import (
+from .common import cli
+from .common.cli import HELD_OUT_SEED, REFERENCE
+from .common.commands import command_line, program
+from .common.files import (
     OutputError,
     atomic_write,
     atomic_write_text,
     prepare_table_outputs,
 )
+from .evaluate import EpisodeRecord, rollout, summarise
 from .pickled import PickleNotTrustedError
 from .policies import OtherIdError, make_controller, shipped_models
 from .safe_format import PolicyFormatError
@@ -1232,7 +1232,7 @@ def plot_aggregate(results: dict[str, Any], path: Path) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``benchmark`` (defined in :mod:`agents.cli`, which the console script parses
+    """The command line of ``benchmark`` (defined in :mod:`agents.common.cli`, which the console script parses
     with before this module's slow imports)."""
     return cli.build_parser("benchmark")
 

@@ -23,7 +23,7 @@ callback use (0 and up, and 1 000 000 and up).
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help and bad options answered before the slow imports below
-    from .cli import parse_before_imports
+    from .common.cli import parse_before_imports
 
     parse_before_imports("compare")
 
@@ -41,17 +41,17 @@ from tether_gym._optional import require
 from tether_gym.limits import is_whole_number
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from . import cli
 from .baselines import BASELINES
-from .cli import HELD_OUT_SEED
-from .commands import program
-from .evaluate import METRICS, EpisodeRecord, rollout, summarise
-from .files import (
+from .common import cli
+from .common.cli import HELD_OUT_SEED
+from .common.commands import program
+from .common.files import (
     OutputError,
     atomic_write,
     atomic_write_text,
     prepare_table_outputs,
 )
+from .evaluate import METRICS, EpisodeRecord, rollout, summarise
 from .pickled import PickleNotTrustedError
 from .policies import make_controller, shipped_models
 from .safe_format import PolicyFormatError
@@ -241,7 +241,7 @@ def plot_displacement(records: list[EpisodeRecord], path: Path, env_id: str, sat
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``compare`` (defined in :mod:`agents.cli`, which the console script parses
+    """The command line of ``compare`` (defined in :mod:`agents.common.cli`, which the console script parses
     with before this module's slow imports)."""
     return cli.build_parser("compare")
 

@@ -20,7 +20,7 @@ continues training.
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help and bad options answered before the slow imports below
-    from .cli import parse_before_imports
+    from .common.cli import parse_before_imports
 
     parse_before_imports("convert")
 
@@ -36,10 +36,10 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
-from . import cli
-from .cli import REFERENCE_FILE
-from .commands import program
-from .files import OutputError, atomic_write_bytes, check_output_files, prepare_output_dir
+from .common import cli
+from .common.cli import REFERENCE_FILE
+from .common.commands import program
+from .common.files import OutputError, atomic_write_bytes, check_output_files, prepare_output_dir
 from .pickled import (
     PickleNotTrustedError,
     is_pickle_model,
@@ -122,8 +122,8 @@ def convert(
     the module docstring); returns ``destination``.
 
     Raises :class:`agents.pickled.PickleNotTrustedError` without ``trust_pickle`` (before reading
-    anything), :class:`agents.files.OutputError` for an unusable or symlinked ``destination``,
-    :class:`agents.files.OutputExistsError` if it holds an earlier conversion and not ``force``,
+    anything), :class:`agents.common.files.OutputError` for an unusable or symlinked ``destination``,
+    :class:`agents.common.files.OutputExistsError` if it holds an earlier conversion and not ``force``,
     and :class:`agents.safe_format.PolicyFormatError` if the converted policy's actions differ
     from the original's."""
     source, destination = Path(source), Path(destination)
@@ -227,7 +227,7 @@ def _sha256(path: Path) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``convert`` (defined in :mod:`agents.cli`, which the console script parses
+    """The command line of ``convert`` (defined in :mod:`agents.common.cli`, which the console script parses
     with before this module's slow imports)."""
     return cli.build_parser("convert")
 

@@ -45,12 +45,13 @@ from tether_gym.envs.contract import Scalar
 from tether_gym.envs.task import DampingTask, TaskState
 from tether_gym.limits import is_whole_number
 
-from .settings import load_settings
+from .common.data import HYPERPARAMS_DIR
+from .common.settings import load_settings
 
 __all__ = ["MPC_SETTINGS_FILE", "MPCController", "MPCSettings", "load_mpc_settings"]
 
 #: Per-id settings of the ``mpc`` controller (plain YAML, nothing evaluated).
-MPC_SETTINGS_FILE = Path(__file__).resolve().parent / "hyperparams" / "mpc.yml"
+MPC_SETTINGS_FILE = HYPERPARAMS_DIR / "mpc.yml"
 
 
 @dataclasses.dataclass(frozen=True)

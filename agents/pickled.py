@@ -22,7 +22,7 @@ with needs_extra("train", "loading pickle-based SB3 models"):
     from stable_baselines3.common.base_class import BaseAlgorithm
     from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from .commands import program
+from .common.commands import program
 from .safe_format import ALGORITHMS, METADATA_FILE
 
 __all__ = [

@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from .baselines import BASELINES, make_baseline
-from .commands import program
+from .common.commands import program
+from .common.data import MODELS_DIR
 from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted
 from .safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
 
@@ -35,11 +36,6 @@ __all__ = [
     "make_controller",
     "shipped_models",
 ]
-
-#: Where the repository keeps its trained models: ``<env id>/<name>/policy.json`` and the rest of
-#: the safe format, with a ``MANIFEST.sha256`` that every load verifies.
-MODELS_DIR = Path(__file__).resolve().parent / "models"
-
 
 def is_shipped(directory: str | Path) -> bool:
     """Whether ``directory`` is inside the repository's :data:`MODELS_DIR` (then its manifest is

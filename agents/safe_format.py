@@ -44,8 +44,8 @@ import numpy as np
 
 from tether_gym._optional import needs_extra, require
 
-from .commands import program
-from .files import atomic_write_bytes, atomic_write_text
+from .common.commands import program
+from .common.files import atomic_write_bytes, atomic_write_text
 
 with needs_extra("train", "the policy files"):
     import torch

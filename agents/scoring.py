@@ -63,6 +63,7 @@ from .benchmark import (
     score_interval,
     t_interval,
 )
+from .common.data import REFERENCE_DIR
 from .evaluate import rollout
 
 __all__ = [
@@ -81,7 +82,7 @@ __all__ = [
 ]
 
 #: The shipped reference scores (inside the package, so a wheel carries them).
-REFERENCE_FILE = Path(__file__).resolve().parent / "reference" / "reference_scores.json"
+REFERENCE_FILE = REFERENCE_DIR / "reference_scores.json"
 #: The file's ``format`` and ``version`` entries: a reader refuses any other.
 FORMAT = "tether-gym reference scores"
 FORMAT_VERSION = 1
@@ -579,7 +580,7 @@ def write_reference(
     scores to ``out`` (atomically); returns them. ``date`` defaults to the time
     ``benchmark_json`` was last written (the end of the benchmark run), in UTC. An existing
     ``out`` is replaced only with ``force``."""
-    from .files import OutputExistsError, atomic_write_text
+    from .common.files import OutputExistsError, atomic_write_text
 
     source = Path(benchmark_json)
     target = Path(out)

@@ -37,7 +37,7 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
-from .files import atomic_write_text
+from .common.files import atomic_write_text
 
 with needs_extra("train", "evaluating policies during training"):
     from stable_baselines3.common.callbacks import BaseCallback

@@ -19,7 +19,7 @@ other ids or algorithms are kept, so runs can be shipped id by id.
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help and bad options answered before the slow imports below
-    from .cli import parse_before_imports
+    from .common.cli import parse_before_imports
 
     parse_before_imports("ship")
 
@@ -37,9 +37,9 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
-from . import cli
-from .commands import command_line, program
-from .files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
+from .common import cli
+from .common.commands import command_line, program
+from .common.files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
 from .safe_format import (
     METADATA_FILE,
     NORMALIZATION_FILE,
@@ -345,7 +345,7 @@ def _write_runs_table(out: Path, candidates: Sequence[dict[str, Any]], command: 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``ship`` (defined in :mod:`agents.cli`, which the console script parses
+    """The command line of ``ship`` (defined in :mod:`agents.common.cli`, which the console script parses
     with before this module's slow imports)."""
     return cli.build_parser("ship")
 

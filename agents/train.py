@@ -41,7 +41,7 @@ evaluation episodes are always at difficulty 1.
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help and bad options answered before the slow imports below
-    from .cli import parse_before_imports
+    from .common.cli import parse_before_imports
 
     parse_before_imports("train")
 
@@ -64,9 +64,10 @@ from tether_gym._optional import needs_extra, require
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
-from . import cli
-from .commands import command_line, program
-from .files import (
+from .common import cli
+from .common.commands import command_line, program
+from .common.data import HYPERPARAMS_DIR
+from .common.files import (
     OutputError,
     OutputExistsError,
     atomic_write_text,
@@ -112,7 +113,7 @@ __all__ = [
     "validate_hyperparameters",
 ]
 
-HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
+
 #: Keys of a hyperparameter entry that are not passed to the algorithm's constructor.
 RUN_KEYS = (
     "n_timesteps",
@@ -1191,7 +1192,7 @@ def _algo_of(cls: type[BaseAlgorithm]) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``train`` (defined in :mod:`agents.cli`, which the console script parses
+    """The command line of ``train`` (defined in :mod:`agents.common.cli`, which the console script parses
     with before this module's slow imports)."""
     return cli.build_parser("train")
 

@@ -46,7 +46,7 @@ statistics, so the exported policy's deterministic actions are the RLlib module'
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help and bad options answered before the slow imports below
-    from .cli import parse_before_imports
+    from .common.cli import parse_before_imports
 
     parse_before_imports("train_rllib")
 
@@ -65,10 +65,10 @@ from tether_gym._optional import needs_extra
 from tether_gym.envs.arguments import MAX_NUM_ENVS
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from . import cli
-from .cli import RLLIB_ALGO as ALGO  # the run directory's prefix and config.yml's algo
-from .commands import command_line, program
-from .files import OutputError, atomic_write_text
+from .common import cli
+from .common.cli import RLLIB_ALGO as ALGO  # the run directory's prefix and config.yml's algo
+from .common.commands import command_line, program
+from .common.files import OutputError, atomic_write_text
 from .pickled import PickleNotTrustedError
 from .safe_format import PolicyFormatError
 from .train import (
@@ -803,7 +803,7 @@ def _lifetime_steps(algo: Any) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``train_rllib`` (defined in :mod:`agents.cli`, which the console script parses
+    """The command line of ``train_rllib`` (defined in :mod:`agents.common.cli`, which the console script parses
     with before this module's slow imports)."""
     return cli.build_parser("train_rllib")
 

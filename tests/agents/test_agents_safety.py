@@ -33,7 +33,7 @@ import agents.train
 from agents.compare import compare
 from agents.convert import REFERENCE_FILE, convert
 from agents.evaluate import rollout
-from agents.files import OutputError, OutputExistsError, atomic_write_text
+from agents.common.files import OutputError, OutputExistsError, atomic_write_text
 from agents.pickled import PickleNotTrustedError, PickleTrustWarning
 from agents.policies import MODELS_DIR, OtherIdWarning, TrainedPolicy, make_controller, shipped_models
 from agents.safe_format import (
@@ -494,7 +494,7 @@ def test_compare_refuses_to_overwrite_and_to_follow_symlinks(tmp_path: Path, mon
 
 
 def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path: Path) -> None:
-    from agents.files import atomic_write
+    from agents.common.files import atomic_write
 
     target = tmp_path / "table.md"
     atomic_write_text(target, "old")

@@ -29,7 +29,7 @@ from agents.benchmark import (
     score_interval,
 )
 from agents.evaluate import rollout
-from agents.files import OutputError, OutputExistsError
+from agents.common.files import OutputError, OutputExistsError
 from agents.policies import make_controller
 
 #: Two-sided 95 % quantile of Student's t with 3 degrees of freedom, from a printed t table

@@ -1,6 +1,6 @@
 """The commands' command lines: every option explained, ``--help`` fast, parsers in one place.
 
-A console script parses its command line with :func:`agents.cli.build_parser` before importing
+A console script parses its command line with :func:`agents.common.cli.build_parser` before importing
 its module, so ``--help`` must not import torch, Stable-Baselines3 or scipy (seconds), and every
 option must say what it does.
 """
@@ -22,7 +22,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-from agents import cli, commands
+from agents.common import cli, commands
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["scripts"]
@@ -98,8 +98,8 @@ def test_help_names_installed_paths_not_the_checkout_only(monkeypatch: pytest.Mo
     """Imported as the installed package, the help texts name its paths and commands
     (tether_gym_agents/..., python -m tether_gym_agents.<command>), never the checkout's
     agents/... or a .venv/bin/python that a wheel user does not have."""
-    monkeypatch.setattr(cli, "_PACKAGE", "tether_gym_agents")
-    monkeypatch.setattr(commands, "__package__", "tether_gym_agents")
+    monkeypatch.setattr(cli, "PACKAGE", "tether_gym_agents")
+    monkeypatch.setattr(commands, "PACKAGE", "tether_gym_agents")
     for command in commands.SCRIPTS:
         text = " ".join(cli.build_parser(command).format_help().split())
         # ship's default --out is the checkout's models folder, and says so.
@@ -146,7 +146,7 @@ def test_a_command_parses_before_its_slow_imports(command: str, form: str) -> No
     )
     probe = (
         "import runpy, sys\n"
-        "from agents import commands\n"
+        "from agents.common import commands\n"
         "for argv in (['--help'], ['--no-such-option']):\n"
         f"    sys.argv = [{commands.SCRIPTS[command]!r}, *argv]\n"
         "    try:\n"

@@ -91,7 +91,7 @@ def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.M
     [
         ("stable_baselines3", "import agents.train", ["stable_baselines3", 'pip install "tether-gym[train]"']),
         ("torch", "import agents.policies", ["torch", 'pip install "tether-gym[train]"']),
-        ("yaml", "import agents.settings", ["yaml", "pyyaml", 'pip install "tether-gym[train]"']),
+        ("yaml", "import agents.common.settings", ["yaml", "pyyaml", 'pip install "tether-gym[train]"']),
         ("scipy", "import agents.baselines", ["scipy", "LQR", 'pip install "tether-gym[train]"']),
         (
             "tensorboard",
@@ -105,7 +105,7 @@ def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.M
         ),
         (
             "matplotlib",
-            "import agents.files, tempfile; agents.files.prepare_table_outputs(tempfile.mkdtemp(), [], [], True, "
+            "import agents.common.files, tempfile; agents.common.files.prepare_table_outputs(tempfile.mkdtemp(), [], [], True, "
             "False, 'x')",
             ["matplotlib", "--no-plots", 'pip install "tether-gym[plots]"'],
         ),
@@ -128,7 +128,7 @@ def test_a_console_script_reports_a_missing_extra_without_a_traceback() -> None:
     probe = (
         "import sys\nsys.modules['stable_baselines3'] = None\n"
         "sys.argv = ['tether-gym-train', '--timesteps', '64']\n"
-        "from agents import commands\ncommands.train()\n"
+        "from agents.common import commands\ncommands.train()\n"
     )
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert result.returncode == 1

@@ -20,7 +20,7 @@ import pytest
 from agents.baselines import BASELINES
 from agents.benchmark import benchmark
 from agents.compare import HELD_OUT_SEED
-from agents.files import OutputExistsError
+from agents.common.files import OutputExistsError
 from agents.policies import TrainedPolicy, shipped_models
 from agents.scoring import (
     FORMAT,

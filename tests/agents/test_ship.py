@@ -9,7 +9,7 @@ import gymnasium as gym
 import pytest
 
 from agents.evaluate import rollout
-from agents.files import OutputError
+from agents.common.files import OutputError
 from agents.policies import TrainedPolicy, make_controller, shipped_models
 from agents.safe_format import verify_manifest
 from agents.selection import evaluation_seeds

@@ -23,7 +23,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - the project's dependency for Python 3.10
     import tomli as tomllib
 
-from agents import commands
+from agents.common import commands
 
 ROOT = Path(__file__).resolve().parents[2]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
@@ -139,7 +139,7 @@ def test_console_scripts_match_the_command_modules() -> None:
         assert scripts[script] == f"tether_gym_agents.commands:{command}"
         assert callable(getattr(commands, command))
         module = (ROOT / "agents" / f"{command}.py").read_text(encoding="utf-8")
-        # The parser is agents.cli's (the console script parses with it before the slow imports).
+        # The parser is agents.common.cli's (the console script parses with it before the slow imports).
         assert 'if __name__ == "__main__":' in module and f'cli.build_parser("{command}")' in module
     agents_scripts = {name for name, target in scripts.items() if target.startswith("tether_gym_agents.")}
     assert agents_scripts == set(commands.SCRIPTS.values())

@@ -3,7 +3,7 @@
 This folder is the package ``agents`` in a checkout and ``tether_gym_agents`` when installed from
 a wheel (``pyproject.toml`` maps the installed name onto the folder, so that a generic top-level
 ``agents`` never lands in site-packages). The modules import each other relatively, and every
-command line they print or record is built here from ``__package__``, so it is one the user can
+command line they print or record is built here from the package name, so it is one the user can
 run under either name.
 
 The console scripts of ``pyproject.toml`` (``tether-gym-train``, ``tether-gym-compare``,
@@ -11,7 +11,7 @@ The console scripts of ``pyproject.toml`` (``tether-gym-train``, ``tether-gym-co
 ``tether-gym-train-ars``)
 run their module exactly as ``python -m`` does, ``__main__`` block and its error handling
 included, so the two ways to run a command cannot drift apart. That block starts by parsing
-the command line with the command's parser (:func:`agents.cli.parse_before_imports`, which
+the command line with the command's parser (:func:`agents.common.cli.parse_before_imports`, which
 imports nothing heavy): ``--help`` and a bad option are answered in a fraction of a second, not
 after the seconds that importing torch and Stable-Baselines3 takes.
 """
@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from tether_gym._optional import MissingExtraError
 
 __all__ = [
+    "PACKAGE",
     "SCRIPTS",
     "ars",
     "benchmark",
@@ -50,6 +51,10 @@ SCRIPTS: dict[str, str] = {
     "ars": "tether-gym-train-ars",
 }
 
+#: The agents package as it is imported now: ``agents`` in a checkout, ``tether_gym_agents`` installed
+#: (this module lives in its ``common`` sub-package).
+PACKAGE = (__package__ or "agents.common").rpartition(".")[0]
+
 # The console script running now (set by its entry point before the module runs), or None under
 # ``python -m`` and when a command's ``main`` is called from Python.
 _running_script: str | None = None
@@ -63,7 +68,7 @@ def program(command: str) -> str:
         raise ValueError(f"unknown command {command!r}: expected one of {', '.join(SCRIPTS)}")
     if _running_script == SCRIPTS[command]:
         return _running_script
-    return f"python -m {__package__}.{command}"
+    return f"python -m {PACKAGE}.{command}"
 
 
 def command_line(command: str, arguments: Sequence[str]) -> str:
@@ -82,7 +87,7 @@ def description(docstring: str | None, command: str | None = None) -> str:
     first_paragraph = docstring.split("\n\n")[0].replace("``", "")
     if command is not None:
         first_paragraph = first_paragraph.replace(f"python -m agents.{command}", program(command))
-    return first_paragraph.replace("python -m agents.", f"python -m {__package__}.")
+    return first_paragraph.replace("python -m agents.", f"python -m {PACKAGE}.")
 
 
 def _run(command: str) -> None:
@@ -91,7 +96,7 @@ def _run(command: str) -> None:
     global _running_script
     _running_script = SCRIPTS[command]
     try:
-        runpy.run_module(f"{__package__}.{command}", run_name="__main__", alter_sys=True)
+        runpy.run_module(f"{PACKAGE}.{command}", run_name="__main__", alter_sys=True)
     except MissingExtraError as error:  # the message names the extra to install: no traceback needed
         sys.exit(f"{program(command)}: error: {error}")
 

@@ -2,7 +2,7 @@
 
 The parsers live here, apart from the commands' modules, because those import torch,
 Stable-Baselines3 and scipy, which take seconds: a command module run as ``__main__`` (by
-``python -m`` or its console script, :mod:`agents.commands`) first parses its command line with
+``python -m`` or its console script, :mod:`agents.common.commands`) first parses its command line with
 :func:`parse_before_imports`, so ``--help`` and a mistyped option answer at once, before any of
 that is imported. This module imports only the standard library and :mod:`tether_gym` (for the
 ids; the package import itself, numba included, is the 0.3 s that remain).
@@ -19,7 +19,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from .commands import description, program
+from .commands import PACKAGE, description, program
 
 __all__ = [
     "HELD_OUT_SEED",
@@ -46,8 +46,6 @@ TRAIN_ALGORITHMS = ("ppo", "sac", "td3")
 #: The algorithm name of agents.train_rllib's runs (the run directory's prefix and config.yml's
 #: ``algo``) and of its hyperparameter file.
 RLLIB_ALGO = "rllib_ppo"
-
-_PACKAGE = __package__ or "agents"
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:
@@ -92,13 +90,13 @@ def add_allow_other_id_argument(parser: argparse.ArgumentParser) -> None:
 def _hyperparams(name: str) -> str:
     """The hyperparameter file ``name`` as the help texts name it: in the installed package
     (``tether_gym_agents/hyperparams/<name>``), or the checkout's ``agents/hyperparams/<name>``."""
-    return f"{_PACKAGE}/hyperparams/{name}"
+    return f"{PACKAGE}/hyperparams/{name}"
 
 
 def _docstring(command: str) -> str:
     """The docstring of the command's module, read from its source without importing it (the
     import is what is slow)."""
-    source = (Path(__file__).resolve().parent / f"{command}.py").read_text(encoding="utf-8")
+    source = (Path(__file__).resolve().parent.parent / f"{command}.py").read_text(encoding="utf-8")
     docstring = ast.get_docstring(ast.parse(source), clean=False)
     return docstring or ""
 
@@ -429,7 +427,7 @@ def parse_before_imports(command: str) -> None:
 
 
 def build_parser(command: str) -> argparse.ArgumentParser:
-    """The argument parser of ``command`` (a key of :data:`agents.commands.SCRIPTS`: every one
+    """The argument parser of ``command`` (a key of :data:`agents.common.commands.SCRIPTS`: every one
     has a parser here, which a test checks)."""
     if command not in _PARSERS:
         raise ValueError(f"unknown command {command!r}: expected one of {', '.join(_PARSERS)}")

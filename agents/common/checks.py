@@ -1,0 +1,26 @@
+"""Checks of the values that the library's functions are called with: one rule each, so that
+every function refuses a bad value in the same words ("episodes must be an integer >= 2; got
+1.5"). The command lines check their arguments with argparse types (:mod:`agents.common.cli`),
+which give argparse's own messages; these are the same rules for callers from Python."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from tether_gym.limits import is_whole_number
+
+__all__ = ["check_int", "is_count"]
+
+
+def check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
+    """``value`` as an ``int``, or a ``ValueError`` naming ``name`` unless it is a Python or numpy
+    integer (not a bool) in ``[minimum, maximum]`` (no upper bound when ``maximum`` is None)."""
+    if not is_whole_number(value) or value < minimum or (maximum is not None and value > maximum):
+        bound = f">= {minimum}" if maximum is None else f"in {minimum}..{maximum}"
+        raise ValueError(f"{name} must be an integer {bound}; got {value!r}")
+    return int(value)
+
+
+def is_count(value: Any) -> bool:
+    """Whether ``value`` is a whole number >= 1 (a Python or numpy integer, not a bool)."""
+    return is_whole_number(value) and value >= 1
