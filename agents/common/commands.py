@@ -21,7 +21,8 @@ from __future__ import annotations
 import runpy
 import shlex
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from tether_gym._optional import MissingExtraError
 
@@ -34,6 +35,7 @@ __all__ = [
     "compare",
     "convert",
     "description",
+    "exit_on_error",
     "program",
     "ship",
     "train",
@@ -88,6 +90,17 @@ def description(docstring: str | None, command: str | None = None) -> str:
     if command is not None:
         first_paragraph = first_paragraph.replace(f"python -m agents.{command}", program(command))
     return first_paragraph.replace("python -m agents.", f"python -m {PACKAGE}.")
+
+
+def exit_on_error(command: str, main: Callable[[], Any], errors: tuple[type[BaseException], ...]) -> None:
+    """Run a command's ``main()`` as its ``__main__`` block does: one of ``errors`` (the refusals
+    whose message names the problem and the fix) ends the process with
+    ``<program>: error: <message>`` and exit status 1, as argparse reports a bad argument, instead
+    of a traceback. Any other exception is a bug and keeps its traceback."""
+    try:
+        main()
+    except errors as error:
+        sys.exit(f"{program(command)}: error: {error}")
 
 
 def _run(command: str) -> None:
