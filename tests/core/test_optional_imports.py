@@ -51,12 +51,6 @@ def parallel_env(monkeypatch: pytest.MonkeyPatch) -> Any:
     return parallel_env("TetherHub-v0")
 
 
-def ppo_share() -> Any:
-    from tether_gym.bench import ppo_env_share
-
-    return ppo_env_share("TetherTetrahedron-v0", 2, 8)
-
-
 CASES: list[tuple[str, str, Callable[[pytest.MonkeyPatch], Any]]] = [
     ("matplotlib", "render_mode='rgb_array'", lambda mp: render_a_frame()),
     ("matplotlib", "render_mode='human'", lambda mp: show_a_window()),
@@ -64,7 +58,6 @@ CASES: list[tuple[str, str, Callable[[pytest.MonkeyPatch], Any]]] = [
     ("pettingzoo", "PettingZoo", lambda mp: fresh_import(mp, "tether_gym.multiagent.parallel")),
     ("stable_baselines3", "tether_gym.sb3", lambda mp: fresh_import(mp, "tether_gym.sb3")),
     ("stable_baselines3", "AgentVecEnv", lambda mp: fresh_import(mp, "tether_gym.multiagent.sb3")),
-    ("stable_baselines3", "PPO", lambda mp: ppo_share()),
 ]
 
 
