@@ -41,7 +41,8 @@ import numpy as np
 
 from tether_gym.multiagent.engine import AgentGraph, Communication, LocalLayout, LocalSensors
 
-from .baselines import BASELINES, Controller, task_of
+from .baselines import BASELINES
+from .controllers.base import Controller, task_of
 
 __all__ = [
     "LocalController",

@@ -265,7 +265,7 @@ def test_training_resumes_from_a_checkpoint(trained_run: Path, tmp_path: Path) -
 def test_curriculum_raises_the_training_difficulty_on_schedule(tmp_path: Path) -> None:
     from stable_baselines3 import PPO
 
-    from agents.baselines import task_of
+    from agents.controllers.base import task_of
     from agents.train import DifficultyCurriculum
 
     schedule = DifficultyCurriculum(0.2, 0.5, 1000)
