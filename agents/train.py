@@ -46,14 +46,9 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
     parse_before_imports("train")
 
 import argparse
-import difflib
-import inspect
-import shutil
 import sys
 import time
-import types
-import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -65,37 +60,30 @@ from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 from tether_gym.sb3 import make_sb3_vec_env
 
 from .common import cli
+from .common.checks import check_int
 from .common.commands import command_line, program
 from .common.data import HYPERPARAMS_DIR
-from .common.files import (
-    OutputError,
-    OutputExistsError,
-    atomic_write_text,
-    check_no_symlinks_inside,
-    prepare_output_dir,
-)
-from .pickled import (
-    PickleNotTrustedError,
-    is_pickle_model,
-    load_pickled_model,
-    normalization_file_of,
-    refuse_untrusted,
-    sb3_model_file,
-)
-from .residual import ResidualVecEnv, check_residual_on
+from .common.files import OutputError, atomic_write_text
+from .pickled import PickleNotTrustedError, load_pickled_model
+from .residual import ResidualVecEnv
 from .safe_format import (
     ACTIVATIONS,
     ALGORITHMS,
     CLASS_KWARGS,
-    METADATA_FILE,
-    POLICY_FILES,
     PolicyFormatError,
-    is_policy_dir,
     load_training_state,
-    read_metadata,
     save_policy,
 )
-from .selection import EVALUATIONS_FILE, SeededEvaluation
+from .selection import SeededEvaluation
+from .training.hyperparams import (
+    RUN_KEYS,
+    SCHEDULE_KEYS,
+    HyperparameterError,
+    load_hyperparameters,
+    schedule,
+    validate_hyperparameters,
+)
+from .training.runs import clear_earlier_run, prepare_run_dir, resume_source
 
 with needs_extra("train", "training"):
     import yaml
@@ -114,487 +102,13 @@ __all__ = [
 ]
 
 
-#: Keys of a hyperparameter entry that are not passed to the algorithm's constructor.
-RUN_KEYS = (
-    "n_timesteps",
-    "n_envs",
-    "normalize",
-    "policy",
-    "env_kwargs",
-    "curriculum",
-    "residual_on",
-    "action_noise_std",
-    "multiagent",
-    "critic_warmup",
-)
-#: The keys of a ``multiagent`` entry (the options of tether_gym.multiagent, checked there).
-MULTIAGENT_KEYS = ("communication", "reward", "local_observation_noise")
-#: Constructor arguments that agents.train sets itself, and where the user sets them instead.
-CONTROLLED_KEYS = {
-    "env": "the env comes from --env",
-    "seed": "use --seed",
-    "device": "training runs on the CPU",
-    "verbose": "use --verbose",
-    "tensorboard_log": "logs go to <run>/tensorboard",
-    "_init_setup_model": "internal to SB3",
-}
-#: Keys that take a number or "lin_<number>" (linear decay to 0 over training).
-SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
-#: Files an earlier run of agents.train may have left (this format and the pickle-based one).
-LEGACY_RUN_FILES = ("model.zip", "vecnormalize.pkl")
-LEGACY_BEST_FILES = ("best_model.zip", "vecnormalize.pkl", "evaluations.npz")
-
-
-class HyperparameterError(ValueError):
-    """A hyperparameter file or entry that cannot be trained with; the message names the key."""
-
-
-# ---------------------------------------------------------------------------------------------
-# Hyperparameters
-# ---------------------------------------------------------------------------------------------
-
-RUN_CONFIG_KEYS = frozenset({"algo", "env_id", "hyperparams"})
-
-
-def load_hyperparameters(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The checked hyperparameters of ``algo`` for ``env_id``: the id's entry of the YAML file, or
-    its ``default`` entry. ``path`` overrides the package's ``hyperparams/<algo>.yml``; it may also be a
-    run's ``config.yml`` (as every run directory and shipped model holds), whose recorded
-    hyperparameters are then used as they are.
-
-    Raises :class:`HyperparameterError` (naming the file, the entry and the key) for unreadable
-    YAML, a missing entry, a missing ``n_timesteps``, an unknown key, or a value of the wrong
-    type; FileNotFoundError if the file does not exist."""
-    if algo not in ALGORITHMS:
-        raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
-    file = Path(path) if path is not None else HYPERPARAMS_DIR / f"{algo}.yml"
-    entry, where = read_hyperparameter_entry(file, env_id, algo)
-    return validate_hyperparameters(algo, entry, where=where)
-
-
-def read_hyperparameter_entry(file: Path, env_id: str, algo: str) -> tuple[dict[str, Any], str]:
-    """The unchecked entry of ``env_id`` (or ``default``) in the hyperparameter file ``file``, or
-    the hyperparameters a run's ``config.yml`` recorded (which must be an ``algo`` run on
-    ``env_id``), and where it was found, for messages. Raises as :func:`load_hyperparameters`."""
-    if not file.is_file():
-        raise FileNotFoundError(f"hyperparameter file {file} does not exist")
-    try:
-        table = yaml.safe_load(file.read_bytes().decode("utf-8"))
-    except UnicodeDecodeError as error:
-        raise HyperparameterError(f"{file} is not UTF-8 text ({error})") from error
-    except yaml.YAMLError as error:
-        raise HyperparameterError(f"{file} is not valid YAML: {error}") from error
-    if table is None:
-        table = {}
-    if not isinstance(table, dict):
-        raise HyperparameterError(
-            f"{file} must map env ids (or 'default') to hyperparameter entries; got a {type(table).__name__}"
-        )
-    if RUN_CONFIG_KEYS <= table.keys():
-        return _run_config_hyperparameters(algo, env_id, file, table)
-    name = env_id if env_id in table else "default"
-    if name not in table:
-        raise HyperparameterError(
-            f"{file} has no entry for {env_id!r} and no 'default' entry; entries: {sorted(map(str, table))}"
-        )
-    entry = table[name]
-    if not isinstance(entry, dict):
-        raise HyperparameterError(f"{file}, entry {name!r}: must be a mapping of hyperparameters; got {entry!r}")
-    return entry, f"{file}, entry {name!r}"
-
-
-def _run_config_hyperparameters(
-    algo: str, env_id: str, file: Path, config: dict[str, Any]
-) -> tuple[dict[str, Any], str]:
-    """The hyperparameters recorded in a run's (or a shipped model's) ``config.yml``: training with
-    them reproduces that run whatever the package's ``hyperparams`` files say today."""
-    for key, wanted in (("algo", algo), ("env_id", env_id)):
-        if config[key] != wanted:
-            option = "--algo" if key == "algo" else "--env"
-            raise HyperparameterError(
-                f"{file} records a {config['algo']} run on {config['env_id']}: pass "
-                f"{option} {config[key]} to reproduce it (got {wanted})"
-            )
-    if not isinstance(config["hyperparams"], dict):
-        raise HyperparameterError(f"{file}: 'hyperparams' must be a mapping; got {config['hyperparams']!r}")
-    return config["hyperparams"], f"{file}, 'hyperparams'"
-
-
-def _components(annotation: Any) -> tuple[Any, ...]:
-    """The alternatives of a type annotation (``int | None`` -> ``(int, NoneType)``)."""
-    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
-        return typing.get_args(annotation)
-    return (annotation,)
-
-
-def _plain(components: tuple[Any, ...]) -> set[Any]:
-    """The annotation's alternatives reduced to what YAML can give: int, float, bool, str, None,
-    dict, tuple (for ``tuple[int, str]``)."""
-    kinds = set()
-    for component in components:
-        origin = typing.get_origin(component) or component
-        if origin in (int, float, bool, str, dict, tuple, type(None)):
-            kinds.add(origin)
-        elif origin is Mapping:
-            kinds.add(dict)
-    return kinds
-
-
-def _number_text_hint(value: str) -> str:
-    try:
-        float(value)
-    except ValueError:
-        return ""
-    return f" (YAML reads {value} as text: write it with a decimal point and a signed exponent, e.g. 1.0e+6)"
-
-
-def _check_value(key: str, value: Any, annotation: Any, where: str) -> Any:
-    """``value`` checked against ``annotation`` (and converted: integral floats to int where an int
-    is expected, lists to tuples where a tuple is). Raises HyperparameterError naming ``key``."""
-    kinds = _plain(_components(annotation))
-    label = f"{where}: {key!r}"
-    if value is None:
-        if type(None) in kinds:
-            return None
-        raise HyperparameterError(f"{label} is empty; give it a value or remove the key")
-    if not kinds - {type(None)}:
-        raise HyperparameterError(f"{label} cannot be set from a YAML file (it takes a Python object)")
-    if isinstance(value, (bool, int, float, str)):
-        return _check_scalar(label, value, kinds)
-    if isinstance(value, list) and tuple in kinds:
-        return _check_frequency(label, value)
-    if isinstance(value, dict) and dict in kinds:
-        return _check_mapping(key, value, where)
-    raise _mismatch(label, value, kinds)
-
-
-def _mismatch(label: str, value: Any, kinds: set[Any]) -> HyperparameterError:
-    return HyperparameterError(f"{label} must be {_describe(kinds)}; got {value!r} ({type(value).__name__})")
-
-
-def _check_scalar(label: str, value: bool | int | float | str, kinds: set[Any]) -> Any:
-    """A YAML scalar checked against the annotation's alternatives ``kinds`` (see :func:`_plain`):
-    ints become floats where only a float is expected, integral floats ints where only an int is."""
-    if isinstance(value, bool):
-        if bool in kinds:
-            return value
-        raise HyperparameterError(f"{label} must be {_describe(kinds)}, not {str(value).lower()}")
-    if isinstance(value, str):
-        if str in kinds:
-            return value
-        raise HyperparameterError(
-            f"{label} must be {_describe(kinds)}; got the text {value!r}{_number_text_hint(value)}"
-        )
-    if isinstance(value, int):
-        if int in kinds:
-            return value
-        if float in kinds:
-            return float(value)
-    else:
-        if float in kinds:
-            return value
-        if int in kinds:
-            if value.is_integer():
-                return int(value)
-            raise HyperparameterError(f"{label} must be an integer; got {value!r}")
-    raise _mismatch(label, value, kinds)
-
-
-def _check_frequency(label: str, value: list[Any]) -> tuple[int, str]:
-    """A YAML list given for a ``tuple[int, str]`` (SB3's ``train_freq``): [integer, 'step' or 'episode']."""
-    if (
-        len(value) == 2
-        and isinstance(value[0], int)
-        and not isinstance(value[0], bool)
-        and value[1] in ("step", "episode")
-    ):
-        return (value[0], value[1])
-    raise HyperparameterError(f"{label} must be an integer or [integer, 'step' or 'episode']; got {value!r}")
-
-
-def _check_mapping(key: str, value: dict[Any, Any], where: str) -> dict[Any, Any]:
-    """A YAML mapping given for a dict: text keys, and no number written as text among its values."""
-    if not all(isinstance(name, str) for name in value):
-        raise HyperparameterError(f"{where}: {key!r} must have string keys; got {list(value)}")
-    for name, entry in value.items():
-        if isinstance(entry, str) and _number_text_hint(entry):
-            raise HyperparameterError(
-                f"{where}: '{key}.{name}' is the text {entry!r}, not a number{_number_text_hint(entry)}"
-            )
-    return value
-
-
-def _describe(kinds: set[Any]) -> str:
-    names = {
-        int: "an integer",
-        float: "a number",
-        bool: "true or false",
-        str: "text",
-        dict: "a mapping",
-        tuple: "[integer, 'step' or 'episode']",
-        type(None): "empty",
-    }
-    if float in kinds:
-        kinds = kinds - {int}
-    return " or ".join(names[kind] for kind in sorted(kinds, key=lambda kind: list(names).index(kind)))
-
-
-def _unknown_key(key: str, known: list[str], where: str, what: str) -> HyperparameterError:
-    close = difflib.get_close_matches(key, known, n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
-    return HyperparameterError(f"{where}: unknown key {key!r}{hint}; {what} accepts {sorted(known)}")
-
-
-def _keyword_parameters(cls: type) -> dict[str, inspect.Parameter]:
-    keyword = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    return {
-        name: p
-        for name, p in inspect.signature(cls.__init__).parameters.items()
-        if name != "self" and p.kind in keyword
-    }
-
-
-def _check_range(key: str, value: Any, where: str) -> None:
-    """The ranges SB3 would otherwise reject deep inside, or silently misuse."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return
-    positive = (
-        "n_timesteps",
-        "n_envs",
-        "n_steps",
-        "batch_size",
-        "n_epochs",
-        "buffer_size",
-        "learning_rate",
-        "clip_range",
-        "train_freq",
-        "policy_delay",
-        "target_update_interval",
-    )
-    non_negative = (
-        "learning_starts",
-        "vf_coef",
-        "max_grad_norm",
-        "target_policy_noise",
-        "target_noise_clip",
-        "action_noise_std",
-        "critic_warmup",
-    )
-    unit = ("gamma", "gae_lambda", "tau")
-    if key in positive and not value > 0:
-        raise HyperparameterError(f"{where}: {key!r} must be positive; got {value!r}")
-    if key in non_negative and not value >= 0:
-        raise HyperparameterError(f"{where}: {key!r} must be >= 0; got {value!r}")
-    if key in unit and not 0 < value <= 1:
-        raise HyperparameterError(f"{where}: {key!r} must be in (0, 1]; got {value!r}")
-
-
-def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "hyperparameters") -> dict[str, Any]:
-    """A copy of ``entry`` with every key checked for ``algo`` (see :func:`load_hyperparameters`);
-    ``where`` (file and entry) starts every message."""
-    if algo not in ALGORITHMS:
-        raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
-    cls = ALGORITHMS[algo]
-    parameters = _keyword_parameters(cls)
-    accepted = sorted(set(parameters) - {"policy", *CONTROLLED_KEYS} | set(RUN_KEYS))
-    checked: dict[str, Any] = {}
-    policy = entry.get("policy", "MlpPolicy")
-    if not isinstance(policy, str) or policy not in cls.policy_aliases:
-        raise HyperparameterError(f"{where}: 'policy' must be one of {sorted(cls.policy_aliases)}; got {policy!r}")
-    if "n_timesteps" not in entry:
-        raise HyperparameterError(
-            f"{where}: 'n_timesteps' is missing: add the number of env steps to train for "
-            f"(e.g. n_timesteps: 2000000), or pass --timesteps"
-        )
-    for key, value in entry.items():
-        if not isinstance(key, str):
-            raise HyperparameterError(f"{where}: key {key!r} is not text")
-        if key in CONTROLLED_KEYS:
-            raise HyperparameterError(
-                f"{where}: {key!r} cannot be set in a hyperparameter file: {CONTROLLED_KEYS[key]}"
-            )
-        if key in RUN_KEYS:
-            checked[key] = _check_run_key(algo, key, value, where)
-        elif key == "policy_kwargs":
-            checked[key] = _check_policy_kwargs(value, cls.policy_aliases[policy], where)
-        elif key in parameters:
-            checked[key] = _check_algorithm_key(algo, key, value, parameters, where)
-        else:
-            raise _unknown_key(key, accepted, where, f"{algo} (with {program('train')})")
-        _check_range(key, checked[key], where)
-    return checked
-
-
-def _check_run_key(algo: str, key: str, value: Any, where: str) -> Any:
-    """One of :data:`RUN_KEYS` (what agents.train itself reads, not the algorithm) checked and converted."""
-    if key in ("n_timesteps", "n_envs"):
-        return _check_value(key, value, int, where)
-    if key == "policy":
-        return value  # validate_hyperparameters checked it against the algorithm's policies
-    if key == "normalize":
-        return _check_normalize(value, where)
-    if key == "env_kwargs":
-        return _check_value(key, value, dict | None, where)
-    if key == "curriculum":
-        return _check_curriculum(value, where)
-    if key == "action_noise_std":
-        if algo == "ppo":
-            raise HyperparameterError(
-                f"{where}: 'action_noise_std' is for sac and td3; PPO explores with "
-                "its own policy noise (policy_kwargs.log_std_init)"
-            )
-        return _check_value(key, value, float, where)
-    if key == "residual_on":
-        try:
-            return check_residual_on(value, f"{where}: 'residual_on'")
-        except ValueError as error:
-            raise HyperparameterError(str(error)) from None
-    if key == "multiagent":
-        return _check_multiagent(value, where)
-    if key == "critic_warmup":
-        return _check_value(key, value, int, where)
-    raise AssertionError(f"RUN_KEYS has {key!r}, which _check_run_key does not handle")
-
-
-def _check_multiagent(value: Any, where: str) -> dict[str, Any]:
-    """A ``multiagent`` entry: a mapping of multi-agent options (:data:`MULTIAGENT_KEYS`; their
-    values are checked when the env is built), possibly empty (the defaults)."""
-    if value is None:
-        value = {}
-    if not isinstance(value, dict):
-        raise HyperparameterError(
-            f"{where}: 'multiagent' must be a mapping of multi-agent options ({', '.join(MULTIAGENT_KEYS)}), "
-            f"e.g. {{}} for the defaults; got {value!r}"
-        )
-    for key in value:
-        if key not in MULTIAGENT_KEYS:
-            raise _unknown_key(str(key), list(MULTIAGENT_KEYS), f"{where}, 'multiagent'", "multi-agent option")
-    return dict(value)
-
-
-def _check_algorithm_key(
-    algo: str, key: str, value: Any, parameters: Mapping[str, inspect.Parameter], where: str
-) -> Any:
-    """A constructor argument of ``algo`` (``parameters``: its keyword parameters) checked against
-    its annotation, or a learning-rate style schedule (see :func:`_schedule`)."""
-    if key in SCHEDULE_KEYS:
-        if value is None and key == "clip_range_vf":
-            return None
-        _schedule(value, key, where)
-        return value
-    if key in ("ent_coef", "target_entropy") and isinstance(value, str) and algo == "sac":
-        if not (value == "auto" or key == "ent_coef" and value.startswith("auto_") and _is_number(value[5:])):
-            raise HyperparameterError(
-                f"{where}: {key!r} must be a number or 'auto'"
-                f"{' or auto_<number>' if key == 'ent_coef' else ''}; got {value!r}"
-            )
-        return value
-    return _check_value(key, value, parameters[key].annotation, where)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _check_normalize(value: Any, where: str) -> bool | dict[str, Any]:
-    if isinstance(value, bool):
-        return value
-    if not isinstance(value, dict):
-        raise HyperparameterError(
-            f"{where}: 'normalize' must be true, false or a mapping of VecNormalize options; got {value!r}"
-        )
-    parameters = {name: p for name, p in _keyword_parameters(VecNormalize).items() if name not in ("venv", "training")}
-    checked = {}
-    for key, option in value.items():
-        if key not in parameters:
-            raise _unknown_key(str(key), list(parameters), f"{where}: normalize", "VecNormalize")
-        checked[key] = _check_value(f"normalize.{key}", option, parameters[key].annotation, where)
-        if key in ("clip_obs", "clip_reward", "epsilon") and not checked[key] > 0:
-            raise HyperparameterError(f"{where}: 'normalize.{key}' must be positive; got {option!r}")
-        _check_range(key, checked[key], f"{where}: normalize")
-    return checked
-
-
-def _check_curriculum(value: Any, where: str) -> dict[str, float] | None:
-    if value is None or value is False:
-        return None
-    if not isinstance(value, dict) or set(value) != {"start", "fraction"}:
-        raise HyperparameterError(
-            f"{where}: 'curriculum' must be a mapping with exactly 'start' and 'fraction'; got {value!r}"
-        )
-    checked = {key: _check_value(f"curriculum.{key}", value[key], float, where) for key in ("start", "fraction")}
-    if not (0.0 <= checked["start"] <= 1.0 and 0.0 < checked["fraction"] <= 1.0):
-        raise HyperparameterError(f"{where}: 'curriculum' needs start in [0, 1] and fraction in (0, 1]; got {value}")
-    return checked
-
-
-def _check_net_arch(value: Any, where: str) -> Any:
-    def layers(sizes: Any, label: str) -> list[int]:
-        if not isinstance(sizes, list) or not all(
-            isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in sizes
-        ):
-            raise HyperparameterError(f"{where}: {label!r} must be a list of positive layer sizes; got {sizes!r}")
-        return sizes
-
-    if isinstance(value, dict):
-        return {key: layers(sizes, f"policy_kwargs.net_arch.{key}") for key, sizes in value.items()}
-    return layers(value, "policy_kwargs.net_arch")
-
-
-def _check_policy_kwargs(value: Any, policy_class: type, where: str) -> dict[str, Any]:
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise HyperparameterError(f"{where}: 'policy_kwargs' must be a mapping; got {value!r}")
-    parameters = {
-        name: p
-        for name, p in _keyword_parameters(policy_class).items()
-        if name not in ("observation_space", "action_space", "lr_schedule")
-    }
-    checked = {}
-    for key, option in value.items():
-        label = f"policy_kwargs.{key}"
-        if key not in parameters:
-            raise _unknown_key(str(key), list(parameters), f"{where}: policy_kwargs", policy_class.__name__)
-        if key in CLASS_KWARGS:
-            if option not in CLASS_KWARGS[key]:
-                raise HyperparameterError(
-                    f"{where}: {label!r} must be one of {sorted(CLASS_KWARGS[key])}; got {option!r}"
-                )
-            checked[key] = option
-        elif key == "net_arch":
-            checked[key] = _check_net_arch(option, where)
-        else:
-            checked[key] = _check_value(label, option, parameters[key].annotation, where)
-    return checked
-
-
-def _schedule(value: Any, name: str, where: str = "hyperparameters") -> float | Callable[[float], float]:
-    """A positive number, or "lin_<number>": linear decay from that number to 0 over training."""
-    if isinstance(value, str):
-        if not (value.startswith("lin_") and _is_number(value[4:]) and float(value[4:]) > 0):
-            raise HyperparameterError(
-                f"{where}: {name!r} must be a positive number or 'lin_<number>' "
-                f"(linear decay to 0); got {value!r}{_number_text_hint(value)}"
-            )
-        start = float(value[4:])
-        return lambda progress_remaining: progress_remaining * start
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-        raise HyperparameterError(f"{where}: {name!r} must be a positive number or 'lin_<number>'; got {value!r}")
-    return float(value)
-
-
 def _algorithm_kwargs(hyperparams: Mapping[str, Any]) -> dict[str, Any]:
     """Constructor keyword arguments from a checked hyperparameter entry: schedules and
     policy_kwargs' class names turned into Python objects."""
     kwargs = {key: value for key, value in hyperparams.items() if key not in RUN_KEYS}
     for key in SCHEDULE_KEYS:
         if kwargs.get(key) is not None:
-            kwargs[key] = _schedule(kwargs[key], key)
+            kwargs[key] = schedule(kwargs[key], key)
     policy_kwargs = dict(kwargs.get("policy_kwargs") or {})
     for key, table in CLASS_KWARGS.items():
         if key in policy_kwargs:
@@ -817,117 +331,6 @@ class DifficultyCurriculum(BaseCallback):
 
 
 # ---------------------------------------------------------------------------------------------
-# The run directory
-# ---------------------------------------------------------------------------------------------
-
-
-def _earlier_run_files(run: Path) -> list[str]:
-    """What an earlier run left in ``run`` (relative names), empty for a new run directory."""
-    found = [name for name in ("config.yml", METADATA_FILE, *LEGACY_RUN_FILES) if (run / name).exists()]
-    for sub in ("best", "checkpoints"):
-        if (run / sub).is_dir() and any((run / sub).iterdir()):
-            found.append(f"{sub}/")
-    return found
-
-
-def _prepare_run_dir(out: str | Path, env_id: str, algo: str, seed: int, force: bool) -> Path:
-    """The run directory ``out/env_id/algo_seed<seed>`` (``algo`` may carry a suffix, e.g.
-    ``ppo_multiagent``), checked before any work: usable, no symlinks in it, and no earlier run
-    unless ``force``."""
-    out = Path(out)
-    if out.is_symlink():
-        raise OutputError(f"--out {out} is a symlink; refusing to write through it: pass the real directory")
-    run = prepare_output_dir(out / env_id / f"{algo}_seed{seed}", argument="--out")
-    check_no_symlinks_inside(run)
-    earlier = _earlier_run_files(run)
-    if earlier and not force:
-        raise OutputExistsError(
-            f"{run} already holds a run ({', '.join(earlier)}) with the same --out, env, algorithm and seed: pass "
-            f"--force to replace it (its models, best/ and checkpoints/ are deleted; TensorBoard logs are kept), "
-            f"or choose another --seed or --out"
-        )
-    return run
-
-
-def _clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
-    """Delete what an earlier run wrote (models, best/, checkpoints/), except the paths in
-    ``keep`` (the checkpoint being resumed). TensorBoard logs stay: SB3 numbers each run's
-    subdirectory, so they do not mix."""
-    keep = {path.resolve() for path in keep}
-
-    def remove(path: Path) -> None:
-        if path.resolve() in keep or not (path.exists() or path.is_symlink()):
-            return
-        if path.is_dir() and not path.is_symlink():
-            shutil.rmtree(path)
-        else:
-            path.unlink()
-
-    if run.resolve() not in keep:
-        for name in (*POLICY_FILES, *LEGACY_RUN_FILES):
-            remove(run / name)
-    best = run / "best"
-    if best.is_dir() and best.resolve() not in keep:
-        for name in (*POLICY_FILES, EVALUATIONS_FILE, *LEGACY_BEST_FILES):
-            remove(best / name)
-    checkpoints = run / "checkpoints"
-    if checkpoints.is_dir():
-        for entry in checkpoints.iterdir():
-            ours = (entry.is_dir() and (entry / METADATA_FILE).is_file()) or (
-                entry.suffix in (".zip", ".pkl") and entry.name.startswith(f"{algo}_")
-            )
-            if ours:
-                remove(entry)
-
-
-def _resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: str) -> tuple[str, Path, set[Path]]:
-    """What ``--resume`` names: ``("safe", policy directory, paths)`` or ``("pickle", model .zip,
-    paths)``, checked before any work: PickleNotTrustedError for a pickle without the opt-in,
-    PolicyFormatError for a safe checkpoint of another algorithm or env, or without training state."""
-    path = Path(resume)
-    if not path.exists():
-        raise FileNotFoundError(
-            f"--resume {path} does not exist: pass a checkpoint directory "
-            f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory"
-        )
-    if is_policy_dir(path):
-        metadata = read_metadata(path)
-        if metadata["algo"] != algo:
-            raise PolicyFormatError(
-                f"--resume {path} is a {metadata['algo']} checkpoint; resume it with --algo "
-                f"{metadata['algo']} (not {algo})"
-            )
-        if metadata["env_id"] != env_id:
-            raise PolicyFormatError(
-                f"--resume {path} was trained on {metadata['env_id']}; resume it with --env "
-                f"{metadata['env_id']} (not {env_id})"
-            )
-        if not metadata["training_state"]:
-            raise PolicyFormatError(
-                f"--resume {path} holds a policy for inference only (no optimizer state): resume from a checkpoint "
-                f"that {program('train')} wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run "
-                "directory)"
-            )
-        return "safe", path, {path}
-    if is_pickle_model(path):
-        if not trust_pickle:
-            refuse_untrusted(path, opt_in="--trust-pickle")
-        model_file = sb3_model_file(path)
-        statistics = normalization_file_of(model_file)
-        return "pickle", model_file, {model_file} | ({statistics} if statistics else set())
-    raise FileNotFoundError(
-        f"--resume {path} holds no checkpoint: pass a directory with {METADATA_FILE} "
-        f"(or, with --trust-pickle, an SB3 .zip)"
-    )
-
-
-def _positive_int(name: str, value: Any, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
-    return value
-
-
-# ---------------------------------------------------------------------------------------------
 # Training
 # ---------------------------------------------------------------------------------------------
 
@@ -968,11 +371,11 @@ def train(
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {sorted(ALGORITHMS)}")
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; tether-gym ids are {list(ENV_IDS)}")
-    _positive_int("seed", seed, minimum=0)
-    _positive_int("eval_freq", eval_freq)
-    _positive_int("eval_episodes", eval_episodes)
-    _positive_int("checkpoint_freq", checkpoint_freq)
-    _positive_int("verbose", verbose, minimum=0)
+    check_int("seed", seed, 0)
+    check_int("eval_freq", eval_freq, 1)
+    check_int("eval_episodes", eval_episodes, 1)
+    check_int("checkpoint_freq", checkpoint_freq, 1)
+    check_int("verbose", verbose, 0)
     # SB3 finds these missing only when training starts, and then names its own extra, not ours.
     require("tensorboard", "train", "the training's TensorBoard logs")
     if progress_bar:
@@ -981,21 +384,21 @@ def train(
     hyperparams = load_hyperparameters(algo, env_id, hyperparams_file)
     hyperparams.update(overrides or {})
     if timesteps is not None:
-        hyperparams["n_timesteps"] = _positive_int("timesteps", timesteps)
+        hyperparams["n_timesteps"] = check_int("timesteps", timesteps, 1)
     if num_envs is not None:
-        hyperparams["n_envs"] = _positive_int("num_envs", num_envs)
+        hyperparams["n_envs"] = check_int("num_envs", num_envs, 1)
     hyperparams = validate_hyperparameters(algo, hyperparams, where="hyperparameters (with overrides)")
     n_envs = int(hyperparams.get("n_envs", 1))
     total = int(hyperparams["n_timesteps"])
     resume_kind, resume_path, keep = (
-        _resume_source(resume, trust_pickle, algo, env_id) if resume is not None else (None, None, set())
+        resume_source(resume, trust_pickle, algo, env_id) if resume is not None else (None, None, set())
     )
     multiagent = hyperparams.get("multiagent")
     if multiagent is not None and hyperparams.get("residual_on") is not None:
         raise HyperparameterError("'multiagent' and 'residual_on' do not combine: a residual policy is centralised")
     from .ship import model_name
 
-    run = _prepare_run_dir(out, env_id, model_name({"algo": algo, "multiagent": multiagent}), seed, force)
+    run = prepare_run_dir(out, env_id, model_name({"algo": algo, "multiagent": multiagent}), seed, force)
 
     record = {
         "algo": algo,
@@ -1020,7 +423,7 @@ def train(
     total = _whole_rollouts(model, total, "--timesteps" if timesteps is not None else "n_timesteps")
     hyperparams["n_timesteps"] = total  # config.yml records what runs, and reproduces it
     if force:
-        _clear_earlier_run(run, algo, keep)
+        clear_earlier_run(run, algo, keep)
     atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
     provenance = {"seed": seed, "command": command, "config": "config.yml of the run directory"}
     callback_items: list[BaseCallback] = [

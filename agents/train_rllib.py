@@ -66,24 +66,23 @@ from tether_gym.envs.arguments import MAX_NUM_ENVS
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 from .common import cli
+from .common.checks import check_int
 from .common.cli import RLLIB_ALGO as ALGO  # the run directory's prefix and config.yml's algo
 from .common.commands import command_line, program
+from .common.data import HYPERPARAMS_DIR
 from .common.files import OutputError, atomic_write_text
 from .pickled import PickleNotTrustedError
 from .safe_format import PolicyFormatError
-from .train import (
-    HYPERPARAMS_DIR,
+from .train import print_evaluation_summary
+from .training.hyperparams import (
     HyperparameterError,
-    _check_multiagent,
-    _check_value,
-    _clear_earlier_run,
-    _positive_int,
-    _prepare_run_dir,
-    _schedule,
-    _unknown_key,
-    print_evaluation_summary,
+    check_multiagent,
+    check_value,
     read_hyperparameter_entry,
+    schedule,
+    unknown_key_error,
 )
+from .training.runs import clear_earlier_run, prepare_run_dir
 
 with needs_extra("rllib", "training on RLlib"):
     import yaml
@@ -169,7 +168,7 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
     checked: dict[str, Any] = {}
     for key, value in entry.items():
         if key not in KEYS:
-            raise _unknown_key(str(key), list(KEYS), where, program("train_rllib"))
+            raise unknown_key_error(str(key), list(KEYS), where, program("train_rllib"))
         checked[key] = _check_entry_value(str(key), value, where)
     if "n_timesteps" not in checked:
         raise HyperparameterError(f"{where}: 'n_timesteps' is missing (the total env steps to train)")
@@ -189,7 +188,7 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
         if checked.get(key) is not None and not checked[key] > 0:
             raise HyperparameterError(f"{where}: {key!r} must be > 0; got {checked[key]}")
     if "lr" in checked:
-        _schedule(checked["lr"], "lr", where)  # a positive number or lin_<number>, or an error
+        schedule(checked["lr"], "lr", where)  # a positive number or lin_<number>, or an error
     if checked.get("fcnet_activation", "tanh") not in ACTIVATIONS:
         raise HyperparameterError(
             f"{where}: 'fcnet_activation' must be one of {list(ACTIVATIONS)} (the activations the policy format "
@@ -203,14 +202,14 @@ def validate_rllib_hyperparameters(entry: Mapping[str, Any], where: str = "hyper
 
 
 def _check_entry_value(key: str, value: Any, where: str) -> Any:
-    """One known key's value, checked (and converted as :func:`~agents.train._check_value` does)."""
+    """One known key's value, checked (and converted as :func:`~agents.training.hyperparams.check_value` does)."""
     if key == "multiagent":
-        return _check_multiagent(value, where)
+        return check_multiagent(value, where)
     if key == "fcnet_hiddens":
         if not (isinstance(value, list) and value and all(_is_count(size) for size in value)):
             raise HyperparameterError(f"{where}: 'fcnet_hiddens' must be a list of layer sizes >= 1; got {value!r}")
         return [int(size) for size in value]
-    return _check_value(key, value, KEYS[key], where)
+    return check_value(key, value, KEYS[key], where)
 
 
 def _check_multiagent_run(checked: Mapping[str, Any], where: str) -> None:
@@ -614,13 +613,13 @@ def train_rllib(
     started = time.perf_counter()
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; tether-gym ids are {list(ENV_IDS)}")
-    _positive_int("seed", seed, minimum=0)
-    _positive_int("num_env_runners", num_env_runners, minimum=0)
-    _positive_int("eval_freq", eval_freq)
-    _positive_int("eval_episodes", eval_episodes)
-    _positive_int("checkpoint_freq", checkpoint_freq)
+    check_int("seed", seed, 0)
+    check_int("num_env_runners", num_env_runners, 0)
+    check_int("eval_freq", eval_freq, 1)
+    check_int("eval_episodes", eval_episodes, 1)
+    check_int("checkpoint_freq", checkpoint_freq, 1)
     if num_cpus is not None:
-        _positive_int("num_cpus", num_cpus)
+        check_int("num_cpus", num_cpus, 1)
         if address is not None:
             raise ValueError(
                 "num_cpus sets the size of a local Ray instance; with --address the cluster's nodes set it"
@@ -629,9 +628,9 @@ def train_rllib(
     if multiagent:
         hyperparams["multiagent"] = hyperparams.get("multiagent") or {}
     if timesteps is not None:
-        hyperparams["n_timesteps"] = _positive_int("timesteps", timesteps)
+        hyperparams["n_timesteps"] = check_int("timesteps", timesteps, 1)
     if envs_per_runner is not None:
-        hyperparams["num_envs_per_env_runner"] = _positive_int("envs_per_runner", envs_per_runner)
+        hyperparams["num_envs_per_env_runner"] = check_int("envs_per_runner", envs_per_runner, 1)
     hyperparams = validate_rllib_hyperparameters(hyperparams, where="hyperparameters (with overrides)")
     envs = int(hyperparams.get("num_envs_per_env_runner", 1))
     if envs > MAX_NUM_ENVS:
@@ -644,7 +643,7 @@ def train_rllib(
     ray = _ray()
     from .ship import model_name
 
-    run = _prepare_run_dir(out, env_id, model_name({"algo": ALGO, "multiagent": multiagent}), seed, force)
+    run = prepare_run_dir(out, env_id, model_name({"algo": ALGO, "multiagent": multiagent}), seed, force)
     owns_ray = connect(address, num_cpus)
     try:
         _check_resources(num_env_runners)
@@ -652,7 +651,7 @@ def train_rllib(
         if checkpoint is not None:
             algo.restore_from_path(str(checkpoint.resolve()))
         if force:
-            _clear_earlier_run(run, ALGO, {checkpoint} if checkpoint else set())
+            clear_earlier_run(run, ALGO, {checkpoint} if checkpoint else set())
         record = {
             "algo": ALGO,
             "env_id": env_id,

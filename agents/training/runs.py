@@ -1,0 +1,127 @@
+"""Run directories of the trainers: ``<out>/<env>/<algo>_seed<seed>/``, checked before any work
+(usable, no symlinks inside, no earlier run unless ``--force``), an earlier run's files cleared
+when it is replaced, and what ``--resume`` names checked against the run to be trained."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from ..common.commands import program
+from ..common.files import OutputError, OutputExistsError, check_no_symlinks_inside, prepare_output_dir
+from ..pickled import is_pickle_model, normalization_file_of, refuse_untrusted, sb3_model_file
+from ..safe_format import METADATA_FILE, POLICY_FILES, PolicyFormatError, is_policy_dir, read_metadata
+from ..selection import EVALUATIONS_FILE
+
+__all__ = [
+    "LEGACY_BEST_FILES",
+    "LEGACY_RUN_FILES",
+    "clear_earlier_run",
+    "earlier_run_files",
+    "prepare_run_dir",
+    "resume_source",
+]
+
+#: Files an earlier run of agents.train may have left (this format and the pickle-based one).
+LEGACY_RUN_FILES = ("model.zip", "vecnormalize.pkl")
+LEGACY_BEST_FILES = ("best_model.zip", "vecnormalize.pkl", "evaluations.npz")
+
+
+def earlier_run_files(run: Path) -> list[str]:
+    """What an earlier run left in ``run`` (relative names), empty for a new run directory."""
+    found = [name for name in ("config.yml", METADATA_FILE, *LEGACY_RUN_FILES) if (run / name).exists()]
+    for sub in ("best", "checkpoints"):
+        if (run / sub).is_dir() and any((run / sub).iterdir()):
+            found.append(f"{sub}/")
+    return found
+
+
+def prepare_run_dir(out: str | Path, env_id: str, algo: str, seed: int, force: bool) -> Path:
+    """The run directory ``out/env_id/algo_seed<seed>`` (``algo`` may carry a suffix, e.g.
+    ``ppo_multiagent``), checked before any work: usable, no symlinks in it, and no earlier run
+    unless ``force``."""
+    out = Path(out)
+    if out.is_symlink():
+        raise OutputError(f"--out {out} is a symlink; refusing to write through it: pass the real directory")
+    run = prepare_output_dir(out / env_id / f"{algo}_seed{seed}", argument="--out")
+    check_no_symlinks_inside(run)
+    earlier = earlier_run_files(run)
+    if earlier and not force:
+        raise OutputExistsError(
+            f"{run} already holds a run ({', '.join(earlier)}) with the same --out, env, algorithm and seed: pass "
+            f"--force to replace it (its models, best/ and checkpoints/ are deleted; TensorBoard logs are kept), "
+            f"or choose another --seed or --out"
+        )
+    return run
+
+
+def clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
+    """Delete what an earlier run wrote (models, best/, checkpoints/), except the paths in
+    ``keep`` (the checkpoint being resumed). TensorBoard logs stay: SB3 numbers each run's
+    subdirectory, so they do not mix."""
+    keep = {path.resolve() for path in keep}
+
+    def remove(path: Path) -> None:
+        if path.resolve() in keep or not (path.exists() or path.is_symlink()):
+            return
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+
+    if run.resolve() not in keep:
+        for name in (*POLICY_FILES, *LEGACY_RUN_FILES):
+            remove(run / name)
+    best = run / "best"
+    if best.is_dir() and best.resolve() not in keep:
+        for name in (*POLICY_FILES, EVALUATIONS_FILE, *LEGACY_BEST_FILES):
+            remove(best / name)
+    checkpoints = run / "checkpoints"
+    if checkpoints.is_dir():
+        for entry in checkpoints.iterdir():
+            ours = (entry.is_dir() and (entry / METADATA_FILE).is_file()) or (
+                entry.suffix in (".zip", ".pkl") and entry.name.startswith(f"{algo}_")
+            )
+            if ours:
+                remove(entry)
+
+
+def resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: str) -> tuple[str, Path, set[Path]]:
+    """What ``--resume`` names: ``("safe", policy directory, paths)`` or ``("pickle", model .zip,
+    paths)``, checked before any work: PickleNotTrustedError for a pickle without the opt-in,
+    PolicyFormatError for a safe checkpoint of another algorithm or env, or without training state."""
+    path = Path(resume)
+    if not path.exists():
+        raise FileNotFoundError(
+            f"--resume {path} does not exist: pass a checkpoint directory "
+            f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory"
+        )
+    if is_policy_dir(path):
+        metadata = read_metadata(path)
+        if metadata["algo"] != algo:
+            raise PolicyFormatError(
+                f"--resume {path} is a {metadata['algo']} checkpoint; resume it with --algo "
+                f"{metadata['algo']} (not {algo})"
+            )
+        if metadata["env_id"] != env_id:
+            raise PolicyFormatError(
+                f"--resume {path} was trained on {metadata['env_id']}; resume it with --env "
+                f"{metadata['env_id']} (not {env_id})"
+            )
+        if not metadata["training_state"]:
+            raise PolicyFormatError(
+                f"--resume {path} holds a policy for inference only (no optimizer state): resume from a checkpoint "
+                f"that {program('train')} wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run "
+                "directory)"
+            )
+        return "safe", path, {path}
+    if is_pickle_model(path):
+        if not trust_pickle:
+            refuse_untrusted(path, opt_in="--trust-pickle")
+        model_file = sb3_model_file(path)
+        statistics = normalization_file_of(model_file)
+        return "pickle", model_file, {model_file} | ({statistics} if statistics else set())
+    raise FileNotFoundError(
+        f"--resume {path} holds no checkpoint: pass a directory with {METADATA_FILE} "
+        f"(or, with --trust-pickle, an SB3 .zip)"
+    )
