@@ -22,6 +22,7 @@ import functools
 import inspect
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
@@ -31,7 +32,7 @@ from tether_gym.cluster import Cluster, ClusterError
 from tether_gym.frames import LEO_ORBIT_RATE, Frame, FrameError
 from tether_gym.limits import is_real_number, is_whole_number, short_repr, to_float
 
-__all__ = ["MAX_SATELLITES", "PRESETS", "make_cluster", "preset_names"]
+__all__ = ["MAX_SATELLITES", "PRESETS", "TetherSpec", "make_cluster", "preset_names"]
 
 #: Largest satellite count a preset builds (``n``, ``spokes``): far beyond any studied formation,
 #: small enough that a cluster's arrays fit in memory many times over.
@@ -86,31 +87,38 @@ def _preset(builder: PresetBuilder) -> PresetBuilder:
     return checked  # type: ignore[return-value]
 
 
-def _uniform_cluster(
-    name: str,
-    positions: ArrayLike,
-    cables: ArrayLike,
-    masses: float | np.ndarray,
-    EA: float,
-    N0: ArrayLike,
-    damping_rate: float,
-    breaking_load: float,
-    **options: Any,
-) -> Cluster:
-    """A preset's cluster: every cable of stiffness ``EA`` (N) and breaking load (N), damping
-    ``damping_rate`` (1/s) times each satellite's mass (kg); ``options`` are further
-    :class:`Cluster` fields (``axial_damping``, ``frame``)."""
-    return Cluster(
-        positions=positions,
-        masses=masses,
-        cables=cables,
-        EA=EA,
-        N0=N0,
-        damping=damping_rate * masses,
-        breaking_load=breaking_load,
-        name=name,
-        **options,
-    )
+@dataclass(frozen=True)
+class TetherSpec:
+    """The cables of a preset, all alike, and the damping of its satellites: the block of
+    arguments that every preset takes the same way."""
+
+    EA: ArrayLike
+    """Axial stiffness of each cable, N (a scalar, or one per cable)."""
+    N0: ArrayLike
+    """Pretension of each cable, N (a scalar, or one per cable)."""
+    damping_rate: float
+    """Diagonal damping per unit mass, 1/s: each satellite's damping is ``damping_rate`` times its
+    mass (C = damping_rate * M)."""
+    breaking_load: ArrayLike
+    """Cable breaking tension, N (a scalar, or one per cable)."""
+
+    def cluster(
+        self, name: str, positions: ArrayLike, cables: ArrayLike, masses: float | np.ndarray, **options: Any
+    ) -> Cluster:
+        """The preset's :class:`Cluster`: satellites at ``positions`` ((n, 3), m) of ``masses`` (kg,
+        a scalar or (n,)) joined by ``cables`` ((m, 2) satellite indices) of this spec;
+        ``options`` are further :class:`Cluster` fields (``axial_damping``, ``frame``)."""
+        return Cluster(
+            positions=positions,
+            masses=masses,
+            cables=cables,
+            EA=self.EA,
+            N0=self.N0,
+            damping=self.damping_rate * masses,
+            breaking_load=self.breaking_load,
+            name=name,
+            **options,
+        )
 
 
 @_preset
@@ -144,15 +152,8 @@ def tetrahedron(
     )
     positions -= positions.mean(axis=0)
     cables = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    return _uniform_cluster(
-        "tetrahedron",
-        positions,
-        cables,
-        mass,
-        EA,
-        N0,
-        damping_rate,
-        breaking_load,
+    return TetherSpec(EA=EA, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
+        "tetrahedron", positions, cables, mass
     )
 
 
@@ -182,15 +183,8 @@ def chain(
     positions = np.zeros((n, 3))
     positions[:, 0] = spacing * (np.arange(n) - (n - 1) / 2.0)
     cables = [(i, i + 1) for i in range(n - 1)]
-    return _uniform_cluster(
-        "chain",
-        positions,
-        cables,
-        mass,
-        EA,
-        N0,
-        damping_rate,
-        breaking_load,
+    return TetherSpec(EA=EA, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
+        "chain", positions, cables, mass
     )
 
 
@@ -216,15 +210,8 @@ def triangle(
     radius = edge / math.sqrt(3.0)
     angles = np.array([0.0, 2 * math.pi / 3, 4 * math.pi / 3])
     positions = np.stack([radius * np.cos(angles), radius * np.sin(angles), np.zeros(3)], axis=1)
-    return _uniform_cluster(
-        "triangle",
-        positions,
-        [(0, 1), (1, 2), (0, 2)],
-        mass,
-        EA,
-        N0,
-        damping_rate,
-        breaking_load,
+    return TetherSpec(EA=EA, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
+        "triangle", positions, [(0, 1), (1, 2), (0, 2)], mass
     )
 
 
@@ -250,15 +237,8 @@ def octahedron(
     half = edge / math.sqrt(2.0)
     positions = half * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
     cables = [(i, j) for i in range(6) for j in range(i + 1, 6) if not np.allclose(positions[i], -positions[j])]
-    return _uniform_cluster(
-        "octahedron",
-        positions,
-        cables,
-        mass,
-        EA,
-        N0,
-        damping_rate,
-        breaking_load,
+    return TetherSpec(EA=EA, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
+        "octahedron", positions, cables, mass
     )
 
 
@@ -299,15 +279,8 @@ def hub(
     if rim:
         cables += [(k + 1, (k + 1) % spokes + 1) for k in range(spokes)]
     masses = np.concatenate([[hub_mass], np.full(spokes, mass)])
-    return _uniform_cluster(
-        "hub",
-        positions,
-        cables,
-        masses,
-        EA,
-        N0,
-        damping_rate,
-        breaking_load,
+    return TetherSpec(EA=EA, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
+        "hub", positions, cables, masses
     )
 
 
@@ -370,15 +343,11 @@ def radial_chain(
     tension = np.array([tidal_force[k + 1 :].sum() for k in range(n - 1)])
     cables = np.array([(k, k + 1) for k in range(n - 1)])
     stiffness = _positive("EA", EA, "N") / spacing
-    return _uniform_cluster(
+    return TetherSpec(EA=EA, N0=tension, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
         "radial_chain",
         positions,
         cables,
         masses,
-        EA,
-        tension,
-        damping_rate,
-        breaking_load,
         axial_damping=_axial_damping(cables, masses, np.full(n - 1, stiffness), axial_damping_ratio),
         frame=frame,
     )
@@ -418,15 +387,13 @@ def spinning_triangle(
     cables = np.array([(0, 1), (1, 2), (0, 2)])
     masses = np.full(3, mass)
     stiffness = np.full(3, _positive("EA", EA, "N") / edge)
-    return _uniform_cluster(
+    return TetherSpec(
+        EA=EA, N0=mass * frame.rate**2 * edge / 3.0, damping_rate=damping_rate, breaking_load=breaking_load
+    ).cluster(
         "spinning_triangle",
         positions,
         cables,
         masses,
-        EA,
-        mass * frame.rate**2 * edge / 3.0,
-        damping_rate,
-        breaking_load,
         axial_damping=_axial_damping(cables, masses, stiffness, axial_damping_ratio),
         frame=frame,
     )
@@ -480,15 +447,11 @@ def spinning_hub(
     rim_tension = rim_share * centripetal / (2.0 * math.sin(math.pi / spokes))
     tension = np.concatenate([np.full(spokes, (1.0 - rim_share) * centripetal), np.full(spokes, rim_tension)])
     lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
-    return _uniform_cluster(
+    return TetherSpec(EA=EA, N0=tension, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
         "spinning_hub",
         positions,
         cables,
         masses,
-        EA,
-        tension,
-        damping_rate,
-        breaking_load,
         axial_damping=_axial_damping(cables, masses, _positive("EA", EA, "N") / lengths, axial_damping_ratio),
         frame=frame,
     )
