@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from .baselines import BASELINES, make_baseline
-from .common.commands import program
-from .common.data import MODELS_DIR
-from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted
-from .safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
+from ..baselines import BASELINES, make_baseline
+from ..common.commands import program
+from ..common.data import MODELS_DIR
+from ..pickled import is_pickle_model, load_pickled_model, refuse_untrusted
+from ..safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
+from .spec import PolicySpec
 
 __all__ = [
     "MODELS_DIR",
@@ -36,6 +37,7 @@ __all__ = [
     "make_controller",
     "shipped_models",
 ]
+
 
 def is_shipped(directory: str | Path) -> bool:
     """Whether ``directory`` is inside the repository's :data:`MODELS_DIR` (then its manifest is
@@ -150,11 +152,13 @@ class TrainedPolicy:
         self._other_ids_warned: set[str | None] = set()
         self.observation_shape: tuple[int, ...] = tuple(self.policy.observation_space.shape)
         self.observation_size = int(np.prod(self.observation_shape))
+        #: How the network's outputs become actions: its residual baseline and multi-agent options.
+        self.spec = PolicySpec.from_metadata(self.metadata)
         #: The baseline whose actions the policy corrects (agents.residual), or None.
-        self.residual_on: str | None = self.metadata.get("residual_on")
+        self.residual_on: str | None = self.spec.residual_on
         self.baseline: Any = None
         #: A shared decentralised policy's multi-agent options (agents.decentralised), or None.
-        self.multiagent: dict[str, Any] | None = self.metadata.get("multiagent")
+        self.multiagent: dict[str, Any] | None = self.spec.multiagent
         self.observer: Any = None
 
     @classmethod
@@ -164,17 +168,21 @@ class TrainedPolicy:
         normalizer: Any,
         env_id: str,
         algo: str,
-        residual_on: str | None = None,
+        spec: PolicySpec | None = None,
         name: str | None = None,
+        *,
+        residual_on: str | None = None,
         multiagent: dict[str, Any] | None = None,
     ) -> TrainedPolicy:
         """A TrainedPolicy around an in-memory SB3 ``policy`` and its observation ``normalizer``
         (a ``VecNormalize`` or None), e.g. the model being trained; nothing is copied, so it acts
-        with the weights and statistics they hold when ``predict`` is called."""
+        with the weights and statistics they hold when ``predict`` is called. ``spec`` says how
+        its outputs become actions (default: a centralised policy whose outputs are its actions)."""
+        spec = _spec_of(spec, residual_on, multiagent)
         self = cls.__new__(cls)
         self.allow_other_id = False
         self.policy, self.normalizer, self.algo, self.env_id = policy, normalizer, algo, env_id
-        self.metadata = {"algo": algo, "env_id": env_id, "residual_on": residual_on, "multiagent": multiagent}
+        self.metadata = {"algo": algo, "env_id": env_id, "residual_on": spec.residual_on, "multiagent": spec.multiagent}
         self.path = Path(f"<in-memory {algo} policy>")
         self._adopt(name)
         return self
@@ -195,7 +203,7 @@ class TrainedPolicy:
         """
         self.check_env_id(env, self.allow_other_id if allow_other_id is None else allow_other_id)
         if self.multiagent is not None:
-            from .decentralised import LocalObserver
+            from ..decentralised import LocalObserver
 
             self.observer = LocalObserver(env, self.multiagent)
             if self.observer.observation_size != self.observation_size:
@@ -204,7 +212,7 @@ class TrainedPolicy:
                     f"this env have {self.observer.observation_size}: pass a model trained on this id"
                 )
         if self.residual_on is not None:
-            from .baselines import make_baseline
+            from ..baselines import make_baseline
 
             self.baseline = make_baseline(self.residual_on, env)
 
@@ -280,7 +288,7 @@ class TrainedPolicy:
                 f"{self.path} is a residual policy on {self.residual_on!r}: attach(env) it to a tether-gym env "
                 "first (make_controller does)"
             )
-        from .residual import residual_actions
+        from ..residual import residual_actions
 
         return residual_actions(self.baseline, raw, actions), state
 
@@ -303,6 +311,16 @@ class TrainedPolicy:
         local, single = self.observer.observe(observation)
         joint = self.act_local(local, deterministic).reshape(local.shape[0], -1)
         return joint[0] if single else joint
+
+
+def _spec_of(spec: PolicySpec | None, residual_on: str | None, multiagent: dict[str, Any] | None) -> PolicySpec:
+    """``spec``, or one built from the keyword form ``residual_on``/``multiagent`` that callers
+    still use while they move to :class:`PolicySpec`; both at once is an error."""
+    if spec is None:
+        return PolicySpec(residual_on=residual_on, multiagent=multiagent)
+    if residual_on is not None or multiagent is not None:
+        raise ValueError("pass either spec or residual_on/multiagent, not both")
+    return spec
 
 
 def shipped_models(env_id: str) -> dict[str, Path]:
@@ -333,7 +351,7 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False, allow_other
     if spec in BASELINES:
         return make_baseline(spec, env)
     if spec == "mpc":
-        from .mpc import MPCController
+        from ..mpc import MPCController
 
         return MPCController(env)
     env_id = getattr(getattr(env, "spec", None), "id", None)
