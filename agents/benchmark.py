@@ -1,7 +1,7 @@
 """The benchmark: every id, every controller, on held-out seeds: ``python -m agents.benchmark``.
 
 It runs, on every tether-gym id (:data:`tether_gym.registration.ENV_IDS`), every scripted
-baseline (:data:`agents.baselines.BASELINES`), the model-predictive reference ``mpc`` and every
+baseline (:data:`agents.controllers.registry.BASELINES`), the model-predictive reference ``mpc`` and every
 model shipped for the id (:func:`agents.policies.shipped_models`), on the comparison's held-out
 episodes: episode e of every controller on an id starts from the reset seeded ``seed + e``
 (:data:`agents.compare.HELD_OUT_SEED` = 10 000 and up), through :func:`agents.evaluate.rollout`,
@@ -93,7 +93,6 @@ from tether_gym._optional import needs_extra, require
 from tether_gym.limits import is_whole_number
 from tether_gym.registration import ENV_IDS
 
-from .baselines import BASELINES
 from .common import cli
 from .common.cli import HELD_OUT_SEED, REFERENCE
 from .common.commands import command_line, program
@@ -103,6 +102,7 @@ from .common.files import (
     atomic_write_text,
     prepare_table_outputs,
 )
+from .controllers.registry import BASELINES
 from .evaluate import EpisodeRecord, rollout, summarise
 from .pickled import PickleNotTrustedError
 from .policies import OtherIdError, make_controller, shipped_models

@@ -41,7 +41,6 @@ from tether_gym._optional import require
 from tether_gym.limits import is_whole_number
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from .baselines import BASELINES
 from .common import cli
 from .common.cli import HELD_OUT_SEED
 from .common.commands import program
@@ -51,6 +50,7 @@ from .common.files import (
     atomic_write_text,
     prepare_table_outputs,
 )
+from .controllers.registry import BASELINES
 from .evaluate import METRICS, EpisodeRecord, rollout, summarise
 from .pickled import PickleNotTrustedError
 from .policies import make_controller, shipped_models

@@ -812,14 +812,14 @@ def read_metadata(directory: Path, reader: _VerifiedReader | None = None) -> dic
     _require(metadata, "training_state", bool, where)
     # Optional (policies written before residual training have none): the baseline the
     # policy's actions are corrections to.
-    from .residual import check_residual_on
+    from .controllers.residual import check_residual_on
 
     try:
         metadata["residual_on"] = check_residual_on(metadata.get("residual_on"), f"{where}: residual_on")
     except ValueError as error:
         raise PolicyFormatError(str(error)) from None
     # Optional (centralised policies have none): the multi-agent options of a shared
-    # decentralised policy, which acts on local observations (agents.decentralised).
+    # decentralised policy, which acts on local observations (agents.controllers.decentralised).
     multiagent = metadata.get("multiagent")
     if multiagent is not None and not isinstance(multiagent, dict):
         raise PolicyFormatError(

@@ -1,7 +1,7 @@
 """Per-id settings of the agents that are not SB3's (``mpc``, ``ars``), read from plain YAML.
 
 A settings file maps env ids to entries, with a ``default`` entry for the ids it does not list;
-each entry gives fields of a frozen dataclass (:class:`agents.mpc.MPCSettings`,
+each entry gives fields of a frozen dataclass (:class:`agents.controllers.mpc.MPCSettings`,
 :class:`agents.ars.ARSSettings`), whose ``__post_init__`` checks the values. Nothing in the file
 is evaluated (``yaml.safe_load``).
 """

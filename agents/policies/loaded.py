@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from ..baselines import BASELINES, make_baseline
 from ..common.commands import program
 from ..common.data import MODELS_DIR
+from ..controllers.registry import BASELINES, make_baseline
 from ..pickled import is_pickle_model, load_pickled_model, refuse_untrusted
 from ..safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
 from .spec import PolicySpec
@@ -154,10 +154,10 @@ class TrainedPolicy:
         self.observation_size = int(np.prod(self.observation_shape))
         #: How the network's outputs become actions: its residual baseline and multi-agent options.
         self.spec = PolicySpec.from_metadata(self.metadata)
-        #: The baseline whose actions the policy corrects (agents.residual), or None.
+        #: The baseline whose actions the policy corrects (agents.controllers.residual), or None.
         self.residual_on: str | None = self.spec.residual_on
         self.baseline: Any = None
-        #: A shared decentralised policy's multi-agent options (agents.decentralised), or None.
+        #: A shared decentralised policy's multi-agent options (agents.controllers.decentralised), or None.
         self.multiagent: dict[str, Any] | None = self.spec.multiagent
         self.observer: Any = None
 
@@ -190,7 +190,7 @@ class TrainedPolicy:
     def attach(self, env: Any, allow_other_id: bool | None = None) -> None:
         """Check that ``env`` (a tether-gym env or vector env) is of the id the policy was trained
         on, then build the baseline a residual policy adds its corrections to, or the local
-        observer of a decentralised policy (:class:`agents.decentralised.LocalObserver`), from it.
+        observer of a decentralised policy (:class:`agents.controllers.decentralised.LocalObserver`), from it.
 
         Args:
             env: the env the policy will act in.
@@ -203,7 +203,7 @@ class TrainedPolicy:
         """
         self.check_env_id(env, self.allow_other_id if allow_other_id is None else allow_other_id)
         if self.multiagent is not None:
-            from ..decentralised import LocalObserver
+            from ..controllers.decentralised import LocalObserver
 
             self.observer = LocalObserver(env, self.multiagent)
             if self.observer.observation_size != self.observation_size:
@@ -212,7 +212,7 @@ class TrainedPolicy:
                     f"this env have {self.observer.observation_size}: pass a model trained on this id"
                 )
         if self.residual_on is not None:
-            from ..baselines import make_baseline
+            from ..controllers.registry import make_baseline
 
             self.baseline = make_baseline(self.residual_on, env)
 
@@ -288,13 +288,13 @@ class TrainedPolicy:
                 f"{self.path} is a residual policy on {self.residual_on!r}: attach(env) it to a tether-gym env "
                 "first (make_controller does)"
             )
-        from ..residual import residual_actions
+        from ..controllers.residual import residual_actions
 
         return residual_actions(self.baseline, raw, actions), state
 
     def act_local(self, local: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """(..., 3) commands of a decentralised policy from (..., size) local observations (of
-        the multi-agent env, or :class:`agents.decentralised.LocalObserver`)."""
+        the multi-agent env, or :class:`agents.controllers.decentralised.LocalObserver`)."""
         obs = np.asarray(local, dtype=np.float32)
         rows = obs.reshape(-1, obs.shape[-1])
         if self.normalizer is not None:
@@ -338,7 +338,7 @@ def shipped_models(env_id: str) -> dict[str, Path]:
 
 def make_controller(spec: str, env: Any, trust_pickle: bool = False, allow_other_id: bool = False) -> Any:
     """A controller from a name: a baseline (``passive``, ``velocity_feedback``, ``lqr``,
-    ``tension_aware``), the privileged model-predictive reference ``mpc`` (agents.mpc), a
+    ``tension_aware``), the privileged model-predictive reference ``mpc`` (agents.controllers.mpc), a
     shipped model of the env's id (e.g. ``ppo``), or a path to a policy directory (a
     pickle-based SB3 model only with ``trust_pickle``; a policy trained on another id than
     ``env``'s only with ``allow_other_id``, which the returned policy keeps for later attaches).
@@ -351,7 +351,7 @@ def make_controller(spec: str, env: Any, trust_pickle: bool = False, allow_other
     if spec in BASELINES:
         return make_baseline(spec, env)
     if spec == "mpc":
-        from ..mpc import MPCController
+        from ..controllers.mpc import MPCController
 
         return MPCController(env)
     env_id = getattr(getattr(env, "spec", None), "id", None)

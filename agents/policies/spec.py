@@ -5,9 +5,9 @@ and they travel together from the hyperparameters through training, saving (``po
 loading and evaluation:
 
 * ``residual_on``: the scripted baseline whose actions the network's outputs correct
-  (:mod:`agents.residual`), or None when the outputs are the actions themselves;
+  (:mod:`agents.controllers.residual`), or None when the outputs are the actions themselves;
 * ``multiagent``: the options of a shared decentralised policy (:mod:`tether_gym.multiagent`),
-  whose network acts on each agent's local observation (:mod:`agents.decentralised`), or None for a
+  whose network acts on each agent's local observation (:mod:`agents.controllers.decentralised`), or None for a
   centralised policy, which acts on the env's whole observation.
 
 :class:`PolicySpec` holds the two, in place of two keyword arguments threaded through every
@@ -31,7 +31,7 @@ class PolicySpec:
     """
 
     residual_on: str | None = None
-    """The name of the scripted baseline (``agents.baselines.BASELINES``) whose actions the
+    """The name of the scripted baseline (``agents.controllers.registry.BASELINES``) whose actions the
     policy's outputs are corrections to, ``clip(baseline + output, -1, 1)``; None for a policy
     whose outputs are its actions. The ``residual_on`` hyperparameter and ``policy.json`` entry."""
 

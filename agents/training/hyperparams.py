@@ -21,7 +21,7 @@ from tether_gym._optional import needs_extra
 
 from ..common.commands import program
 from ..common.data import HYPERPARAMS_DIR
-from ..residual import check_residual_on
+from ..controllers.residual import check_residual_on
 from ..safe_format import ALGORITHMS, CLASS_KWARGS
 
 with needs_extra("train", "training"):

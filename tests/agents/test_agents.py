@@ -12,16 +12,15 @@ import numpy as np
 import pytest
 
 import tether_gym
-from agents.baselines import (
-    BASELINES,
-    LinearModel,
+from agents.compare import compare
+from agents.controllers.centralised import (
     LQRController,
     PassiveController,
     TensionAwareController,
     VelocityFeedbackController,
-    make_baseline,
 )
-from agents.compare import compare
+from agents.controllers.linear_model import LinearModel
+from agents.controllers.registry import BASELINES, make_baseline
 from agents.policies import TrainedPolicy, make_controller
 from agents.train import load_hyperparameters, make_training_env, train
 from tether_gym.envs.contract import Scalar

@@ -92,7 +92,7 @@ def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.M
         ("stable_baselines3", "import agents.train", ["stable_baselines3", 'pip install "tether-gym[train]"']),
         ("torch", "import agents.policies", ["torch", 'pip install "tether-gym[train]"']),
         ("yaml", "import agents.common.settings", ["yaml", "pyyaml", 'pip install "tether-gym[train]"']),
-        ("scipy", "import agents.baselines", ["scipy", "LQR", 'pip install "tether-gym[train]"']),
+        ("scipy", "import agents.controllers.centralised", ["scipy", "LQR", 'pip install "tether-gym[train]"']),
         (
             "tensorboard",
             "import agents.train, tempfile; agents.train.train('ppo', out=tempfile.mkdtemp(), timesteps=64)",

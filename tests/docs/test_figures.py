@@ -113,7 +113,7 @@ def test_replace_block_writes_between_the_markers_and_refuses_a_page_without_the
 def test_the_comparison_tables_are_the_comparisons_output() -> None:
     """The tables in docs/agents.md keep the header agents.compare writes, with one row per
     baseline and shipped model of the id."""
-    from agents.baselines import BASELINES
+    from agents.controllers.registry import BASELINES
     from agents.policies import shipped_models
 
     figures = load_figures()

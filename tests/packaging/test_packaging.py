@@ -108,7 +108,8 @@ def test_runtime_files_are_read_from_inside_the_package() -> None:
                     f"{where} reads a file outside its package folder: {line.strip()}"
                 )
     # The files those paths name exist (a renamed folder would leave the wheel without them).
-    from agents import mpc, policies, train
+    from agents import policies, train
+    from agents.controllers import mpc
 
     assert mpc.MPC_SETTINGS_FILE.is_file()
     assert policies.MODELS_DIR.is_dir() and any(policies.MODELS_DIR.glob("*/*/MANIFEST.sha256"))

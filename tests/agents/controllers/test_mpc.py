@@ -7,8 +7,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.evaluate import rollout
-from agents.mpc import MPCController, MPCSettings, load_mpc_settings
+from agents.controllers.mpc import MPCController, MPCSettings, load_mpc_settings
+from agents.evaluation.rollout import rollout
 from agents.policies import make_controller
 from tests.helpers import assert_unchanged, env_state
 from tether_gym.registration import ENV_IDS

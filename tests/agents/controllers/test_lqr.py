@@ -12,8 +12,9 @@ import pytest
 import scipy.stats
 
 import tether_gym
-from agents.baselines import LinearModel, LQRController, PassiveController
-from agents.evaluate import rollout
+from agents.controllers.centralised import LQRController, PassiveController
+from agents.controllers.linear_model import LinearModel
+from agents.evaluation.rollout import rollout
 from tether_gym.analysis import frame_stiffness, gyroscopic_matrix, tangent_stiffness
 
 #: Seeds of the paired episodes: apart from the comparison's held-out seeds (10 000 and up) and

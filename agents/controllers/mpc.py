@@ -45,8 +45,8 @@ from tether_gym.envs.contract import Scalar
 from tether_gym.envs.task import DampingTask, TaskState
 from tether_gym.limits import is_whole_number
 
-from .common.data import HYPERPARAMS_DIR
-from .common.settings import load_settings
+from ..common.data import HYPERPARAMS_DIR
+from ..common.settings import load_settings
 
 __all__ = ["MPC_SETTINGS_FILE", "MPCController", "MPCSettings", "load_mpc_settings"]
 
@@ -75,7 +75,7 @@ class MPCSettings:
             costs; 0 keeps the best candidate (predictive sampling).
         discount: weight of step h's reward is ``discount**h``.
         terminal_weight: weight of the vibration term of the horizon's last step, in steps.
-        prior: a scripted baseline (``agents.baselines.BASELINES``) whose closed-loop action the
+        prior: a scripted baseline (``agents.controllers.registry.BASELINES``) whose closed-loop action the
             plans are residuals on, or ``"none"``: plans are the actions themselves.
         seed: seed of the controller's own noise.
     """
@@ -105,7 +105,7 @@ class MPCSettings:
             value = getattr(self, name)
             if not is_whole_number(value) or not low <= value <= high:
                 raise ValueError(f"mpc setting {name} must be a whole number in {low}..{high}; got {value!r}")
-        from .baselines import BASELINES
+        from .registry import BASELINES
 
         if self.prior != "none" and self.prior not in BASELINES:
             raise ValueError(f"mpc setting prior must be 'none' or one of {sorted(BASELINES)}; got {self.prior!r}")
@@ -157,7 +157,7 @@ class MPCController:
         self.task = task
         self.prior = None
         if s.prior != "none":
-            from .baselines import make_baseline
+            from .registry import make_baseline
 
             self.prior = make_baseline(s.prior, env)
         self.batch = task.num_clusters

@@ -9,11 +9,11 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.baselines import make_baseline
+from agents.controllers.registry import make_baseline
 from agents.policies import TrainedPolicy, make_controller
-from agents.residual import ResidualVecEnv
 from agents.safe_format import read_metadata
 from agents.train import HyperparameterError, train, validate_hyperparameters
+from agents.training.residual_env import ResidualVecEnv
 from tether_gym.sb3 import make_sb3_vec_env
 
 

@@ -1,7 +1,7 @@
 """Decentralised controllers: each thruster acts on what its own satellite measures.
 
-Two scripted laws (registered in :data:`agents.baselines.BASELINES`, so the comparison and the
-benchmark run them like the other baselines) and the adapter that runs a shared decentralised
+Two scripted laws (listed in :data:`agents.controllers.registry.BASELINES`, so the comparison and
+the benchmark run them like the other baselines) and the adapter that runs a shared decentralised
 policy (trained with ``python -m agents.train --multiagent``) on the single-agent envs.
 
 **Local laws.** Satellite i with thruster k sees, for each of its cables c to a neighbour j, the
@@ -19,7 +19,7 @@ satellite's designer would:
   ``g_c mu_c (w_c . e_c) e_c``, its rate scheduled on the cable's state (``g_taut`` while the
   cable is taut, ``g_slack`` while it is slack: a slack cable no longer couples the pair, so the
   thrusters are the only damper left), plus the virtual strut of
-  :class:`agents.baselines.TensionAwareController` across a slack cable,
+  :class:`agents.controllers.centralised.TensionAwareController` across a slack cable,
   ``-kappa_c (dL_slack - dL_c) e_c`` with ``dL_slack = -N0 L0 / EA``, again equal and opposite.
 
 Their gains were tuned on the tuning seeds 2000-2063 (apart from the benchmark's held-out seeds
@@ -27,7 +27,7 @@ Their gains were tuned on the tuning seeds 2000-2063 (apart from the benchmark's
 and the measurements.
 
 Both read the single-agent observation too (``predict`` as every baseline): the decoded state
-(:meth:`agents.baselines.Controller.decode`) gives each satellite exactly its local quantities,
+(:meth:`agents.controllers.base.Controller.decode`) gives each satellite exactly its local quantities,
 so the same law runs on the multi-agent env (:meth:`LocalController.act_local`) and on the
 single-agent envs, and a batch of observations gives each row what that row alone gives.
 """
@@ -41,8 +41,7 @@ import numpy as np
 
 from tether_gym.multiagent.engine import AgentGraph, Communication, LocalLayout, LocalSensors
 
-from .baselines import BASELINES
-from .controllers.base import Controller, task_of
+from .base import Controller, task_of
 
 __all__ = [
     "LocalController",
@@ -176,9 +175,6 @@ class LocalTensionAwareController(LocalController):
         shortfall = np.where(slack, self.slack_point[None] - elongation, 0.0)  # m, >= 0
         strut = -(self.strut[None] * shortfall)[..., None] * direction
         return (damping + strut).sum(axis=2)
-
-
-BASELINES.update({cls.name: cls for cls in (LocalVelocityFeedbackController, LocalTensionAwareController)})
 
 
 class LocalObserver:
