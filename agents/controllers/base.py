@@ -18,7 +18,7 @@ Thrust commands beyond the limit are clipped, as the env would do anyway. Each c
 how often that happens (:attr:`Controller.saturation_fraction`): a linear design that saturates
 most of the time is no longer the design that was analysed.
 
-**The contracts.** The evaluation (:func:`agents.evaluate.rollout`) runs scripted controllers,
+**The contracts.** The evaluation (:func:`agents.evaluation.rollout.rollout`) runs scripted controllers,
 the model-predictive reference (:class:`agents.controllers.mpc.MPCController`), trained
 policies (:class:`agents.policies.TrainedPolicy`) and ARS's linear residual policies alike. What
 it needs of them is named here by Protocols, checked structurally (no controller inherits them):

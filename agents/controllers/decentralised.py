@@ -233,7 +233,7 @@ def local_trajectory_observations(
 ) -> Callable[[int], np.ndarray]:
     """A function ``n -> (n, size)`` of agents' local observations along the trajectories of
     ``act`` (a batch of local observations -> a batch of (3,) commands), 8 clusters in parallel,
-    seeds 0-7: what :func:`agents.convert.trajectory_observations` is to a centralised policy,
+    seeds 0-7: what :func:`agents.policies.reference.trajectory_observations` is to a centralised policy,
     for the reference actions of a shipped decentralised one."""
     from tether_gym.multiagent.sb3 import make_agent_vec_env
 
