@@ -22,6 +22,8 @@ from tether_gym._optional import needs_extra
 from tether_gym.envs.contract import Scalar
 from tether_gym.limits import is_whole_number
 
+from ..controllers.base import CountsSaturation, ReadsEnv
+
 with needs_extra("train", "the evaluation's confidence intervals"):
     import scipy.stats
 
@@ -72,8 +74,14 @@ def rollout(
     env_kwargs: dict[str, Any] | None = None,
     progress: Any = None,
 ) -> EpisodeRecord:
-    """Run ``controller`` (anything with ``predict(obs, deterministic=True)``) for one episode per
-    seed on ``gym.make_vec(env_id, num_envs=len(seeds), **env_kwargs)``.
+    """Run ``controller`` (a :class:`~agents.controllers.base.Policy`: anything with
+    ``predict(obs, deterministic=True)``) for one episode per seed on
+    ``gym.make_vec(env_id, num_envs=len(seeds), **env_kwargs)``.
+
+    A controller that reads its env (:class:`~agents.controllers.base.ReadsEnv`) is attached to
+    the vector env first; one that counts its clipped commands
+    (:class:`~agents.controllers.base.CountsSaturation`) has its count restarted, and the record
+    holds its ``saturation_fraction`` after the episodes.
 
     ``progress`` is an optional callable ``progress(steps_done, steps_total)``."""
     seed_list = list(seeds)
@@ -94,9 +102,9 @@ def rollout(
     steps = envs.unwrapped.max_episode_steps
     if steps is None:
         raise ValueError(f"{env_id} has no max_episode_steps; pass env_kwargs={{'max_episode_steps': ...}}")
-    if hasattr(controller, "attach"):  # privileged controllers (mpc) read the state of the env they control
+    if isinstance(controller, ReadsEnv):  # privileged controllers (mpc) read the state of the env they control
         controller.attach(envs)
-    if hasattr(controller, "reset_statistics"):
+    if isinstance(controller, CountsSaturation):
         controller.reset_statistics()
     observation, _ = envs.reset(seed=[int(s) for s in seeds])
     energy = np.full((count, steps + 1), np.nan)

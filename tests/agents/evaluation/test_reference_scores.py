@@ -1,7 +1,7 @@
 """The shipped reference scores (``agents/reference/reference_scores.json``): they hold every id and
 controller of the benchmark on the ids' own settings, every statistic in them is what their
-returns give, and rerunning a scripted controller through :func:`agents.scoring.score_policy`
-reproduces its returns and statistics to the bit."""
+returns give, and rerunning a scripted controller through
+:func:`agents.evaluation.scoring.score_policy` reproduces its returns and statistics to the bit."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agents.baselines import BASELINES
-from agents.compare import HELD_OUT_SEED
+from agents.common.cli import HELD_OUT_SEED
+from agents.controllers.registry import BASELINES
+from agents.evaluation.scoring import REFERENCE_FILE, load_reference, reference_from_benchmark, score_policy
 from agents.policies import shipped_models
-from agents.scoring import REFERENCE_FILE, load_reference, reference_from_benchmark, score_policy
 from tether_gym.registration import ENV_IDS
 
 ENV_ID = "TetherTetrahedron-v0"

@@ -1,4 +1,4 @@
-"""Scoring a policy against reference scores (``agents.scoring``): the converter from a
+"""Scoring a policy against reference scores (``agents.evaluation.scoring``): the converter from a
 benchmark.json, the statistics of :func:`score_policy` against the benchmark's own numbers, and
 its errors.
 
@@ -17,21 +17,22 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agents.baselines import BASELINES
-from agents.benchmark import benchmark
-from agents.compare import HELD_OUT_SEED
+import agents.scoring
+from agents.common.cli import HELD_OUT_SEED
 from agents.common.files import OutputExistsError
-from agents.policies import TrainedPolicy, shipped_models
-from agents.scoring import (
+from agents.controllers.registry import BASELINES
+from agents.evaluation.benchmark import BenchmarkConfig, benchmark
+from agents.evaluation.scoring import (
     FORMAT,
     ReferenceDataError,
     load_reference,
-    main,
     reference_from_benchmark,
     score_policy,
     score_returns,
     write_reference,
 )
+from agents.policies import TrainedPolicy, shipped_models
+from agents.scoring import main
 
 ENV_ID = "TetherTetrahedron-v0"
 #: Enough episodes that the bootstrap's percentiles depend on its seed (4 give too few distinct resamples).
@@ -44,13 +45,15 @@ def small_benchmark(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A benchmark.json of one id, 8 held-out episodes of 20 steps, with mpc (the score's 100)."""
     out = tmp_path_factory.mktemp("benchmark")
     benchmark(
-        env_ids=[ENV_ID],
-        controllers=SMALL_CONTROLLERS,
-        episodes=EPISODES,
-        env_kwargs={"max_episode_steps": 20},
-        bootstrap_reps=100,
-        plots=False,
-        out=out,
+        BenchmarkConfig(
+            env_ids=[ENV_ID],
+            controllers=SMALL_CONTROLLERS,
+            episodes=EPISODES,
+            env_kwargs={"max_episode_steps": 20},
+            bootstrap_reps=100,
+            plots=False,
+            out=out,
+        )
     )
     return out / "benchmark.json"
 
@@ -192,13 +195,20 @@ def test_the_converter_refuses_numbers_its_returns_do_not_give(small_benchmark: 
         reference_from_benchmark(results, "abc1234", "2026-01-01T00:00:00Z")
 
 
+def test_the_documented_import_path_keeps_score_policy() -> None:
+    """``from tether_gym_agents.scoring import score_policy`` (the README's path of earlier
+    releases) is the evaluation room's function."""
+    assert agents.scoring.score_policy is score_policy
+
+
 def test_the_command_writes_a_file_that_loads(small_benchmark: Path, tmp_path: Path) -> None:
     out = tmp_path / "reference.json"
     written = main([str(small_benchmark), "--commit", "abc1234", "--out", str(out), "--machine", "test machine"])
     loaded = load_reference(out)
     assert loaded == written
     assert (loaded["format"], loaded["commit"], loaded["machine"]) == (FORMAT, "abc1234", "test machine")
-    assert loaded["command"].startswith("agents.benchmark.benchmark(") and loaded["date"].endswith("Z")
+    assert loaded["command"].startswith("agents.evaluation.benchmark.benchmark(BenchmarkConfig(")
+    assert loaded["date"].endswith("Z")
     assert loaded["env_kwargs"] == {"max_episode_steps": 20}
     with pytest.raises(OutputExistsError, match="pass --force"):
         write_reference(small_benchmark, "abc1234", out)

@@ -1,5 +1,4 @@
-"""The benchmark command (``python -m agents.benchmark``): its statistics against cases worked
-out by hand, and smoke runs of the command on two ids with a few scripted controllers.
+"""The benchmark's statistics (``agents.evaluation.stats``) against cases worked out by hand.
 
 The hand cases spell their arithmetic out (means, sums of squares, a t-table quantile) instead
 of calling the functions under test or scipy, so a wrong formula in the module cannot agree
@@ -8,29 +7,18 @@ with itself here.
 
 from __future__ import annotations
 
-import csv
-import json
 import math
-from pathlib import Path
-from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
-import agents.benchmark
-from agents.benchmark import (
+from agents.evaluation.stats import (
     aggregate_scores,
-    benchmark,
     best_eligible_baseline,
-    main,
     normalised_scores,
     paired_difference,
     score_interval,
 )
-from agents.evaluate import rollout
-from agents.common.files import OutputError, OutputExistsError
-from agents.policies import make_controller
 
 #: Two-sided 95 % quantile of Student's t with 3 degrees of freedom, from a printed t table
 #: (t_{0.975, 3} = 3.182446...).
@@ -178,160 +166,3 @@ def test_aggregate_intervals_are_paired_and_seeded() -> None:
     # Seeded: the same numbers again, whatever other rows are computed with it.
     assert aggregate_scores({"noisy": noisy}, zero, ref, reps=500, seed=7)["noisy"] == row
     assert aggregate_scores({"noisy": noisy}, zero, ref, reps=500, seed=8)["noisy"] != row
-
-
-def _without_mpc(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Make ``mpc`` unknown, as it is until the reference controller lands (and stays so for
-    these tests after it has: they check how a missing controller is reported)."""
-
-    def make(spec: str, env: Any, trust_pickle: bool = False, allow_other_id: bool = False) -> Any:
-        if spec == "mpc":
-            raise ValueError("unknown controller 'mpc' (test: as if it did not exist)")
-        return make_controller(spec, env, trust_pickle=trust_pickle, allow_other_id=allow_other_id)
-
-    monkeypatch.setattr(agents.benchmark, "make_controller", make)
-
-
-SMOKE_IDS = ["TetherTetrahedron-v0", "TetherTriangle-v0"]
-
-
-@pytest.mark.slow
-def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    _without_mpc(monkeypatch)
-    out = tmp_path / "bench"
-    arguments = [
-        "--envs",
-        *SMOKE_IDS,
-        "--episodes",
-        "4",
-        "--reference",
-        "tension_aware",
-        "--bootstrap-reps",
-        "200",
-        "--out",
-        str(out),
-    ]
-    results = main([*arguments, "--controllers", "velocity_feedback", "tension_aware", "mpc"])
-    for name in agents.benchmark.TABLE_FILES:
-        assert (out / name).stat().st_size > 0
-    for name in agents.benchmark.PLOT_FILES:
-        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    report = (out / "benchmark.md").read_text()
-    data = json.loads((out / "benchmark.json").read_text())
-    assert data == json.loads(json.dumps(agents.benchmark._json_ready(results)))
-    assert data["settings"]["seeds"] == [10_000, 10_001, 10_002, 10_003]
-    assert "passive" in data["per_id"][SMOKE_IDS[0]]["controllers"]  # added: the score's zero
-    for env_id in SMOKE_IDS:
-        assert f"### {env_id}" in report
-        entry = data["per_id"][env_id]
-        assert entry["missing"] == [
-            {"controller": "mpc", "reason": "unknown controller 'mpc' (test: as if it did not exist)"}
-        ]
-        controllers = entry["controllers"]
-        assert list(controllers) == ["passive", "velocity_feedback", "tension_aware"]
-        assert controllers["passive"]["normalised_scores"] == [0.0] * 4
-        reference_score = controllers["tension_aware"]["normalised_score"]
-        assert (reference_score["mean"], reference_score["low"], reference_score["high"]) == pytest.approx(
-            (100.0, 100.0, 100.0)
-        )
-        best = entry["best_baseline"]
-        assert best == max(
-            ("passive", "velocity_feedback", "tension_aware"), key=lambda name: controllers[name]["mean_return"]
-        )
-        for name, item in controllers.items():
-            if name == best:
-                assert item["paired_vs_best"] is None
-                continue
-            differences = np.array(item["returns"]) - np.array(controllers[best]["returns"])
-            assert item["paired_vs_best"]["mean"] == pytest.approx(differences.mean())
-    # The episodes are the comparison's: agents.evaluate.rollout on the same seeds gives the same returns.
-    env_id = SMOKE_IDS[0]
-    probe = gym.make_vec(env_id, num_envs=1)
-    direct = rollout(make_controller("velocity_feedback", probe), env_id, range(10_000, 10_004))
-    probe.close()
-    direct_returns = direct.rewards.sum(axis=1).tolist()
-    assert data["per_id"][env_id]["controllers"]["velocity_feedback"]["returns"] == direct_returns
-    # episodes.csv holds every per-episode return, to the last digit.
-    with open(out / "episodes.csv", newline="") as stream:
-        rows = list(csv.DictReader(stream))
-    assert len(rows) == len(SMOKE_IDS) * 3 * 4
-    from_csv = [
-        float(row["return"]) for row in rows if row["env_id"] == env_id and row["controller"] == "velocity_feedback"
-    ]
-    assert from_csv == direct_returns
-    aggregate = data["aggregate"]
-    assert set(aggregate) == {"passive", "velocity_feedback", "tension_aware", agents.benchmark.BEST_BASELINE_ROW}
-    assert aggregate["passive"]["iqm"] == 0.0 and aggregate["velocity_feedback"]["ids"] == 2
-    assert "| velocity_feedback | 2/2 |" in report
-    assert "| id | passive | velocity_feedback | tension_aware |" in report  # the reference once
-    # A second run refuses to overwrite the first, and replaces it with --force (to the same numbers,
-    # the bootstrap included: it is seeded).
-    with pytest.raises(OutputExistsError, match="--force"):
-        main([*arguments, "--controllers", "velocity_feedback", "tension_aware"])
-    again = main([*arguments, "--controllers", "velocity_feedback", "tension_aware", "--force"])
-    assert again["aggregate"] == results["aggregate"]
-
-    def numbers(result: dict[str, Any]) -> dict[str, Any]:
-        """Every per-id number but the wall times."""
-        return {
-            env_id: {
-                name: {key: value for key, value in item.items() if not key.startswith("wall")}
-                for name, item in entry["controllers"].items()
-            }
-            for env_id, entry in result["per_id"].items()
-        }
-
-    assert numbers(again) == numbers(results)
-
-
-def test_benchmark_says_the_score_is_not_available_without_mpc(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    _without_mpc(monkeypatch)
-    results = benchmark(
-        env_ids=[SMOKE_IDS[1]],
-        controllers=["passive", "velocity_feedback"],
-        episodes=3,
-        out=tmp_path,
-        bootstrap_reps=200,
-    )
-    entry = results["per_id"][SMOKE_IDS[1]]
-    assert entry["score"] == "not available: mpc did not run on this id"
-    assert all(item["normalised_score"] is None for item in entry["controllers"].values())
-    assert results["aggregate"] == {}
-    report = (tmp_path / "benchmark.md").read_text()
-    assert "Not available: the normalised score needs mpc" in report
-    assert "| TetherTriangle-v0 | n/a | n/a |" in report
-    assert (tmp_path / "aggregate.png").stat().st_size > 0  # a figure that says why it is empty
-
-
-def test_bad_output_or_controller_is_refused_before_any_rollout(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    def no_rollout(*args: Any, **kwargs: Any) -> None:
-        raise AssertionError("a rollout ran before the arguments were checked")
-
-    monkeypatch.setattr(agents.benchmark, "rollout", no_rollout)
-    a_file = tmp_path / "file"
-    a_file.write_text("not a directory")
-    with pytest.raises(OutputError, match="is a file"):
-        main(["--envs", SMOKE_IDS[0], "--out", str(a_file)])
-    with pytest.raises(OutputError, match="inside"):
-        main(["--envs", SMOKE_IDS[0], "--out", str(a_file / "below")])
-    link = tmp_path / "link"
-    link.symlink_to(tmp_path / "elsewhere")
-    with pytest.raises(OutputError, match="symlink"):
-        main(["--envs", SMOKE_IDS[0], "--out", str(link)])
-    earlier = tmp_path / "earlier"
-    earlier.mkdir()
-    (earlier / "benchmark.md").write_text("an earlier benchmark")
-    with pytest.raises(OutputExistsError, match="--force"):
-        main(["--envs", SMOKE_IDS[0], "--out", str(earlier)])
-    (earlier / "aggregate.png").symlink_to(tmp_path / "target.png")
-    with pytest.raises(OutputError, match="symlink"):
-        main(["--envs", SMOKE_IDS[0], "--out", str(earlier), "--force"])
-    assert (earlier / "benchmark.md").read_text() == "an earlier benchmark"
-    with pytest.raises(ValueError, match="unknown controllers \\['pasive'\\]"):
-        main(["--envs", SMOKE_IDS[0], "--controllers", "pasive", "--out", str(tmp_path / "new")])
-    with pytest.raises(ValueError, match="reference"):
-        benchmark(env_ids=[SMOKE_IDS[0]], reference="passive", out=tmp_path / "new")
-    with pytest.raises(SystemExit):  # argparse: --episodes must be at least 2
-        main(["--episodes", "1", "--out", str(tmp_path / "new")])

@@ -1,0 +1,294 @@
+"""The benchmark's statistics: t intervals, paired differences, the best eligible baseline,
+normalised scores with their paired bootstrap intervals, and rliable's aggregates over ids.
+
+Every function takes per-episode returns (undiscounted sums of rewards, reward units) of
+episodes that share their seeds: entry e of every array is the episode reset with the same
+seed, so differences between controllers are paired. :mod:`agents.evaluation.benchmark` defines
+what each statistic means in its reports; :mod:`agents.evaluation.scoring` and the training's
+model selection and shipping use the same functions, so their numbers are the benchmark's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from typing import Any
+
+import numpy as np
+
+from tether_gym._optional import needs_extra, require
+
+with needs_extra("train", "the benchmark's statistics"):
+    import scipy.stats
+
+__all__ = [
+    "CONFIDENCE",
+    "SCORE_BOOTSTRAP_REPS",
+    "ZERO",
+    "PairedDifference",
+    "aggregate_scores",
+    "best_eligible_baseline",
+    "normalised_scores",
+    "paired_difference",
+    "rliable_modules",
+    "score_interval",
+    "t_interval",
+]
+
+#: The controller that scores 0: doing nothing.
+ZERO = "passive"
+#: Confidence level of every interval.
+CONFIDENCE = 0.95
+#: Bootstrap resamples of each per-id score interval.
+SCORE_BOOTSTRAP_REPS = 10_000
+
+
+@dataclasses.dataclass(frozen=True)
+class PairedDifference:
+    """Controller a minus controller b over the same seeds, in return units.
+
+    Attributes:
+        mean: mean over episodes of ``a[e] - b[e]``.
+        std: sample standard deviation of the differences (E-1 degrees of freedom).
+        half_width: half-width of the two-sided t interval at :data:`CONFIDENCE`.
+        low, high: the interval's ends, ``mean ∓ half_width``.
+        wins: number of episodes where ``a[e] > b[e]``.
+        episodes: E.
+    """
+
+    mean: float
+    std: float
+    half_width: float
+    low: float
+    high: float
+    wins: int
+    episodes: int
+
+
+def _check_returns(name: str, values: Any) -> np.ndarray:
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim != 1 or array.size < 2:
+        raise ValueError(f"{name} must be a 1-D array of at least 2 per-episode returns; got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} has NaN or infinite returns: a return must be a finite number")
+    return array
+
+
+def _check_scored_returns(
+    returns: Any, zero_returns: Any, reference_returns: Any, purpose: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The three (E,) return arrays of a score (controller, passive, reference), checked to be
+    per-episode returns of the same seeds; ``purpose`` ("normalised scores need") starts the
+    message when they are not."""
+    returns = _check_returns("returns", returns)
+    zero = _check_returns("zero_returns", zero_returns)
+    reference = _check_returns("reference_returns", reference_returns)
+    if not returns.shape == zero.shape == reference.shape:
+        raise ValueError(
+            f"{purpose} the same seeds on every side; got {returns.size}, {zero.size} and {reference.size} episodes"
+        )
+    return returns, zero, reference
+
+
+def t_interval(values: np.ndarray, confidence: float = CONFIDENCE) -> tuple[float, float, float]:
+    """``(mean, sample std, half-width)`` of the two-sided t interval of the mean of ``values``
+    (1-D, at least 2 entries): ``t(1 - (1 - confidence)/2, n - 1) · std / sqrt(n)``."""
+    count = values.size
+    mean = float(values.mean())
+    std = float(values.std(ddof=1))
+    half_width = float(scipy.stats.t.ppf(0.5 + confidence / 2, count - 1) * std / math.sqrt(count))
+    return mean, std, half_width
+
+
+def paired_difference(returns: Any, baseline_returns: Any, confidence: float = CONFIDENCE) -> PairedDifference:
+    """The paired difference ``returns - baseline_returns`` (both (E,), episode e of each on the
+    same seed) with its t interval. Raises ValueError for arrays of different lengths, fewer
+    than 2 episodes, or non-finite returns."""
+    a = _check_returns("returns", returns)
+    b = _check_returns("baseline_returns", baseline_returns)
+    if a.shape != b.shape:
+        raise ValueError(f"paired returns need one value per seed on both sides; got {a.size} and {b.size} episodes")
+    differences = a - b
+    mean, std, half_width = t_interval(differences, confidence)
+    return PairedDifference(
+        mean=mean,
+        std=std,
+        half_width=half_width,
+        low=mean - half_width,
+        high=mean + half_width,
+        wins=int(np.sum(differences > 0)),
+        episodes=int(a.size),
+    )
+
+
+def best_eligible_baseline(mean_returns: dict[str, float], zero: str = ZERO) -> tuple[str, dict[str, str]]:
+    """The best scripted baseline of an id, and why the others are not it.
+
+    ``mean_returns`` maps each scripted baseline that ran to its mean return; it must include
+    ``zero`` (passive). A baseline whose mean return is below ``zero``'s is not eligible; the
+    best is the eligible one with the highest mean return (the first listed on a tie).
+
+    Returns ``(best name, {name: note})`` with a note for every baseline: ``"best"``,
+    ``"eligible"`` or ``"not eligible: mean return below passive's"``."""
+    if zero not in mean_returns:
+        raise ValueError(f"the best-baseline rule compares with {zero!r}, which is not among {sorted(mean_returns)}")
+    bar = mean_returns[zero]
+    eligible = [name for name, value in mean_returns.items() if value >= bar]
+    best = max(eligible, key=lambda name: mean_returns[name])  # max keeps the first of equal values
+    excluded = f"not eligible: mean return below {zero}'s"
+    notes = {name: "best" if name == best else "eligible" if name in eligible else excluded for name in mean_returns}
+    return best, notes
+
+
+def normalised_scores(returns: Any, zero_returns: Any, reference_returns: Any) -> np.ndarray:
+    """Per-episode normalised scores (E,): ``100 (R[e] - R0[e]) / (mean(Rref) - mean(R0))``.
+
+    ``returns``, ``zero_returns`` (passive) and ``reference_returns`` (mpc) are (E,) returns on
+    the same seeds. Raises ValueError when the reference's mean return is not above passive's
+    (the scale would be zero or reversed)."""
+    returns, zero, reference = _check_scored_returns(returns, zero_returns, reference_returns, "normalised scores need")
+    gap = float(reference.mean() - zero.mean())
+    if not gap > 0:
+        raise ValueError(f"the reference's mean return is not above passive's (gap {gap:.4g}): no score scale")
+    return 100.0 * (returns - zero) / gap
+
+
+def score_interval(
+    returns: Any,
+    zero_returns: Any,
+    reference_returns: Any,
+    reps: int = SCORE_BOOTSTRAP_REPS,
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+) -> tuple[float, float] | None:
+    """Paired percentile-bootstrap interval of the score of the means,
+    ``100 (mean R - mean R0) / (mean Rref - mean R0)``.
+
+    Each of ``reps`` resamples draws E seeds with replacement, the same seeds for the three
+    (E,) return arrays, so the interval carries the denominator's uncertainty and the
+    correlation between numerator and denominator (both grow with a seed's initial energy).
+    Returns ``(low, high)``, or None when more than ``(1 - confidence) / 2`` of the resamples
+    have a reference no better than passive (the scale itself is then uncertain)."""
+    returns, zero, reference = _check_scored_returns(
+        returns, zero_returns, reference_returns, "a paired bootstrap needs"
+    )
+    picks = np.random.default_rng(seed).integers(0, returns.size, size=(reps, returns.size))
+    gains = (returns - zero)[picks].mean(axis=1)
+    scales = (reference - zero)[picks].mean(axis=1)
+    tail = (1.0 - confidence) / 2
+    usable = scales > 0
+    if np.mean(~usable) > tail:
+        return None
+    ratios = 100.0 * gains[usable] / scales[usable]
+    low, high = np.quantile(ratios, [tail, 1.0 - tail])
+    return float(low), float(high)
+
+
+def rliable_modules() -> tuple[Any, Any]:
+    """rliable's ``library`` and ``metrics`` modules, or an ImportError that says how to get them."""
+    library = require("rliable.library", "train", "the benchmark's aggregate over ids (rliable==1.2.0, pandas<3)")
+    metrics = require("rliable.metrics", "train", "the benchmark's aggregate over ids (rliable==1.2.0, pandas<3)")
+    return library, metrics
+
+
+def aggregate_scores(
+    returns: dict[str, dict[str, Any]],
+    zero_returns: dict[str, Any],
+    reference_returns: dict[str, Any],
+    reps: int = 50_000,
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+) -> dict[str, dict[str, Any]]:
+    """rliable's aggregates over ids of the normalised scores, one entry per row of ``returns``.
+
+    ``returns[row][env_id]`` holds the row's (E,) returns on an id, and ``zero_returns[env_id]``
+    and ``reference_returns[env_id]`` passive's and the reference's on the same seeds. Each row
+    is one run (a controller, or one shipped model per id), whose score on an id is the score of
+    its mean return, :func:`normalised_scores` averaged over the episodes. Over the ids where
+    the row ran:
+
+    * ``iqm``: :func:`rliable.metrics.aggregate_iqm` of the (1, ids) matrix of those scores, the
+      mean of the middle half of the ids (scipy's 25 % trimmed mean);
+    * ``mean``: :func:`rliable.metrics.aggregate_mean`, the mean of the per-id scores;
+    * ``*_low`` / ``*_high``: their stratified percentile-bootstrap interval from
+      :func:`rliable.library.get_interval_estimates` with ``reps`` replications. rliable's
+      :class:`~rliable.library.StratifiedBootstrap` resamples an (E, ids) matrix of episode
+      indices within each id; each replication's per-id scores are the scores of the means of
+      the drawn seeds, the same seeds for the row, passive and the reference, so the resampling
+      stays paired (the reference's own interval is exactly [100, 100]). A replication whose
+      reference is no better than passive on some id has no score; if any does, the interval
+      is None.
+
+    The resampling is seeded with ``seed``: the intervals reproduce, and a row's interval does
+    not depend on the other rows."""
+    library, metrics = rliable_modules()
+    results: dict[str, dict[str, Any]] = {}
+    for name, per_id in returns.items():
+        ids = list(per_id)
+        if not ids:
+            raise ValueError(f"row {name!r} has no id to aggregate over")
+        gains, scales = [], []
+        for env_id in ids:
+            values = _check_returns(f"returns of {name!r} on {env_id}", per_id[env_id])
+            zero = _check_returns(f"zero_returns on {env_id}", zero_returns[env_id])
+            reference = _check_returns(f"reference_returns on {env_id}", reference_returns[env_id])
+            if not values.shape == zero.shape == reference.shape:
+                raise ValueError(
+                    f"{name!r} on {env_id}: the returns need the same seeds on every side; got "
+                    f"{values.size}, {zero.size} and {reference.size} episodes"
+                )
+            gains.append(values - zero)
+            scales.append(reference - zero)
+        episodes = {gain.size for gain in gains}
+        if len(episodes) != 1:
+            raise ValueError(f"row {name!r} has different episode counts on its ids: {sorted(episodes)}")
+        gain, scale = np.stack(gains, axis=1), np.stack(scales, axis=1)  # (E, ids)
+
+        def statistics(drawn: np.ndarray, gain: np.ndarray = gain, scale: np.ndarray = scale) -> np.ndarray:
+            """IQM and mean over ids of the per-id scores of the episodes ``drawn`` ((E, ids) indices)."""
+            columns = np.arange(gain.shape[1])
+            picks = drawn.astype(np.intp)
+            denominator = scale[picks, columns].mean(axis=0)
+            if not np.all(denominator > 0):
+                return np.array([math.nan, math.nan])
+            per_id_scores = (100.0 * gain[picks, columns].mean(axis=0) / denominator)[None, :]  # (1 run, ids)
+            return np.array([metrics.aggregate_iqm(per_id_scores), metrics.aggregate_mean(per_id_scores)])
+
+        indices = np.tile(np.arange(gain.shape[0], dtype=np.float64)[:, None], (1, len(ids)))
+        # rliable 1.2.0's StratifiedBootstrap.update_indices draws its resamples from numpy's
+        # global generator (np.random.choice) and ignores ``random_state``: seed the global
+        # generator for the call, and put back its state after it, so that the intervals
+        # reproduce and nobody else's random stream is disturbed.
+        global_state = np.random.get_state()
+        np.random.seed(seed)
+        try:
+            with warnings.catch_warnings():
+                # rliable hands arch the RandomState through arch's deprecated ``random_state``
+                # keyword; arch only warns about the keyword's name.
+                warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)
+                points, intervals = library.get_interval_estimates(
+                    {name: indices},
+                    statistics,
+                    method="percentile",
+                    reps=reps,
+                    confidence_interval_size=confidence,
+                    random_state=np.random.RandomState(seed),
+                )
+        finally:
+            np.random.set_state(global_state)
+        (iqm, mean), ((iqm_low, mean_low), (iqm_high, mean_high)) = points[name], intervals[name]
+        bounds = [iqm_low, iqm_high, mean_low, mean_high]
+        iqm_low, iqm_high, mean_low, mean_high = (None if not np.all(np.isfinite(bounds)) else float(b) for b in bounds)
+        results[name] = {
+            "iqm": float(iqm),
+            "iqm_low": iqm_low,
+            "iqm_high": iqm_high,
+            "mean": float(mean),
+            "mean_low": mean_low,
+            "mean_high": mean_high,
+            "ids": len(ids),
+            "env_ids": ids,
+            "episodes": int(gain.shape[0]),
+        }
+    return results

@@ -1,0 +1,1 @@
+"""Tests of the evaluation room (agents/evaluation): rollouts, statistics, the benchmark and scoring."""
