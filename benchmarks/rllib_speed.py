@@ -54,12 +54,13 @@ def sb3_speed(env_id: str, iterations: int) -> float:
     """Env steps/s of SB3's PPO with ``agents/hyperparams/ppo.yml``'s settings over ``iterations`` updates."""
     from stable_baselines3 import PPO
 
-    from agents.train import _algorithm_kwargs, load_hyperparameters, make_training_env
+    from agents.training.hyperparams import load_hyperparameters
+    from agents.training.sb3 import algorithm_kwargs, make_training_env
 
     hyperparams = load_hyperparameters("ppo", env_id)
     n_envs = int(hyperparams["n_envs"])
     venv = make_training_env(env_id, n_envs, 0, hyperparams.get("normalize", False))
-    model = PPO("MlpPolicy", venv, seed=0, device="cpu", **_algorithm_kwargs(hyperparams))
+    model = PPO("MlpPolicy", venv, seed=0, device="cpu", **algorithm_kwargs(hyperparams))
     per_update = n_envs * int(hyperparams["n_steps"])
     model.learn(per_update)  # warm-up
     started = time.perf_counter()

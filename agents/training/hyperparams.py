@@ -22,7 +22,8 @@ from tether_gym._optional import needs_extra
 from ..common.commands import program
 from ..common.data import HYPERPARAMS_DIR
 from ..controllers.residual import check_residual_on
-from ..safe_format import ALGORITHMS, CLASS_KWARGS
+from ..policies.codecs import CLASS_KWARGS
+from ..policies.format import ALGORITHMS
 
 with needs_extra("train", "training"):
     import yaml

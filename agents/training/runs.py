@@ -9,9 +9,10 @@ from pathlib import Path
 
 from ..common.commands import program
 from ..common.files import OutputError, OutputExistsError, check_no_symlinks_inside, prepare_output_dir
-from ..pickled import is_pickle_model, normalization_file_of, refuse_untrusted, sb3_model_file
-from ..safe_format import METADATA_FILE, POLICY_FILES, PolicyFormatError, is_policy_dir, read_metadata
-from ..selection import EVALUATIONS_FILE
+from ..policies.format import is_policy_dir, read_metadata
+from ..policies.layout import METADATA_FILE, POLICY_FILES, PolicyFormatError
+from ..policies.pickled import is_pickle_model, normalization_file_of, refuse_untrusted, sb3_model_file
+from .selection import EVALUATIONS_FILE
 
 __all__ = [
     "LEGACY_BEST_FILES",

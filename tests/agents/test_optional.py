@@ -95,12 +95,14 @@ def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.M
         ("scipy", "import agents.controllers.centralised", ["scipy", "LQR", 'pip install "tether-gym[train]"']),
         (
             "tensorboard",
-            "import agents.train, tempfile; agents.train.train('ppo', out=tempfile.mkdtemp(), timesteps=64)",
+            "import tempfile; from agents.training.config import TrainConfig; from agents.training.sb3 import train; "
+            "train(TrainConfig('ppo', out=tempfile.mkdtemp(), timesteps=64))",
             ["tensorboard", "TensorBoard logs", 'pip install "tether-gym[train]"'],
         ),
         (
             "rich",
-            "import agents.train, tempfile; agents.train.train('ppo', out=tempfile.mkdtemp(), timesteps=64)",
+            "import tempfile; from agents.training.config import TrainConfig; from agents.training.sb3 import train; "
+            "train(TrainConfig('ppo', out=tempfile.mkdtemp(), timesteps=64))",
             ["rich", "--no-progress", 'pip install "tether-gym[train]"'],
         ),
         (

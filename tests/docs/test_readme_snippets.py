@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from agents.train import load_hyperparameters
+from agents.training.hyperparams import load_hyperparameters
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 ROOT = Path(__file__).resolve().parents[2]

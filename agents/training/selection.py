@@ -12,7 +12,7 @@ never the comparison's held-out seeds 10 000-10 063), so that successive evaluat
 baselines are compared episode by episode:
 
 * at the start of training it rolls out every scripted baseline on those seeds once and takes the
-  best eligible one (:func:`agents.benchmark.best_eligible_baseline`) as the bar;
+  best eligible one (:func:`agents.evaluation.stats.best_eligible_baseline`) as the bar;
 * at every evaluation it reports the policy's mean return and its paired difference from the bar
   with a 95 % t interval, to the console, to TensorBoard (``eval/*``) and to
   ``best/evaluations.json``;
@@ -37,7 +37,8 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
-from .common.files import atomic_write_text
+from ..common.files import atomic_write_text
+from ..policies.spec import PolicySpec
 
 with needs_extra("train", "evaluating policies during training"):
     from stable_baselines3.common.callbacks import BaseCallback
@@ -50,6 +51,7 @@ __all__ = [
     "baseline_returns",
     "episode_returns",
     "evaluation_seeds",
+    "print_evaluation_summary",
 ]
 
 #: The evaluation log in the run's ``best/`` directory.
@@ -68,8 +70,9 @@ def evaluation_seeds(episodes: int) -> list[int]:
 def episode_returns(
     controller: Any, env_id: str, seeds: list[int], env_kwargs: dict[str, Any] | None = None
 ) -> np.ndarray:
-    """(E,) undiscounted return of ``controller`` in one episode per seed (``agents.evaluate.rollout``)."""
-    from .evaluate import rollout
+    """(E,) undiscounted return of ``controller`` in one episode per seed
+    (:func:`agents.evaluation.rollout.rollout`)."""
+    from ..evaluation.rollout import rollout
 
     return rollout(controller, env_id, seeds, env_kwargs=env_kwargs).rewards.sum(axis=1)
 
@@ -78,11 +81,11 @@ def baseline_returns(
     env_id: str, seeds: list[int], env_kwargs: dict[str, Any] | None = None
 ) -> tuple[dict[str, np.ndarray], str]:
     """Every scripted baseline's (E,) returns on ``seeds``, and the bar: the best eligible one
-    (:func:`agents.benchmark.best_eligible_baseline`)."""
+    (:func:`agents.evaluation.stats.best_eligible_baseline`)."""
     import gymnasium as gym
 
-    from .baselines import BASELINES, make_baseline
-    from .benchmark import best_eligible_baseline
+    from ..controllers.registry import BASELINES, make_baseline
+    from ..evaluation.stats import best_eligible_baseline
 
     env = gym.make(env_id, **dict(env_kwargs or {}))
     returns = {name: episode_returns(make_baseline(name, env), env_id, seeds, env_kwargs) for name in BASELINES}
@@ -125,8 +128,8 @@ class EvaluationLog:
     def add(self, returns: np.ndarray, timesteps: int, **extra: Any) -> tuple[dict[str, Any], Any, bool]:
         """Record an evaluation's (E,) ``returns`` after ``timesteps`` env steps (``extra``: more
         entries of its record); returns its record, its paired difference from the bar
-        (:class:`agents.benchmark.PairedDifference`) and whether it is the best so far."""
-        from .benchmark import paired_difference
+        (:class:`agents.evaluation.stats.PairedDifference`) and whether it is the best so far."""
+        from ..evaluation.stats import paired_difference
 
         paired = paired_difference(returns, self.baseline_returns[self.bar])
         entry = {
@@ -188,8 +191,7 @@ class SeededEvaluation(BaseCallback):
         on_new_best: a callback run when the mean return is the best so far (saves ``best/``).
         started: ``time.perf_counter()`` at the start of the training command.
         env_kwargs: the env's keyword arguments (``env_kwargs`` of the hyperparameters).
-        residual_on: the baseline a residual policy corrects, or None.
-        multiagent: a shared decentralised policy's multi-agent options, or None.
+        spec: how the policy's outputs become actions (residual, multi-agent); default centralised.
         verbose: 1 prints a line per evaluation.
     """
 
@@ -202,15 +204,13 @@ class SeededEvaluation(BaseCallback):
         on_new_best: BaseCallback,
         started: float,
         env_kwargs: dict[str, Any] | None = None,
-        residual_on: str | None = None,
-        multiagent: dict[str, Any] | None = None,
+        spec: PolicySpec | None = None,
         verbose: int = 1,
     ) -> None:
         super().__init__(verbose=verbose)
         self.env_id, self.seeds, self.every = env_id, evaluation_seeds(episodes), max(int(every), 1)
         self.log_dir, self.on_new_best, self.started = Path(log_dir), on_new_best, started
-        self.env_kwargs, self.residual_on = dict(env_kwargs or {}), residual_on
-        self.multiagent = multiagent
+        self.env_kwargs, self.spec = dict(env_kwargs or {}), spec if spec is not None else PolicySpec()
         #: The evaluations, from the start of training (when the baselines have been rolled out).
         self.log = EvaluationLog(env_id, self.seeds, {}, "", started)
         self.policy: Any = None
@@ -250,17 +250,16 @@ class SeededEvaluation(BaseCallback):
         """The model's policy as a controller, built once: it holds the model's own policy and
         normaliser objects, so it acts with their weights and statistics of the moment (and a
         residual policy's baseline is designed once, not at every evaluation)."""
-        from .policies import TrainedPolicy
+        from ..policies import TrainedPolicy
 
         policy = TrainedPolicy.from_parts(
             self.model.policy,
             self.model.get_vec_normalize_env(),
             self.env_id,
             algo=type(self.model).__name__.lower(),
-            residual_on=self.residual_on,
-            multiagent=self.multiagent,
+            spec=self.spec,
         )
-        if self.residual_on is not None:
+        if self.spec.residual_on is not None:
             import gymnasium as gym
 
             env = gym.make(self.env_id, **self.env_kwargs)
@@ -305,3 +304,19 @@ class SeededEvaluation(BaseCallback):
 
     def write(self) -> None:
         self.log.write(self.log_dir)
+
+
+def print_evaluation_summary(evaluation: SeededEvaluation | EvaluationLog) -> None:
+    """One line: the best evaluation return against the bar, and when training first beat it."""
+    if not evaluation.history:
+        return
+    beat = evaluation.first_beat.get(evaluation.bar)
+    print(
+        f"best evaluation return {evaluation.best_mean:.2f} against {evaluation.bar} "
+        f"{evaluation.baseline_returns[evaluation.bar].mean():.2f} on the evaluation seeds; "
+        + (
+            f"first beat it at {beat['timesteps']:,} steps, {beat['wall_time_s']:.0f} s after the command started"
+            if beat
+            else "never beat it"
+        )
+    )
