@@ -4,7 +4,7 @@ Bring your own algorithm: this script is the whole training loop of PPO (Schulma
 for continuous actions, written after CleanRL's ``ppo_continuous_action.py``, on
 ``gym.make_vec(id, num_envs=N)``: the project's own vector env, which steps all N sub-envs in one
 compiled batch. At the end it scores the trained policy on the benchmark's held-out episodes
-with ``tether_gym_agents.scoring.score_policy`` (mean return, the paired difference against the
+with ``tether_gym_agents.evaluation.scoring.score_policy`` (mean return, the paired difference against the
 id's best scripted baseline, and the normalised score: 0 = passive, 100 = mpc), so the result
 can be placed in the tables of docs/benchmark.md. Change what you like and compare.
 
@@ -29,7 +29,7 @@ import tether_gym  # noqa: F401
 
 # isort: split
 import torch
-from tether_gym_agents.scoring import score_policy
+from tether_gym_agents.evaluation.scoring import score_policy
 from torch import nn
 from torch.distributions.normal import Normal
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
-from tether_gym_agents.evaluate import rollout, summarise
+from tether_gym_agents.evaluation.rollout import rollout, summarise
 from tether_gym_agents.policies import make_controller, shipped_models
 
 import tether_gym as tg

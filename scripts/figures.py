@@ -183,7 +183,7 @@ def make_benchmark(args: argparse.Namespace) -> None:
             f"{source} has neither the benchmark's plots nor its benchmark.json: is it the --out of a "
             f"finished `python -m agents.benchmark`?"
         )
-    from agents.benchmark import plot_normalised_scores, plot_paired_differences
+    from agents.evaluation.plots import plot_normalised_scores, plot_paired_differences
 
     results = json.loads(results_file.read_text(encoding="utf-8"))
     plot_normalised_scores(results, IMG / "benchmark_scores.png")
