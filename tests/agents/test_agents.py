@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 import tether_gym
-from agents.compare import compare
 from agents.controllers.centralised import (
     LQRController,
     PassiveController,
@@ -21,6 +20,7 @@ from agents.controllers.centralised import (
 )
 from agents.controllers.linear_model import LinearModel
 from agents.controllers.registry import BASELINES, make_baseline
+from agents.evaluation.comparison import CompareConfig, compare
 from agents.policies import TrainedPolicy, make_controller
 from agents.train import load_hyperparameters, make_training_env, train
 from tether_gym.envs.contract import Scalar
@@ -185,8 +185,9 @@ def trained_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _check_evaluations(run: Path) -> None:
     """best/evaluations.json: every evaluation on the same seeds, paired against the best baseline
     rolled out on those seeds, and the best/ policy is the one with the best mean return."""
-    from agents.evaluate import rollout
     from agents.selection import evaluation_seeds
+
+    from agents.evaluation.rollout import rollout
 
     log = json.loads((run / "best" / "evaluations.json").read_text())
     seeds = evaluation_seeds(2)
@@ -305,14 +306,14 @@ def test_comparison_loads_a_trained_model_and_is_reproducible(trained_run: Path,
         seed=123,
         env_kwargs={"max_episode_steps": 40},
     )
-    records, summaries = compare(out=tmp_path / "a", **kwargs)
+    records, summaries = compare(CompareConfig(out=tmp_path / "a", **kwargs))
     assert [r.name for r in records[:4]] == ["passive", "velocity_feedback", "lqr", "tension_aware"]
     table = (tmp_path / "a" / "comparison.md").read_text()
     for record in records:
         assert f"| {record.name} |" in table
     for name in ("energy.png", "displacement.png", "comparison.csv"):
         assert (tmp_path / "a" / name).stat().st_size > 0
-    compare(out=tmp_path / "b", plots=False, **kwargs)
+    compare(CompareConfig(out=tmp_path / "b", plots=False, **kwargs))
     rows_a = list(csv.reader(open(tmp_path / "a" / "comparison.csv")))
     rows_b = list(csv.reader(open(tmp_path / "b" / "comparison.csv")))
     assert rows_a == rows_b and len(rows_a) == 1 + len(controllers)

@@ -24,18 +24,7 @@ import numpy as np
 import pytest
 import torch
 import yaml
-from stable_baselines3 import PPO, SAC
-
-import agents.compare
-import agents.convert
-import agents.policies
-import agents.train
-from agents.compare import compare
-from agents.convert import REFERENCE_FILE, convert
-from agents.evaluate import rollout
-from agents.common.files import OutputError, OutputExistsError, atomic_write_text
 from agents.pickled import PickleNotTrustedError, PickleTrustWarning
-from agents.policies import MODELS_DIR, OtherIdWarning, TrainedPolicy, make_controller, shipped_models
 from agents.safe_format import (
     ChecksumError,
     PolicyFormatError,
@@ -45,6 +34,18 @@ from agents.safe_format import (
     reference_observations,
     save_policy,
 )
+from stable_baselines3 import PPO, SAC
+
+import agents.compare
+import agents.convert
+import agents.evaluation.comparison
+import agents.policies
+import agents.train
+from agents.common.files import OutputError, OutputExistsError, atomic_write_text
+from agents.convert import REFERENCE_FILE, convert
+from agents.evaluation.comparison import CompareConfig, compare
+from agents.evaluation.rollout import rollout
+from agents.policies import MODELS_DIR, OtherIdWarning, TrainedPolicy, make_controller, shipped_models
 from agents.train import HyperparameterError, make_training_env, train
 from tether_gym import ENV_IDS
 
@@ -445,8 +446,8 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
     def forbidden(*args: object, **kwargs: object) -> None:
         raise AssertionError("work started before the outputs were checked")
 
-    monkeypatch.setattr(agents.compare, "rollout", forbidden)
-    monkeypatch.setattr(agents.compare, "make_controller", forbidden)
+    monkeypatch.setattr(agents.evaluation.comparison, "rollout", forbidden)
+    monkeypatch.setattr(agents.evaluation.comparison, "make_controller", forbidden)
     monkeypatch.setattr(agents.train, "make_training_env", forbidden)
 
 
@@ -475,13 +476,15 @@ def test_compare_refuses_a_bad_out_before_any_work(tmp_path: Path, no_work: None
 def test_compare_refuses_to_overwrite_and_to_follow_symlinks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     out = tmp_path / "compare"
     kwargs = dict(env_id=ENV, controllers=["passive", "lqr"], episodes=2, plots=False, env_kwargs=SHORT)
-    compare(out=out, **kwargs)
+    compare(CompareConfig(out=out, **kwargs))
     first = (out / "comparison.csv").read_text()
-    monkeypatch.setattr(agents.compare, "rollout", lambda *a, **k: pytest.fail("rollout before the refusal"))
+    monkeypatch.setattr(
+        agents.evaluation.comparison, "rollout", lambda *a, **k: pytest.fail("rollout before the refusal")
+    )
     with pytest.raises(OutputExistsError, match="comparison.md, comparison.csv .*--force"):
-        compare(out=out, **kwargs)
+        compare(CompareConfig(out=out, **kwargs))
     monkeypatch.undo()
-    compare(out=out, force=True, **kwargs)
+    compare(CompareConfig(out=out, force=True, **kwargs))
     assert (out / "comparison.csv").read_text() == first  # same seeds: same numbers
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary files left
     outside = tmp_path / "outside.md"
@@ -489,7 +492,7 @@ def test_compare_refuses_to_overwrite_and_to_follow_symlinks(tmp_path: Path, mon
     (out / "comparison.md").unlink()
     (out / "comparison.md").symlink_to(outside)
     with pytest.raises(OutputError, match="symlink"):
-        compare(out=out, force=True, **kwargs)
+        compare(CompareConfig(out=out, force=True, **kwargs))
     assert outside.read_text() == "not yours" and (out / "comparison.md").is_symlink()
 
 
@@ -642,14 +645,17 @@ def _quietly_on_another_id(model: Path) -> None:
 def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
     cases = [
-        (lambda: compare(ENV, episodes=-3, out=out), "episodes must be an integer >= 2"),
-        (lambda: compare(ENV, seed=-1, out=out), "seed must be an integer >= 0"),
-        (lambda: compare(ENV, seed=1.5, out=out), "seed must be an integer"),
-        (lambda: compare("Nope-v0", out=out), "unknown env id 'Nope-v0'"),
-        (lambda: compare(ENV, controllers=["passive", "nope"], out=out, episodes=2), "unknown controller 'nope'"),
-        (lambda: compare(ENV, controllers=["lqr", "lqr"], out=out), r"\['lqr'\] more than once"),
-        (lambda: compare(ENV, controllers=[], out=out), "at least one controller"),
-        (lambda: compare(ENV, satellite=9, out=out, episodes=2), r"satellite must be in 0\.\.3"),
+        (lambda: compare(CompareConfig(ENV, episodes=-3, out=out)), "episodes must be an integer >= 2"),
+        (lambda: compare(CompareConfig(ENV, seed=-1, out=out)), "seed must be an integer >= 0"),
+        (lambda: compare(CompareConfig(ENV, seed=1.5, out=out)), "seed must be an integer"),
+        (lambda: compare(CompareConfig("Nope-v0", out=out)), "unknown env id 'Nope-v0'"),
+        (
+            lambda: compare(CompareConfig(ENV, controllers=["passive", "nope"], out=out, episodes=2)),
+            "unknown controller 'nope'",
+        ),
+        (lambda: compare(CompareConfig(ENV, controllers=["lqr", "lqr"], out=out)), r"\['lqr'\] more than once"),
+        (lambda: compare(CompareConfig(ENV, controllers=[], out=out)), "at least one controller"),
+        (lambda: compare(CompareConfig(ENV, satellite=9, out=out, episodes=2)), r"satellite must be in 0\.\.3"),
         (
             lambda: rollout(make_controller("passive", gym.make_vec(ENV, num_envs=1)), ENV, [1.5]),
             r"seeds must be non-negative integers; got \[1\.5\]",
