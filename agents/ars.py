@@ -7,7 +7,7 @@ Training, evaluation and selection follow ``agents.train``: the run directory
 ``<out>/<env>/ars_seed<seed>`` holds ``config.yml`` (settings and the exact command), TensorBoard
 logs, ``best/`` (the policy with the best mean return on the evaluation seeds, 1 000 000 up,
 never the benchmark's held-out seeds) with ``best/evaluations.json``, and the final policy. The
-policy is stored in the safe format (:mod:`agents.safe_format`) as the linear actor of SB3's
+policy is stored in the safe format (:mod:`agents.policies.format`) as the linear actor of SB3's
 ``ActorCriticPolicy`` (``net_arch: {pi: [], vf: []}``) with ``algo: ars``, so ``agents.compare``,
 ``agents.benchmark`` and ``agents.ship`` load it like any trained model. Settings per id are in
 the package's ``hyperparams/ars.yml`` (``agents/hyperparams`` in a checkout). Console script:
@@ -28,7 +28,7 @@ from pathlib import Path
 from .common import cli
 from .common.commands import command_line, exit_on_error
 from .common.files import OutputError
-from .safe_format import PolicyFormatError
+from .policies.layout import PolicyFormatError
 from .training.ars import load_ars_settings, train_ars
 
 __all__ = ["build_parser", "main"]

@@ -1,9 +1,9 @@
 """Controllers by name: the scripted baselines, and trained policies loaded from disk.
 
-Trained policies are read from the safe format of :mod:`agents.safe_format` (JSON metadata,
+Trained policies are read from the safe format of :mod:`agents.policies.format` (JSON metadata,
 safetensors weights, JSON normalisation statistics), which cannot run code on load. The
 pickle-based SB3 files (``model.zip`` + ``vecnormalize.pkl``) are loaded only with
-``trust_pickle=True`` (see :mod:`agents.pickled`).
+``trust_pickle=True`` (see :mod:`agents.policies.pickled`).
 
 A trained policy records the id it was trained on (``policy.json``'s ``env_id``), and runs only
 on envs of that id: ids of the same observation shape (the triangle and the spinning triangle)
@@ -23,9 +23,10 @@ import numpy as np
 from ..common.commands import program
 from ..common.data import MODELS_DIR
 from ..controllers.registry import BASELINES, make_baseline
-from ..pickled import is_pickle_model, load_pickled_model, refuse_untrusted
-from ..safe_format import MANIFEST_FILE, METADATA_FILE, is_policy_dir, load_policy
-from .spec import PolicySpec
+from .format import is_policy_dir, load_policy
+from .layout import MANIFEST_FILE, METADATA_FILE
+from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted
+from .spec import PolicySpec, spec_of
 
 __all__ = [
     "MODELS_DIR",
@@ -91,15 +92,15 @@ class TrainedPolicy:
         best: load the run directory's ``best/`` policy instead of the final one.
         name: the name shown in tables (default: the algorithm, e.g. ``"ppo"``).
         trust_pickle: allow loading pickle-based SB3 files, which can run arbitrary code; a
-            :class:`agents.pickled.PickleTrustWarning` is emitted when it happens.
+            :class:`agents.policies.pickled.PickleTrustWarning` is emitted when it happens.
         allow_other_id: let :meth:`attach` put the policy on an env of another id than the one
             it was trained on (``env_id``), with an :class:`OtherIdWarning`; without it that is an
             :class:`OtherIdError`.
 
     Raises:
         FileNotFoundError: nothing loadable at ``path``.
-        agents.pickled.PickleNotTrustedError: a pickle-based model without ``trust_pickle``.
-        agents.safe_format.PolicyFormatError: a malformed policy directory, or (ChecksumError) a
+        agents.policies.pickled.PickleNotTrustedError: a pickle-based model without ``trust_pickle``.
+        agents.policies.layout.PolicyFormatError: a malformed policy directory, or (ChecksumError) a
             file that does not match its manifest.
     """
 
@@ -178,7 +179,7 @@ class TrainedPolicy:
         (a ``VecNormalize`` or None), e.g. the model being trained; nothing is copied, so it acts
         with the weights and statistics they hold when ``predict`` is called. ``spec`` says how
         its outputs become actions (default: a centralised policy whose outputs are its actions)."""
-        spec = _spec_of(spec, residual_on, multiagent)
+        spec = spec_of(spec, residual_on, multiagent)
         self = cls.__new__(cls)
         self.allow_other_id = False
         self.policy, self.normalizer, self.algo, self.env_id = policy, normalizer, algo, env_id
@@ -306,21 +307,11 @@ class TrainedPolicy:
         if self.observer is None:
             raise RuntimeError(
                 f"{self.path} is a decentralised policy: attach(env) it to the tether-gym env whose observations "
-                "it is given (make_controller and agents.evaluate.rollout do)"
+                "it is given (make_controller and agents.evaluation.rollout.rollout do)"
             )
         local, single = self.observer.observe(observation)
         joint = self.act_local(local, deterministic).reshape(local.shape[0], -1)
         return joint[0] if single else joint
-
-
-def _spec_of(spec: PolicySpec | None, residual_on: str | None, multiagent: dict[str, Any] | None) -> PolicySpec:
-    """``spec``, or one built from the keyword form ``residual_on``/``multiagent`` that callers
-    still use while they move to :class:`PolicySpec`; both at once is an error."""
-    if spec is None:
-        return PolicySpec(residual_on=residual_on, multiagent=multiagent)
-    if residual_on is not None or multiagent is not None:
-        raise ValueError("pass either spec or residual_on/multiagent, not both")
-    return spec
 
 
 def shipped_models(env_id: str) -> dict[str, Path]:

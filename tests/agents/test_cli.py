@@ -89,7 +89,7 @@ def test_the_command_modules_use_the_cli_parsers() -> None:
 
 
 def test_the_algorithm_names_match_the_policy_format() -> None:
-    from agents.safe_format import ALGORITHMS
+    from agents.policies.format import ALGORITHMS
 
     assert tuple(sorted(ALGORITHMS)) == cli.TRAIN_ALGORITHMS
 

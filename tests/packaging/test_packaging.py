@@ -194,7 +194,8 @@ def test_the_agents_work_under_their_installed_name(tmp_path: Path) -> None:
 
         sys.meta_path.insert(0, NoAgents())
         import tether_gym_agents
-        from tether_gym_agents import commands, pickled, ship
+        from tether_gym_agents import commands, ship
+        from tether_gym_agents.policies import pickled
 
         names = [info.name for info in pkgutil.iter_modules(tether_gym_agents.__path__)]
         modules = {name: importlib.import_module(f"tether_gym_agents.{name}") for name in names}

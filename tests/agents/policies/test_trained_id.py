@@ -15,8 +15,9 @@ import gymnasium as gym
 import pytest
 
 import agents.compare
-from agents.benchmark import benchmark
-from agents.evaluate import rollout
+from agents.evaluation.benchmark import BenchmarkConfig, benchmark
+from agents.evaluation.comparison import CompareConfig, compare
+from agents.evaluation.rollout import rollout
 from agents.policies import (
     MODELS_DIR,
     OtherIdError,
@@ -26,7 +27,8 @@ from agents.policies import (
     make_controller,
     shipped_models,
 )
-from agents.safe_format import METADATA_FILE, read_metadata, write_manifest
+from agents.policies.format import read_metadata, write_manifest
+from agents.policies.layout import METADATA_FILE
 
 TRIANGLE, SPINNING = "TetherTriangle-v0", "TetherSpinningTriangle-v0"
 SHORT = {"max_episode_steps": 5}
@@ -106,14 +108,16 @@ def test_compare_refuses_another_id_unless_allowed(tmp_path: Path) -> None:
         agents.compare.main([*arguments, "--out", str(tmp_path / "refused")])
     assert not (tmp_path / "refused" / "comparison.md").exists()
     with pytest.warns(OtherIdWarning, match=SPINNING):
-        records, _ = agents.compare.compare(
-            SPINNING,
-            [str(triangle_ppo())],
-            episodes=2,
-            out=tmp_path / "allowed",
-            plots=False,
-            env_kwargs=SHORT,
-            allow_other_id=True,
+        records, _ = compare(
+            CompareConfig(
+                SPINNING,
+                [str(triangle_ppo())],
+                episodes=2,
+                out=tmp_path / "allowed",
+                plots=False,
+                env_kwargs=SHORT,
+                allow_other_id=True,
+            )
         )
     assert records[0].rewards.shape == (2, 5)
     assert agents.compare.build_parser().parse_args(["--allow-other-id"]).allow_other_id
@@ -129,12 +133,12 @@ def test_benchmark_runs_a_policy_on_its_own_id_only_unless_allowed(tmp_path: Pat
         bootstrap_reps=100,
         env_kwargs=SHORT,
     )
-    results = benchmark(out=tmp_path / "own", **settings)
+    results = benchmark(BenchmarkConfig(out=tmp_path / "own", **settings))
     assert str(triangle_ppo()) in results["per_id"][TRIANGLE]["controllers"]
     missing = results["per_id"][SPINNING]["missing"]
     assert missing == [
         {"controller": str(triangle_ppo()), "reason": f"trained on {TRIANGLE}; --allow-other-id runs it on other ids"}
     ]
     with pytest.warns(OtherIdWarning):
-        results = benchmark(out=tmp_path / "allowed", allow_other_id=True, **settings)
+        results = benchmark(BenchmarkConfig(out=tmp_path / "allowed", allow_other_id=True, **settings))
     assert str(triangle_ppo()) in results["per_id"][SPINNING]["controllers"]

@@ -2,7 +2,7 @@
 
 An SB3 ``.zip`` stores some of its fields cloudpickled, and ``VecNormalize.save`` writes a plain
 pickle. Unpickling runs whatever code the file names, so a crafted model file runs code the moment
-it is loaded. tether-gym's own format (:mod:`agents.safe_format`) has no such step; these files
+it is loaded. tether-gym's own format (:mod:`agents.policies.format`) has no such step; these files
 are read only when the caller passes ``trust_pickle=True`` (``--trust-pickle`` on the command
 line), and then with a :class:`PickleTrustWarning`. This is the only module of the project that
 unpickles anything.
@@ -22,8 +22,9 @@ with needs_extra("train", "loading pickle-based SB3 models"):
     from stable_baselines3.common.base_class import BaseAlgorithm
     from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from .common.commands import program
-from .safe_format import ALGORITHMS, METADATA_FILE
+from ..common.commands import program
+from .format import ALGORITHMS
+from .layout import METADATA_FILE
 
 __all__ = [
     "PickleNotTrustedError",
