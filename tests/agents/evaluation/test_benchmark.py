@@ -6,6 +6,7 @@ before any rollout. Its statistics are checked by hand in ``test_stats.py``.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -146,6 +147,22 @@ def test_benchmark_says_the_score_is_not_available_without_mpc(tmp_path: Path, m
     assert "Not available: the normalised score needs mpc" in report
     assert "| TetherTriangle-v0 | n/a | n/a |" in report
     assert (tmp_path / "aggregate.png").stat().st_size > 0  # a figure that says why it is empty
+
+
+def test_the_config_keeps_checked_values_and_is_frozen() -> None:
+    config = BenchmarkConfig(env_ids=[SMOKE_IDS[0]], controllers=["lqr"], episodes=np.int64(3), bootstrap_reps=100)
+    assert (config.env_ids, config.controllers, config.episodes) == ((SMOKE_IDS[0],), ("lqr",), 3)
+    assert type(config.episodes) is int
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        config.seed = 0  # type: ignore[misc]
+    for settings, message in [
+        ({"env_ids": ["Nope-v0"]}, r"env_ids: unknown \['Nope-v0'\]"),
+        ({"controllers": ["lqr", "lqr"]}, r"controllers lists \['lqr'\] more than once"),
+        ({"episodes": 1}, "episodes must be an integer >= 2; got 1"),
+        ({"bootstrap_reps": 99}, "bootstrap_reps must be an integer >= 100; got 99"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            BenchmarkConfig(**settings)  # type: ignore[arg-type]
 
 
 def test_bad_output_or_controller_is_refused_before_any_rollout(
