@@ -3,7 +3,7 @@
 
 Each ``RUN`` is a run directory of ``agents.train`` (its ``best/`` policy is the candidate), or a
 policy directory (a checkpoint, or a model shipped earlier). Every candidate is rolled out on the
-evaluation seeds (:func:`agents.selection.evaluation_seeds`, 1 000 000 up), the seeds training
+evaluation seeds (:func:`agents.training.selection.evaluation_seeds`, 1 000 000 up), the seeds training
 selected its ``best/`` on, alongside every scripted baseline. Per id and algorithm, the candidate
 with the highest mean return there is shipped: its policy files, ``config.yml`` and training log
 are copied to ``OUT/<id>/<algo>/`` under a fresh ``MANIFEST.sha256``. The held-out seeds the
@@ -14,6 +14,8 @@ training seed, steps, wall time, mean return on the evaluation seeds and its pai
 from the best scripted baseline there (95 % t interval), and the wall time at which its training
 first beat each baseline (from the run's ``best/evaluations.json``). Entries of earlier calls for
 other ids or algorithms are kept, so runs can be shipped id by id.
+
+This module is the command line; :mod:`agents.training.shipping` does the work.
 """
 
 from __future__ import annotations
@@ -24,324 +26,16 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
     parse_before_imports("ship")
 
 import argparse
-import hashlib
-import json
-import shlex
-import shutil
 import sys
-from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from tether_gym._optional import needs_extra
-
 from .common import cli
-from .common.commands import command_line, program
-from .common.files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
-from .safe_format import (
-    METADATA_FILE,
-    NORMALIZATION_FILE,
-    POLICY_HOSTS,
-    WEIGHTS_FILE,
-    PolicyFormatError,
-    is_policy_dir,
-    read_metadata,
-    write_manifest,
-)
-from .selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
+from .common.commands import command_line, exit_on_error
+from .common.files import OutputError
+from .policies.layout import PolicyFormatError
+from .training.shipping import ship
 
-with needs_extra("train", "shipping models"):
-    import yaml
-
-__all__ = ["evaluate_candidates", "main", "reproduce_command", "ship"]
-
-SHIPPED_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE)
-RUNS_TABLE = "training_runs"
-
-
-#: What a shared decentralised policy's model name adds to its algorithm's (``ppo_multiagent``),
-#: as agents.train names its run directories: the two kinds of model of an id ship side by side.
-MULTIAGENT_SUFFIX = "_multiagent"
-
-
-def model_name(metadata: Mapping[str, Any]) -> str:
-    """The name a policy ships under: its algorithm, with :data:`MULTIAGENT_SUFFIX` for a shared
-    decentralised policy."""
-    return metadata["algo"] + (MULTIAGENT_SUFFIX if metadata.get("multiagent") is not None else "")
-
-
-def _policy_dir(run: Path) -> Path:
-    for directory in (run / "best", run):
-        if is_policy_dir(directory):
-            return directory
-    raise FileNotFoundError(f"{run} holds no policy (neither {run}/best/{METADATA_FILE} nor {run}/{METADATA_FILE})")
-
-
-def _training_log(run: Path, policy_dir: Path) -> dict[str, Any] | None:
-    for path in (policy_dir / EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE):
-        if path.is_file():
-            return json.loads(path.read_text(encoding="utf-8"))
-    return None
-
-
-def _config(run: Path, policy_dir: Path) -> dict[str, Any]:
-    for path in (policy_dir / "config.yml", run / "config.yml"):
-        if path.is_file():
-            return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    return {}
-
-
-def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[dict[str, Any]]:
-    """Roll every candidate of ``runs`` and every scripted baseline of its id out on the
-    evaluation seeds; returns one record (plain JSON data) per run."""
-    import gymnasium as gym
-
-    from .benchmark import paired_difference
-    from .policies import TrainedPolicy
-
-    seeds = evaluation_seeds(episodes)
-    baselines: dict[str, tuple[dict[str, np.ndarray], str]] = {}
-    candidates = []
-    weights_seen: set[str] = set()
-    for run in map(Path, runs):
-        policy_dir = _policy_dir(run)
-        # A shipped model passed beside the run it came from is one candidate, not two.
-        weights = hashlib.sha256((policy_dir / WEIGHTS_FILE).read_bytes()).hexdigest()
-        if weights in weights_seen:
-            continue
-        weights_seen.add(weights)
-        metadata = read_metadata(policy_dir)
-        env_id = metadata["env_id"]
-        if env_id is None:
-            raise PolicyFormatError(f"{policy_dir}/{METADATA_FILE} names no env id: it cannot be shipped for one")
-        if env_id not in baselines:
-            baselines[env_id] = baseline_returns(env_id, seeds)
-        by_name, bar = baselines[env_id]
-        policy = TrainedPolicy(policy_dir)
-        env = gym.make(env_id)
-        policy.attach(env)
-        env.close()
-        returns = episode_returns(policy, env_id, seeds)
-        paired = paired_difference(returns, by_name[bar])
-        config, log = _config(run, policy_dir), _training_log(run, policy_dir)
-        training = (log or {}).get("training") or {}
-        candidates.append(
-            {
-                "env_id": env_id,
-                "algo": model_name(metadata),
-                "run": str(run),
-                "policy": str(policy_dir),
-                "seed": config.get("seed"),
-                "command": config.get("command"),
-                "timesteps": metadata["num_timesteps"],
-                "wall_time_s": training.get("wall_time_s"),
-                "residual_on": metadata.get("residual_on"),
-                "mean_return": float(returns.mean()),
-                "bar": bar,
-                "bar_mean_return": float(by_name[bar].mean()),
-                "difference": paired.mean,
-                "difference_low": paired.low,
-                "difference_high": paired.high,
-                "baselines": {name: float(r.mean()) for name, r in by_name.items()},
-                "first_beat": (log or {}).get("first_beat"),
-                "seeds": [seeds[0], seeds[-1]],
-            }
-        )
-    return candidates
-
-
-def _write_reference_actions(directory: Path, env_id: str, count: int = 1024) -> None:
-    """``reference_actions.safetensors``: observations (along the policy's own trajectories, seeds
-    0-7, and drawn around its normalisation statistics) and the network's deterministic actions on
-    them, so that a test can tell, on any machine, that the shipped files still act as shipped."""
-    import gymnasium as gym
-    import torch
-
-    from .convert import REFERENCE_FILE, _safe_actions, trajectory_observations
-    from .policies import TrainedPolicy
-    from .safe_format import reference_observations, tensor_bytes
-
-    policy = TrainedPolicy(directory)
-    env = gym.make(env_id)
-    policy.attach(env)
-    env.close()
-    statistics = policy.normalizer
-    mean, var = (statistics.obs_mean, statistics.obs_var) if statistics is not None else (0.0, 1.0)
-    if policy.multiagent is not None:  # a shared decentralised policy: the agents' local observations
-        from .decentralised import local_trajectory_observations
-
-        trajectory = local_trajectory_observations(policy.act_local, env_id, policy.multiagent)
-    else:
-        trajectory = trajectory_observations(lambda obs: policy.predict(obs)[0], env_id)
-    observations = reference_observations(
-        count, policy.policy.observation_space, mean, var, np.random.default_rng(0), trajectory
-    )
-    actions = _safe_actions(directory, observations)
-    atomic_write_bytes(
-        directory / REFERENCE_FILE,
-        tensor_bytes(
-            {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(actions))},
-            metadata={"pipeline": "normalization.json, then the policy's predict(deterministic=True)"},
-        ),
-    )
-
-
-def _markdown(entries: list[dict[str, Any]]) -> str:
-    lines = [
-        "# Training runs and the shipped models",
-        "",
-        (
-            "Every training run considered for shipping, evaluated on the evaluation seeds "
-            f"({entries[0]['seeds'][0]}..{entries[0]['seeds'][1]}, never the benchmark's held-out seeds). "
-            "Δ: paired difference of the mean return from the id's best scripted baseline on those seeds (95 % t "
-            "interval). Beat: wall time from the start of the training command to the first evaluation whose "
-            f"mean return beat that baseline's (— never). Made by `{program('ship')}`."
-        ),
-        "",
-    ]
-    columns = ["id", "algo", "seed", "steps", "wall time", "mean return", "best baseline", "Δ vs best baseline"]
-    columns += ["beat velocity feedback", "beat best baseline", "shipped"]
-    lines += ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-
-    def beat(entry: dict[str, Any], name: str) -> str:
-        found = (entry.get("first_beat") or {}).get(name)
-        return "—" if not found else f"{found['wall_time_s'] / 60:.1f} min ({found['timesteps'] / 1e6:.2f} M)"
-
-    for entry in sorted(entries, key=lambda e: (e["env_id"], e["algo"], str(e["seed"]))):
-        wall = "?" if entry["wall_time_s"] is None else f"{entry['wall_time_s'] / 60:.1f} min"
-        algo = entry["algo"] + (f" (residual on {entry['residual_on']})" if entry["residual_on"] else "")
-        shipped = "**yes**" if entry["shipped"] else ""
-        lines.append(
-            f"| {entry['env_id']} | {algo} "
-            f"| {entry['seed']} | {entry['timesteps'] / 1e6:.2f} M | {wall} | {entry['mean_return']:.2f} "
-            f"| {entry['bar']} {entry['bar_mean_return']:.2f} "
-            f"| {entry['difference']:+.2f} [{entry['difference_low']:+.2f}, {entry['difference_high']:+.2f}] "
-            f"| {beat(entry, 'velocity_feedback')} | {beat(entry, entry['bar'])} | {shipped} |"
-        )
-    lines += [
-        "",
-        "## Shipped models (the command that reproduces each)",
-        "",
-        "| id | algo | seed | steps | wall time | command |",
-        "|---|---|---|---|---|---|",
-    ]
-    for entry in sorted((e for e in entries if e["shipped"]), key=lambda e: (e["env_id"], e["algo"])):
-        wall = "?" if entry["wall_time_s"] is None else f"{entry['wall_time_s'] / 60:.1f} min"
-        lines.append(
-            f"| {entry['env_id']} | {entry['algo']} | {entry['seed']} | {entry['timesteps'] / 1e6:.2f} M "
-            f"| {wall} | `{entry.get('reproduce') or entry['command']}` |"
-        )
-    return "\n".join(lines) + "\n"
-
-
-def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
-    """The training command that reproduces a shipped model: the run's own command (its evaluation
-    and checkpoint settings choose ``best/``), with the hyperparameters read from the shipped
-    ``config.yml``, so that the command stays true when the YAML files are retuned."""
-    env_id, algo = candidate["env_id"], candidate["algo"]
-    tokens = shlex.split(candidate.get("command") or program("train"))
-    kept: list[str] = []
-    skip_value = False
-    for token in tokens:
-        if skip_value:
-            skip_value = False
-        elif token == "--hyperparams":
-            skip_value = True
-        elif not token.startswith("--hyperparams="):
-            kept.append(token)
-    algorithm = algo.removesuffix(MULTIAGENT_SUFFIX)
-    # agents.train takes --algo; a trainer of its own (agents.ars) is named by its command.
-    flags = [("--env", env_id), ("--seed", candidate["seed"])]
-    if algorithm not in POLICY_HOSTS:
-        flags.insert(0, ("--algo", algorithm))
-    for flag, value in flags:
-        if flag not in kept:
-            kept += [flag, str(value)]
-    return shlex.join([*kept, "--hyperparams", str(Path(shipped_at) / env_id / algo / "config.yml")])
-
-
-def ship(
-    runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force: bool = False, command: str | None = None
-) -> list[dict[str, Any]]:
-    """Evaluate ``runs``, ship the best per id and algorithm into ``out`` (see the module
-    docstring) and return every candidate's record (with ``shipped``).
-
-    An existing shipped model is replaced only with ``force``; to keep it in the running, pass
-    its directory among ``runs`` (every candidate is evaluated before anything is replaced)."""
-    shipped_at = str(out)
-    out = prepare_output_dir(out, argument="--out")
-    candidates = evaluate_candidates(runs, episodes)
-    chosen = _best_per_id_and_algo(candidates)
-    for (env_id, algo), candidate in chosen.items():
-        target = out / env_id / algo
-        if (target / METADATA_FILE).exists() and not force and Path(candidate["policy"]).resolve() != target.resolve():
-            raise OutputError(f"{target} already holds a shipped model: pass --force to replace it")
-    for candidate in candidates:
-        candidate["shipped"] = chosen[(candidate["env_id"], candidate["algo"])] is candidate
-        if candidate["shipped"]:
-            candidate["reproduce"] = reproduce_command(candidate, shipped_at)
-    for (env_id, algo), candidate in chosen.items():
-        _install(candidate, out / env_id / algo, env_id)
-    _write_runs_table(out, candidates, command)
-    for candidate in candidates:
-        print(
-            f"{candidate['env_id']} {candidate['algo']} seed {candidate['seed']}: {candidate['mean_return']:.2f} "
-            f"(vs {candidate['bar']} {candidate['difference']:+.2f} [{candidate['difference_low']:+.2f}, "
-            f"{candidate['difference_high']:+.2f}]){'  <- shipped' if candidate['shipped'] else ''}"
-        )
-    return candidates
-
-
-def _best_per_id_and_algo(candidates: Sequence[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
-    """The candidate with the highest mean return for each (env id, algorithm); the first on ties."""
-    chosen: dict[tuple[str, str], dict[str, Any]] = {}
-    for candidate in candidates:
-        key = (candidate["env_id"], candidate["algo"])
-        if key not in chosen or candidate["mean_return"] > chosen[key]["mean_return"]:
-            chosen[key] = candidate
-    return chosen
-
-
-def _install(candidate: Mapping[str, Any], target: Path, env_id: str) -> None:
-    """Copy ``candidate``'s policy, its run's ``config.yml`` and evaluations, reference actions of
-    ``env_id`` and a checksum manifest into ``target``. Staged beside it and renamed at the end, so a
-    failure leaves the earlier shipped model in place; nothing happens when the candidate is ``target``."""
-    source = Path(candidate["policy"])
-    if source.resolve() == target.resolve():
-        return
-    staging = target.parent / f".{target.name}.staging"
-    shutil.rmtree(staging, ignore_errors=True)
-    staging.mkdir(parents=True)
-    for name in SHIPPED_FILES:
-        if (source / name).is_file():
-            shutil.copy2(source / name, staging / name)
-    run = Path(candidate["run"])
-    for name, origin in (("config.yml", run / "config.yml"), (EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE)):
-        if origin.is_file():
-            shutil.copy2(origin, staging / name)
-    try:
-        write_manifest(staging, [p.name for p in staging.iterdir()])  # loading inside agents/models needs it
-        _write_reference_actions(staging, env_id)
-        write_manifest(staging, [p.name for p in staging.iterdir()])
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    if target.exists():
-        shutil.rmtree(target)
-    staging.rename(target)
-
-
-def _write_runs_table(out: Path, candidates: Sequence[dict[str, Any]], command: str | None) -> None:
-    """Merge ``candidates`` into the runs table in ``out`` (JSON and Markdown): they replace the
-    earlier entries of every (env id, algorithm) they cover."""
-    table = out / f"{RUNS_TABLE}.json"
-    earlier = json.loads(table.read_text(encoding="utf-8"))["runs"] if table.is_file() else []
-    replaced = {(c["env_id"], c["algo"]) for c in candidates}
-    entries = [e for e in earlier if (e["env_id"], e["algo"]) not in replaced] + list(candidates)
-    atomic_write_text(table, json.dumps({"command": command, "runs": entries}, indent=1) + "\n")
-    atomic_write_text(out / f"{RUNS_TABLE}.md", _markdown(entries))
+__all__ = ["build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -351,6 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    """Ship as the command line ``argv`` (default: ``sys.argv[1:]``) asks; returns every
+    candidate's record (:func:`agents.training.shipping.ship`)."""
     arguments = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(arguments)
     return ship(
@@ -363,7 +59,4 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except (OutputError, PolicyFormatError, FileNotFoundError, ValueError) as error:
-        sys.exit(f"{program('ship')}: error: {error}")
+    exit_on_error("ship", main, (OutputError, PolicyFormatError, FileNotFoundError, ValueError))

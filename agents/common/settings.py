@@ -2,7 +2,7 @@
 
 A settings file maps env ids to entries, with a ``default`` entry for the ids it does not list;
 each entry gives fields of a frozen dataclass (:class:`agents.controllers.mpc.MPCSettings`,
-:class:`agents.ars.ARSSettings`), whose ``__post_init__`` checks the values. Nothing in the file
+:class:`agents.training.ars.ARSSettings`), whose ``__post_init__`` checks the values. Nothing in the file
 is evaluated (``yaml.safe_load``).
 """
 

@@ -1,4 +1,5 @@
-"""agents.ship: the shipped model is the best candidate on the evaluation seeds, every run is recorded."""
+"""Shipping (agents.training.shipping, the command agents.ship): the shipped model is the best
+candidate on the evaluation seeds, every run is recorded."""
 
 from __future__ import annotations
 
@@ -8,13 +9,16 @@ from pathlib import Path
 import gymnasium as gym
 import pytest
 
-from agents.evaluate import rollout
 from agents.common.files import OutputError
+from agents.evaluation.rollout import rollout
 from agents.policies import TrainedPolicy, make_controller, shipped_models
-from agents.safe_format import verify_manifest
-from agents.selection import evaluation_seeds
-from agents.ship import main, ship
-from agents.train import HyperparameterError, load_hyperparameters, train
+from agents.policies.format import verify_manifest
+from agents.ship import main
+from agents.training.config import TrainConfig
+from agents.training.hyperparams import HyperparameterError, load_hyperparameters
+from agents.training.sb3 import train
+from agents.training.selection import evaluation_seeds
+from agents.training.shipping import ship
 from tether_gym import ENV_IDS
 
 ENV = "TetherTetrahedron-v0"
@@ -32,7 +36,7 @@ TINY = dict(
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     out = tmp_path_factory.mktemp("runs")
-    return [train("ppo", ENV, seed=seed, out=out, **TINY) for seed in (0, 1, 2)]
+    return [train(TrainConfig("ppo", ENV, seed=seed, out=out, **TINY)) for seed in (0, 1, 2)]
 
 
 def _mean_on_evaluation_seeds(policy_dir: Path, episodes: int) -> float:
@@ -87,12 +91,14 @@ def test_the_shipped_reproduce_command_retrains_the_same_weights(runs: list[Path
     assert command[command.index("--hyperparams") + 1] == str(config)
     # The reproduce command holds whatever the YAML files say today: tiny settings no YAML has.
     again = train(
-        "ppo",
-        ENV,
-        seed=int(command[command.index("--seed") + 1]),
-        out=tmp_path / "again",
-        hyperparams_file=config,
-        **{k: v for k, v in TINY.items() if k not in ("timesteps", "num_envs", "overrides")},
+        TrainConfig(
+            "ppo",
+            ENV,
+            seed=int(command[command.index("--seed") + 1]),
+            out=tmp_path / "again",
+            hyperparams_file=config,
+            **{k: v for k, v in TINY.items() if k not in ("timesteps", "num_envs", "overrides")},
+        )
     )
     assert (again / "policy.safetensors").read_bytes() == (runs[0] / "policy.safetensors").read_bytes()
     with pytest.raises(HyperparameterError, match="--env TetherTetrahedron-v0"):

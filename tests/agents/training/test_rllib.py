@@ -1,7 +1,7 @@
-"""Training on Ray RLlib (agents.train_rllib): one iteration with the native vector env in the env
-runners, checkpoint and resume, the export to the policy format (its actions equal RLlib's), the
-exported policy in agents.compare, and clear errors for bad input; the same for the multi-agent
-run with one shared module (--multiagent).
+"""Training on Ray RLlib (agents.training.rllib, the command agents.train_rllib): one iteration
+with the native vector env in the env runners, checkpoint and resume, the export to the policy
+format (its actions equal RLlib's), the exported policy in agents.compare, and clear errors for bad
+input; the same for the multi-agent run with one shared module (--multiagent).
 
 These need the rllib extra (bash scripts/test_rllib.sh); without Ray they are skipped. They share
 one local Ray instance of 2 CPUs, started and shut down by a session fixture."""
@@ -24,13 +24,15 @@ import yaml
 ray = pytest.importorskip("ray", reason="the rllib extra is not installed (bash scripts/test_rllib.sh runs these)")
 
 from agents import compare  # noqa: E402
-from agents.pickled import PickleNotTrustedError  # noqa: E402
 from agents.policies import TrainedPolicy  # noqa: E402
-from agents.safe_format import save_policy  # noqa: E402
-from agents.train import HyperparameterError  # noqa: E402
-from agents.train_rllib import (  # noqa: E402
+from agents.policies.format import save_policy  # noqa: E402
+from agents.policies.pickled import PickleNotTrustedError  # noqa: E402
+from agents.policies.spec import PolicySpec  # noqa: E402
+from agents.training.hyperparams import HyperparameterError  # noqa: E402
+from agents.training.rllib import (  # noqa: E402
     ALGO,
     RayUnavailableError,
+    RLlibConfig,
     build_config,
     export_policy,
     load_rllib_hyperparameters,
@@ -44,7 +46,7 @@ from tether_gym.registration import ENV_IDS  # noqa: E402
 
 pytestmark = [pytest.mark.rllib, pytest.mark.slow]
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 ENV_ID = "TetherTetrahedron-v0"
 #: A run small enough for tests: 800 env steps per iteration, 8 envs per runner, 40-step episodes.
 SMALL = {
@@ -79,15 +81,17 @@ def first_run(ray_instance: object, small_file: Path, tmp_path_factory: pytest.T
     """One iteration with one remote env runner, evaluated on 4 seeds and checkpointed."""
     out = tmp_path_factory.mktemp("runs")
     return train_rllib(
-        ENV_ID,
-        seed=3,
-        out=out,
-        num_env_runners=1,
-        hyperparams_file=small_file,
-        eval_freq=800,
-        eval_episodes=4,
-        checkpoint_freq=800,
-        command="python -m agents.train_rllib --test",
+        RLlibConfig(
+            ENV_ID,
+            seed=3,
+            out=out,
+            num_env_runners=1,
+            hyperparams_file=small_file,
+            eval_freq=800,
+            eval_episodes=4,
+            checkpoint_freq=800,
+            command="python -m agents.train_rllib --test",
+        )
     )
 
 
@@ -169,18 +173,22 @@ def test_the_exported_policy_runs_in_compare(first_run: Path, tmp_path: Path) ->
 def test_resume_continues_from_the_checkpoint(first_run: Path, small_file: Path) -> None:
     checkpoint = first_run / "checkpoints" / "iter_000001"
     with pytest.raises(PickleNotTrustedError, match="--trust-pickle"):
-        train_rllib(ENV_ID, seed=3, out=first_run.parents[1], hyperparams_file=small_file, resume=checkpoint)
+        train_rllib(
+            RLlibConfig(ENV_ID, seed=3, out=first_run.parents[1], hyperparams_file=small_file, resume=checkpoint)
+        )
     run = train_rllib(
-        ENV_ID,
-        seed=3,
-        out=first_run.parents[1],
-        timesteps=1600,
-        hyperparams_file=small_file,
-        resume=first_run,  # a run directory: its latest checkpoint
-        trust_pickle=True,
-        force=True,
-        eval_freq=10**6,
-        eval_episodes=2,
+        RLlibConfig(
+            ENV_ID,
+            seed=3,
+            out=first_run.parents[1],
+            timesteps=1600,
+            hyperparams_file=small_file,
+            resume=first_run,  # a run directory: its latest checkpoint
+            trust_pickle=True,
+            force=True,
+            eval_freq=10**6,
+            eval_episodes=2,
+        )
     )
     assert (run / "checkpoints" / "iter_000002" / "rllib_checkpoint.json").is_file()
     assert TrainedPolicy(run).metadata["num_timesteps"] == 1600
@@ -189,7 +197,7 @@ def test_resume_continues_from_the_checkpoint(first_run: Path, small_file: Path)
 
 def test_bad_arguments_fail_before_training(ray_instance: object, small_file: Path, tmp_path: Path) -> None:
     def run(**kwargs: object) -> Path:
-        return train_rllib(out=tmp_path, hyperparams_file=small_file, **kwargs)  # type: ignore[arg-type]
+        return train_rllib(RLlibConfig(out=tmp_path, hyperparams_file=small_file, **kwargs))  # type: ignore[arg-type]
 
     with pytest.raises(ValueError, match="unknown env id 'TetherNothing-v0'"):
         run(env_id="TetherNothing-v0")
@@ -205,7 +213,7 @@ def test_bad_arguments_fail_before_training(ray_instance: object, small_file: Pa
     with pytest.raises(HyperparameterError, match="unknown key 'learning_rate'"):
         bad = tmp_path / "bad.yml"
         bad.write_text(yaml.safe_dump({"default": {**SMALL, "learning_rate": 0.1}}))
-        train_rllib(out=tmp_path, hyperparams_file=bad)
+        train_rllib(RLlibConfig(out=tmp_path, hyperparams_file=bad))
     assert sorted(ENV_IDS)  # the ids exist
 
 
@@ -286,7 +294,9 @@ def multiagent_run(ray_instance: object, tmp_path_factory: pytest.TempPathFactor
     path = tmp_path_factory.mktemp("hyperparams") / "multiagent.yml"
     path.write_text(yaml.safe_dump({ENV_ID: SMALL_MULTIAGENT}))
     return train_rllib(
-        ENV_ID, seed=2, out=tmp_path_factory.mktemp("runs"), hyperparams_file=path, eval_freq=200, eval_episodes=2
+        RLlibConfig(
+            ENV_ID, seed=2, out=tmp_path_factory.mktemp("runs"), hyperparams_file=path, eval_freq=200, eval_episodes=2
+        )
     )
 
 
@@ -314,7 +324,7 @@ def test_every_agent_maps_to_the_one_shared_module(ray_instance: object) -> None
 def test_the_exported_multiagent_policy_acts_as_the_shared_module(ray_instance: object, tmp_path: Path) -> None:
     options = SMALL_MULTIAGENT["multiagent"]
     vessel, samples, expected = _exported_after_one_iteration(SMALL_MULTIAGENT, 1, lambda: _local_observations(options))
-    save_policy(tmp_path, vessel, None, ENV_ID, multiagent=options)
+    save_policy(tmp_path, vessel, None, ENV_ID, spec=PolicySpec(multiagent=options))
     loaded = TrainedPolicy(tmp_path)
     actions, _ = loaded.policy.predict(samples, deterministic=True)
     np.testing.assert_allclose(actions, expected, rtol=0, atol=1e-6)
@@ -341,7 +351,7 @@ def test_bad_multiagent_options_fail_before_training(ray_instance: object, tmp_p
     def run(entry: dict[str, object]) -> Path:
         path = tmp_path / "bad.yml"
         path.write_text(yaml.safe_dump({ENV_ID: {**SMALL_MULTIAGENT, **entry}}))
-        return train_rllib(ENV_ID, out=tmp_path, hyperparams_file=path)
+        return train_rllib(RLlibConfig(ENV_ID, out=tmp_path, hyperparams_file=path))
 
     with pytest.raises(HyperparameterError, match="unknown key 'rewards'.*reward"):
         run({"multiagent": {"rewards": "shares"}})

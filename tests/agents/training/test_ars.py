@@ -1,4 +1,5 @@
-"""ARS (agents.ars): the update rule, the settings, and a run whose saved policy acts as trained."""
+"""ARS (agents.training.ars, the command agents.ars): the update rule, the settings, and a run whose
+saved policy acts as trained."""
 
 from __future__ import annotations
 
@@ -9,10 +10,11 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.ars import ARSSettings, LinearResidualPolicy, ars_update, load_ars_settings, main, train_ars
+from agents.ars import main
 from agents.policies import TrainedPolicy
-from agents.safe_format import read_metadata
-from agents.ship import reproduce_command
+from agents.policies.format import read_metadata
+from agents.training.ars import ARSSettings, LinearResidualPolicy, ars_update, load_ars_settings, train_ars
+from agents.training.shipping import reproduce_command
 
 TINY = {
     "iterations": 2,

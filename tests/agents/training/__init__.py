@@ -1,0 +1,1 @@
+"""Tests of the training room (agents/training): the trainers, their run directories, selection and shipping."""
