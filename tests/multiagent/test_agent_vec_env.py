@@ -122,7 +122,7 @@ def test_ppo_trains_a_shared_decentralised_policy(tmp_path: Path) -> None:
 
 
 def test_decentralised_models_ship_beside_the_centralised_ones() -> None:
-    from agents.ship import model_name, reproduce_command
+    from agents.training.shipping import model_name, reproduce_command
 
     assert model_name({"algo": "ppo", "multiagent": None}) == "ppo"
     assert model_name({"algo": "ppo", "multiagent": {}}) == "ppo_multiagent"
