@@ -22,7 +22,9 @@ from agents.controllers.linear_model import LinearModel
 from agents.controllers.registry import BASELINES, make_baseline
 from agents.evaluation.comparison import CompareConfig, compare
 from agents.policies import TrainedPolicy, make_controller
-from agents.train import load_hyperparameters, make_training_env, train
+from agents.training.config import TrainConfig
+from agents.training.hyperparams import load_hyperparameters
+from agents.training.sb3 import make_training_env, train
 from tether_gym.envs.contract import Scalar
 
 
@@ -168,26 +170,27 @@ def trained_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A few hundred PPO steps, with a checkpoint, through the project's own training script."""
     out = tmp_path_factory.mktemp("runs")
     return train(
-        "ppo",
-        "TetherTetrahedron-v0",
-        seed=0,
-        out=out,
-        timesteps=512,
-        num_envs=4,
-        overrides={"n_steps": 64, "batch_size": 64},
-        eval_freq=256,
-        eval_episodes=2,
-        checkpoint_freq=256,
-        progress_bar=False,
+        TrainConfig(
+            "ppo",
+            "TetherTetrahedron-v0",
+            seed=0,
+            out=out,
+            timesteps=512,
+            num_envs=4,
+            overrides={"n_steps": 64, "batch_size": 64},
+            eval_freq=256,
+            eval_episodes=2,
+            checkpoint_freq=256,
+            progress_bar=False,
+        )
     )
 
 
 def _check_evaluations(run: Path) -> None:
     """best/evaluations.json: every evaluation on the same seeds, paired against the best baseline
     rolled out on those seeds, and the best/ policy is the one with the best mean return."""
-    from agents.selection import evaluation_seeds
-
     from agents.evaluation.rollout import rollout
+    from agents.training.selection import evaluation_seeds
 
     log = json.loads((run / "best" / "evaluations.json").read_text())
     seeds = evaluation_seeds(2)
@@ -246,18 +249,20 @@ def test_training_smoke_writes_everything(trained_run: Path) -> None:
 @pytest.mark.slow
 def test_training_resumes_from_a_checkpoint(trained_run: Path, tmp_path: Path) -> None:
     run = train(
-        "ppo",
-        "TetherTetrahedron-v0",
-        seed=0,
-        out=tmp_path,
-        timesteps=256,
-        num_envs=4,
-        overrides={"n_steps": 64, "batch_size": 64},
-        resume=trained_run / "checkpoints" / "ppo_256_steps",
-        eval_freq=10_000,
-        eval_episodes=2,
-        checkpoint_freq=10_000,
-        progress_bar=False,
+        TrainConfig(
+            "ppo",
+            "TetherTetrahedron-v0",
+            seed=0,
+            out=tmp_path,
+            timesteps=256,
+            num_envs=4,
+            overrides={"n_steps": 64, "batch_size": 64},
+            resume=trained_run / "checkpoints" / "ppo_256_steps",
+            eval_freq=10_000,
+            eval_episodes=2,
+            checkpoint_freq=10_000,
+            progress_bar=False,
+        )
     )
     assert TrainedPolicy(run).metadata["num_timesteps"] == 512  # 256 from the checkpoint + 256 more
 
@@ -266,7 +271,7 @@ def test_curriculum_raises_the_training_difficulty_on_schedule(tmp_path: Path) -
     from stable_baselines3 import PPO
 
     from agents.controllers.base import task_of
-    from agents.train import DifficultyCurriculum
+    from agents.training.callbacks import DifficultyCurriculum
 
     schedule = DifficultyCurriculum(0.2, 0.5, 1000)
     assert [schedule.difficulty_at(t) for t in (0, 250, 500, 900)] == pytest.approx([0.2, 0.6, 1.0, 1.0])
@@ -281,17 +286,19 @@ def test_curriculum_raises_the_training_difficulty_on_schedule(tmp_path: Path) -
 @pytest.mark.slow
 def test_sac_training_smoke(tmp_path: Path) -> None:
     run = train(
-        "sac",
-        "TetherTetrahedron-v0",
-        seed=0,
-        out=tmp_path,
-        timesteps=200,
-        num_envs=2,
-        overrides={"learning_starts": 50, "batch_size": 32, "gradient_steps": 1},
-        eval_freq=10_000,
-        eval_episodes=2,
-        checkpoint_freq=10_000,
-        progress_bar=False,
+        TrainConfig(
+            "sac",
+            "TetherTetrahedron-v0",
+            seed=0,
+            out=tmp_path,
+            timesteps=200,
+            num_envs=2,
+            overrides={"learning_starts": 50, "batch_size": 32, "gradient_steps": 1},
+            eval_freq=10_000,
+            eval_episodes=2,
+            checkpoint_freq=10_000,
+            progress_bar=False,
+        )
     )
     assert TrainedPolicy(run).algo == "sac"
 
