@@ -11,9 +11,11 @@ import pytest
 
 from agents.controllers.registry import make_baseline
 from agents.policies import TrainedPolicy, make_controller
-from agents.safe_format import read_metadata
-from agents.train import HyperparameterError, train, validate_hyperparameters
+from agents.policies.format import read_metadata
+from agents.training.config import TrainConfig
+from agents.training.hyperparams import HyperparameterError, validate_hyperparameters
 from agents.training.residual_env import ResidualVecEnv
+from agents.training.sb3 import train
 from tether_gym.sb3 import make_sb3_vec_env
 
 
@@ -21,17 +23,19 @@ from tether_gym.sb3 import make_sb3_vec_env
 def residual_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("runs")
     return train(
-        "ppo",
-        "TetherTriangle-v0",
-        seed=0,
-        out=out,
-        timesteps=256,
-        num_envs=4,
-        overrides={"n_steps": 64, "batch_size": 64, "residual_on": "lqr"},
-        eval_freq=256,
-        eval_episodes=2,
-        checkpoint_freq=256,
-        progress_bar=False,
+        TrainConfig(
+            "ppo",
+            "TetherTriangle-v0",
+            seed=0,
+            out=out,
+            timesteps=256,
+            num_envs=4,
+            overrides={"n_steps": 64, "batch_size": 64, "residual_on": "lqr"},
+            eval_freq=256,
+            eval_episodes=2,
+            checkpoint_freq=256,
+            progress_bar=False,
+        )
     )
 
 
@@ -76,8 +80,8 @@ def test_residual_on_must_name_a_baseline() -> None:
 def test_a_residual_policy_starts_exactly_at_its_baseline(algo: str) -> None:
     """The actor's last layer is zeroed, so the closed loop starts as the baseline's, for every
     algorithm (SAC and TD3 otherwise start with random corrections of about a third of full thrust)."""
-    from agents.safe_format import ALGORITHMS
-    from agents.train import start_at_the_baseline
+    from agents.policies.format import ALGORITHMS
+    from agents.training.sb3 import start_at_the_baseline
 
     venv = ResidualVecEnv(make_sb3_vec_env("TetherTriangle-v0", 2, seed=0), "lqr")
     model = ALGORITHMS[algo]("MlpPolicy", venv, seed=0, device="cpu")
@@ -106,7 +110,7 @@ def test_action_noise_is_for_off_policy_algorithms() -> None:
 def _actor_and_critic(model: Any) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Copies of the actor's and the critic's weights (SAC/TD3: ``model.critic``; PPO: the rest
     of the policy)."""
-    from agents.train import actor_parameters
+    from agents.training.callbacks import actor_parameters
 
     actor = actor_parameters(model)
     actor_ids = {id(p) for p in actor}
@@ -120,8 +124,8 @@ def _actor_and_critic(model: Any) -> tuple[list[np.ndarray], list[np.ndarray]]:
 def test_critic_warmup_freezes_the_actor_and_then_releases_it(algo: str) -> None:
     """While warming up only the critic learns (the actor's weights stay bit-identical); after the
     warm-up the actor learns too."""
-    from agents.safe_format import ALGORITHMS
-    from agents.train import CriticWarmup
+    from agents.policies.format import ALGORITHMS
+    from agents.training.callbacks import CriticWarmup
 
     venv = ResidualVecEnv(make_sb3_vec_env("TetherTriangle-v0", 2, seed=0), "local_tension_aware")
     options: dict[str, Any] = {"n_steps": 32, "batch_size": 32} if algo == "ppo" else {"learning_starts": 16}
