@@ -118,7 +118,7 @@ from .layout import (
 )
 from .normalization import NormalizationStatistics
 from .sb3_state import TRAINING_STATE_FORMAT, capture_training_state, restore_training_state
-from .spec import PolicySpec, spec_of
+from .spec import PolicySpec
 
 with needs_extra("train", "the policy files"):
     import torch
@@ -363,15 +363,11 @@ def save_policy(
     extra_files: Iterable[str] = (),
     spec: PolicySpec | None = None,
     algo: str | None = None,
-    *,
-    residual_on: str | None = None,
-    multiagent: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write ``model``'s policy (and ``normalizer``'s statistics) to ``directory`` in the safe
     format; with ``training_state``, also the optimizer states and counters that resuming needs;
     ``spec`` (default: a centralised policy whose outputs are its actions) and ``algo`` as in
-    :func:`policy_metadata`. ``residual_on`` and ``multiagent`` are the keyword form of ``spec``
-    that callers still use while they move to it.
+    :func:`policy_metadata`.
     Every file is written atomically, the manifest last; it also covers ``extra_files`` (names
     of files already in ``directory``, such as ``config.yml``). Returns the directory."""
     directory = Path(directory)
@@ -379,9 +375,7 @@ def save_policy(
     statistics = (
         NormalizationStatistics.from_vec_normalize(normalizer) if isinstance(normalizer, VecNormalize) else normalizer
     )
-    metadata = policy_metadata(
-        model, env_id, provenance, statistics is not None, training_state, spec_of(spec, residual_on, multiagent), algo
-    )
+    metadata = policy_metadata(model, env_id, provenance, statistics is not None, training_state, spec, algo)
     written = [METADATA_FILE, WEIGHTS_FILE]
     atomic_write_bytes(directory / WEIGHTS_FILE, tensor_bytes(model.policy.state_dict()))
     if statistics is not None:

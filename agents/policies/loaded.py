@@ -26,7 +26,7 @@ from ..controllers.registry import BASELINES, make_baseline
 from .format import is_policy_dir, load_policy
 from .layout import MANIFEST_FILE, METADATA_FILE
 from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted
-from .spec import PolicySpec, spec_of
+from .spec import PolicySpec
 
 __all__ = [
     "MODELS_DIR",
@@ -171,15 +171,12 @@ class TrainedPolicy:
         algo: str,
         spec: PolicySpec | None = None,
         name: str | None = None,
-        *,
-        residual_on: str | None = None,
-        multiagent: dict[str, Any] | None = None,
     ) -> TrainedPolicy:
         """A TrainedPolicy around an in-memory SB3 ``policy`` and its observation ``normalizer``
         (a ``VecNormalize`` or None), e.g. the model being trained; nothing is copied, so it acts
         with the weights and statistics they hold when ``predict`` is called. ``spec`` says how
         its outputs become actions (default: a centralised policy whose outputs are its actions)."""
-        spec = spec_of(spec, residual_on, multiagent)
+        spec = spec or PolicySpec()
         self = cls.__new__(cls)
         self.allow_other_id = False
         self.policy, self.normalizer, self.algo, self.env_id = policy, normalizer, algo, env_id

@@ -20,7 +20,7 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["PolicySpec", "spec_of"]
+__all__ = ["PolicySpec"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,15 +64,3 @@ class PolicySpec:
         """The spec a policy's metadata records (its ``residual_on`` and ``multiagent`` entries,
         absent in files older than those settings)."""
         return cls(residual_on=metadata.get("residual_on"), multiagent=metadata.get("multiagent"))
-
-
-def spec_of(
-    spec: PolicySpec | None, residual_on: str | None = None, multiagent: Mapping[str, Any] | None = None
-) -> PolicySpec:
-    """``spec``, or the one the keyword form ``residual_on``/``multiagent`` describes (which
-    callers still use while they move to :class:`PolicySpec`); both at once is a ValueError."""
-    if spec is None:
-        return PolicySpec(residual_on=residual_on, multiagent=None if multiagent is None else dict(multiagent))
-    if residual_on is not None or multiagent is not None:
-        raise ValueError("pass either spec or residual_on/multiagent, not both")
-    return spec

@@ -1,0 +1,85 @@
+"""agents.policies.sb3_state: an SB3 model's training state as data, both ways, and the only
+module of agents/ that touches SB3's private attributes."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import re
+from pathlib import Path
+
+import pytest
+import torch
+from stable_baselines3 import PPO, SAC, TD3
+
+from agents.policies.layout import PolicyFormatError
+from agents.policies.sb3_state import TRAINING_STATE_FORMAT, capture_training_state, restore_training_state
+from tether_gym.sb3 import make_sb3_vec_env
+
+ENV = "TetherTriangle-v0"
+AGENTS = Path(__file__).resolve().parents[3] / "agents"
+
+
+def tiny_ppo(seed: int) -> PPO:
+    venv = make_sb3_vec_env(ENV, 1, seed=seed, max_episode_steps=20)
+    return PPO("MlpPolicy", venv, n_steps=16, batch_size=16, device="cpu", policy_kwargs={"net_arch": [8]}, seed=seed)
+
+
+def sb3_private_names() -> set[str]:
+    """The private attributes and methods of SB3's algorithms (instances and classes), as SB3
+    itself has them: read from the installed version, not listed by hand."""
+    venv = make_sb3_vec_env(ENV, 1, seed=0)
+    names: set[str] = set()
+    settings = {PPO: {"n_steps": 16, "batch_size": 16}, SAC: {"buffer_size": 10}, TD3: {"buffer_size": 10}}
+    for cls, kwargs in settings.items():
+        model = cls("MlpPolicy", venv, device="cpu", **kwargs)
+        names |= set(vars(model)) | {name for name, _ in inspect.getmembers(cls)}
+    venv.close()
+    return {name for name in names if name.startswith("_") and not name.startswith(("__", "_abc"))}
+
+
+def test_only_sb3_state_touches_sb3_private_attributes() -> None:
+    names = sb3_private_names()
+    assert {"_get_torch_save_params", "_n_updates", "_episode_num"} <= names  # what sb3_state itself uses
+    alternatives = "|".join(map(re.escape, sorted(names)))
+    use = re.compile(rf"\.({alternatives})\b|[\"']({alternatives})[\"']")
+    found = [
+        f"{path.relative_to(AGENTS.parent)}:{number}: {line.strip()}"
+        for path in sorted(AGENTS.rglob("*.py"))
+        if path.name != "sb3_state.py" or path.parent.name != "policies"
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1)
+        if use.search(line)
+    ]
+    assert not found, "SB3 private attributes used outside agents/policies/sb3_state.py:\n" + "\n".join(found)
+    own = (AGENTS / "policies" / "sb3_state.py").read_text(encoding="utf-8")
+    assert use.search(own), "the check finds nothing even where the private attributes are used"
+
+
+def test_the_training_state_goes_back_into_a_fresh_model(tmp_path: Path) -> None:
+    model = tiny_ppo(seed=0)
+    model.learn(32)  # two updates: Adam has moments and a step count
+    tensors, meta = capture_training_state(model)
+    assert meta["format"] == TRAINING_STATE_FORMAT
+    meta = json.loads(json.dumps(meta, allow_nan=False))  # plain JSON data, as training.json holds it
+    updates = model.n_epochs * (model.num_timesteps // model.n_steps)  # PPO counts epochs of each rollout
+    assert meta["counters"] == {"num_timesteps": model.num_timesteps, "n_updates": updates, "episode_num": 0}
+    fresh = tiny_ppo(seed=1)
+    restore_training_state(fresh, meta, tensors, "ppo", tmp_path / "training.json", tmp_path / "training.safetensors")
+    assert fresh.num_timesteps == model.num_timesteps
+    ours, theirs = fresh.policy.optimizer.state_dict(), model.policy.optimizer.state_dict()
+    assert ours["param_groups"] == theirs["param_groups"]
+    assert theirs["state"] and ours["state"].keys() == theirs["state"].keys()
+    for index, entries in theirs["state"].items():
+        for key, value in entries.items():
+            assert torch.equal(torch.as_tensor(ours["state"][index][key]), torch.as_tensor(value)), (index, key)
+
+
+def test_a_state_that_does_not_fit_the_model_is_refused(tmp_path: Path) -> None:
+    model = tiny_ppo(seed=0)
+    model.learn(16)
+    tensors, meta = capture_training_state(model)
+    where = (tmp_path / "training.json", tmp_path / "training.safetensors")
+    with pytest.raises(PolicyFormatError, match=r"the checkpoint has optimizers \['other.optimizer'\]"):
+        restore_training_state(tiny_ppo(1), {**meta, "optimizers": {"other.optimizer": {}}}, tensors, "ppo", *where)
+    with pytest.raises(PolicyFormatError, match="'counters'"):
+        restore_training_state(tiny_ppo(1), {k: v for k, v in meta.items() if k != "counters"}, tensors, "ppo", *where)
