@@ -32,7 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.train_rllib import _lifetime_steps, build_config, load_rllib_hyperparameters  # noqa: E402
+from agents.training.rllib import build_config, lifetime_steps, load_rllib_hyperparameters  # noqa: E402
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS  # noqa: E402
 
 
@@ -42,10 +42,10 @@ def rllib_speed(env_id: str, runners: int, envs: int, iterations: int) -> float:
     algo = build_config(env_id, hyperparams, runners, envs, seed=0).build_algo()
     try:
         algo.train()  # warm-up
-        before, started = _lifetime_steps(algo), time.perf_counter()
+        before, started = lifetime_steps(algo), time.perf_counter()
         for _ in range(iterations):
             algo.train()
-        return (_lifetime_steps(algo) - before) / (time.perf_counter() - started)
+        return (lifetime_steps(algo) - before) / (time.perf_counter() - started)
     finally:
         algo.stop()
 

@@ -68,6 +68,7 @@ __all__ = [
     "build_config",
     "connect",
     "export_policy",
+    "lifetime_steps",
     "load_rllib_hyperparameters",
     "make_multiagent_env",
     "make_vessel",
@@ -730,7 +731,7 @@ def _train_loop(
     }
     evaluation = _seeded_evaluation(config, run, vessel, hyperparams, provenance, spec, started)
     total = int(hyperparams["n_timesteps"])
-    first = _lifetime_steps(algo)
+    first = lifetime_steps(algo)
     start = time.perf_counter()
     steps = _train_iterations(algo, run, config, vessel, evaluation, total, first)
     export_policy(algo, vessel, steps)
@@ -802,7 +803,7 @@ def _train_iterations(
     while steps < total:
         tick = time.perf_counter()
         result = algo.train()
-        before, steps = steps, _lifetime_steps(algo)
+        before, steps = steps, lifetime_steps(algo)
         speed = (steps - before) / max(time.perf_counter() - tick, 1e-9)
         _record_iteration(vessel.logger, result, speed, _module_id(algo))
         returns = result.get("env_runners", {}).get("episode_return_mean", float("nan"))
@@ -834,8 +835,9 @@ def _check_multiagent_env(env_id: str, hyperparams: Mapping[str, Any]) -> None:
         raise HyperparameterError(f"hyperparameters, 'multiagent' {hyperparams['multiagent']!r}: {error}") from error
 
 
-def _lifetime_steps(algo: Any) -> int:
-    """Env steps sampled since the run began (kept across a resume)."""
+def lifetime_steps(algo: Any) -> int:
+    """Env steps that ``algo`` (an RLlib ``Algorithm``) has sampled, over all its env runners, since
+    the run began (kept across a resume): what the run's step counts and frequencies count."""
     from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
     value = algo.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
