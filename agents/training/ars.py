@@ -94,7 +94,7 @@ class ARSSettings:
     them as its ``hyperparams``."""
 
     residual_on: str = "local_tension_aware"
-    """The scripted baseline the policy corrects (a name of ``BASELINES``)."""
+    """The scripted baseline the policy corrects (a name of :data:`agents.controllers.registry.BASELINES`)."""
     iterations: int = 100
     """ARS updates."""
     directions: int = 16
