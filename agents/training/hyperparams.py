@@ -4,7 +4,7 @@ algorithm's constructor (its annotations), the run keys that the trainer reads i
 (:data:`RUN_KEYS`), and the ranges SB3 would otherwise reject deep inside. Errors are
 :class:`HyperparameterError` and name the file, the entry and the key.
 
-The other trainers (:mod:`agents.train_rllib`) check their own files with the same value checks
+The other trainers (:mod:`agents.training.rllib`) check their own files with the same value checks
 (:func:`check_value`, :func:`check_multiagent`, :func:`schedule`, :func:`unknown_key_error`)."""
 
 from __future__ import annotations

@@ -81,13 +81,8 @@ def train(config: TrainConfig) -> Path:
         else (None, None, set())
     )
     spec = policy_spec(hyperparams)
-    run = prepare_run_dir(
-        config.out,
-        config.env_id,
-        model_name({"algo": config.algo, "multiagent": spec.multiagent}),
-        config.seed,
-        config.force,
-    )
+    name = model_name({"algo": config.algo, "multiagent": spec.multiagent})  # ppo or ppo_multiagent
+    run = prepare_run_dir(config.out, config.env_id, name, config.seed, config.force)
     record = _run_record(config, hyperparams, resume_path)
     env_kwargs = hyperparams.get("env_kwargs")
     venv = make_training_env(
@@ -106,17 +101,7 @@ def train(config: TrainConfig) -> Path:
         clear_earlier_run(run, config.algo, keep)
     atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
     provenance = {"seed": config.seed, "command": config.command, "config": "config.yml of the run directory"}
-    evaluation = SeededEvaluation(
-        config.env_id,
-        config.eval_episodes,
-        every=config.eval_freq // rows,
-        log_dir=run / "best",
-        on_new_best=SafePolicySaver(run / "best", config.env_id, provenance, spec=spec),
-        started=started,
-        env_kwargs=env_kwargs,
-        spec=spec,
-        verbose=1 if config.progress_bar or config.verbose else 0,
-    )
+    evaluation = _seeded_evaluation(config, run, provenance, spec, env_kwargs, rows, started)
     callbacks = _callbacks(config, hyperparams, run, provenance, spec, rows, evaluation, total)
     start = time.perf_counter()
     model.learn(
@@ -128,25 +113,8 @@ def train(config: TrainConfig) -> Path:
     )
     if not evaluation.history:
         _evaluate_the_final_policy(evaluation, model, total, config.eval_freq, run)
-    record["num_timesteps"] = int(model.num_timesteps)  # counted from the start of a resumed run
-    atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
-    save_policy(
-        run,
-        model,
-        model.get_vec_normalize_env(),
-        config.env_id,
-        provenance,
-        training_state=True,
-        extra_files=["config.yml"],
-        spec=spec,
-    )
-    elapsed = time.perf_counter() - start
-    evaluation.finish(model.num_timesteps)
-    print(
-        f"trained {config.algo} on {config.env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
-        f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}"
-    )
-    print_evaluation_summary(evaluation)
+    _save_the_final_policy(run, model, config.env_id, provenance, spec, record)
+    _report(config, model, run, evaluation, time.perf_counter() - start)
     venv.close()
     return run
 
@@ -197,6 +165,30 @@ def _run_record(config: TrainConfig, hyperparams: dict[str, Any], resume_path: P
     }
 
 
+def _seeded_evaluation(
+    config: TrainConfig,
+    run: Path,
+    provenance: Mapping[str, Any],
+    spec: PolicySpec,
+    env_kwargs: Mapping[str, Any] | None,
+    rows: int,
+    started: float,
+) -> SeededEvaluation:
+    """The evaluation every ``--eval-freq`` env steps on the evaluation seeds, which saves the best
+    policy to ``run/best`` and logs there (``rows``: the vector env's rows, which the steps count)."""
+    return SeededEvaluation(
+        config.env_id,
+        config.eval_episodes,
+        every=config.eval_freq // rows,
+        log_dir=run / "best",
+        on_new_best=SafePolicySaver(run / "best", config.env_id, provenance, spec=spec),
+        started=started,
+        env_kwargs=env_kwargs,
+        spec=spec,
+        verbose=1 if config.progress_bar or config.verbose else 0,
+    )
+
+
 def _callbacks(
     config: TrainConfig,
     hyperparams: Mapping[str, Any],
@@ -240,6 +232,41 @@ def _evaluate_the_final_policy(
     )
     evaluation.num_timesteps = model.num_timesteps
     evaluation.evaluate()
+
+
+def _save_the_final_policy(
+    run: Path,
+    model: BaseAlgorithm,
+    env_id: str,
+    provenance: Mapping[str, Any],
+    spec: PolicySpec,
+    record: dict[str, Any],
+) -> None:
+    """``config.yml`` completed by the steps trained, then the final policy with its training state
+    into ``run``, its manifest covering ``config.yml``."""
+    record["num_timesteps"] = int(model.num_timesteps)  # counted from the start of a resumed run
+    atomic_write_text(run / "config.yml", yaml.safe_dump(record, sort_keys=False))
+    save_policy(
+        run,
+        model,
+        model.get_vec_normalize_env(),
+        env_id,
+        provenance,
+        training_state=True,
+        extra_files=["config.yml"],
+        spec=spec,
+    )
+
+
+def _report(config: TrainConfig, model: BaseAlgorithm, run: Path, evaluation: SeededEvaluation, elapsed: float) -> None:
+    """Close the evaluation log (``best/evaluations.json``) and print the run's summary: steps,
+    time and speed (``elapsed``: seconds of ``model.learn`` and after), and the best evaluation."""
+    evaluation.finish(model.num_timesteps)
+    print(
+        f"trained {config.algo} on {config.env_id} for {model.num_timesteps:,} steps in {elapsed / 60:.1f} min "
+        f"({model.num_timesteps / max(elapsed, 1e-9):,.0f} steps/s); run directory {run}"
+    )
+    print_evaluation_summary(evaluation)
 
 
 def make_training_env(
