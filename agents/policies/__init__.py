@@ -2,10 +2,20 @@
 
 The documented import path is this package: ``from tether_gym_agents.policies import
 TrainedPolicy, shipped_models, make_controller`` (``agents.policies`` in a checkout). It imports
-torch, as loading a policy needs it; the modules below hold the rest:
+torch, as loading a policy needs it; the modules hold the rest, each importing only those listed before it:
 
 * :mod:`.spec`: :class:`PolicySpec`, how a policy's outputs become actions (residual, multi-agent);
-* :mod:`.loaded`: :class:`TrainedPolicy`, the shipped models, and controllers by name.
+* :mod:`.layout`: a policy directory's file names, the format's version, and its errors;
+* :mod:`.codecs`: strict JSON, spaces, and classes by name;
+* :mod:`.normalization`: the observation normalisation statistics, without SB3's wrapper;
+* :mod:`.sb3_state`: an SB3 model's optimizer state and counters (the only module touching SB3's
+  private attributes);
+* :mod:`.format`: the safe format itself (save, load, manifest, metadata), and why it describes an
+  SB3 policy;
+* :mod:`.pickled`: SB3's pickle-based files, only on opt-in;
+* :mod:`.loaded`: :class:`TrainedPolicy`, the shipped models, and controllers by name;
+* :mod:`.reference`: the observations and actions that conversions and shipped models are checked on;
+* :mod:`.conversion`: converting SB3's files to the safe format (``python -m agents.convert``).
 """
 
 from .loaded import (

@@ -13,6 +13,7 @@ import dataclasses
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -75,9 +76,6 @@ def convert(config: ConvertConfig) -> Path:
     and not ``force``, and :class:`agents.policies.layout.PolicyFormatError` if the converted
     policy's actions differ from the original's."""
     source, destination = config.source, config.destination
-    trust_pickle, best, algo, env_id = config.trust_pickle, config.best, config.algo, config.env_id
-    training_state, check_observations = config.training_state, config.check_observations
-    reference, force = config.reference, config.force
     if not source.exists():
         raise FileNotFoundError(f"SRC {source} does not exist")
     if not is_pickle_model(source):
@@ -85,30 +83,21 @@ def convert(config: ConvertConfig) -> Path:
             f"SRC {source} is not a pickle-based SB3 model (a .zip, or a directory holding model.zip); "
             f"a directory with policy.json is already in the safe format"
         )
-    if not trust_pickle:
+    if not config.trust_pickle:
         refuse_untrusted(source, opt_in="--trust-pickle")
-    model_file = sb3_model_file(source, best)
+    model_file = sb3_model_file(source, config.best)
     config_file = next(
         (d / "config.yml" for d in (model_file.parent, model_file.parent.parent) if (d / "config.yml").is_file()), None
     )
     prepare_output_dir(destination, argument="DST")
     copy_config = config_file is not None and config_file.resolve() != (destination / "config.yml").resolve()
     outputs = [*POLICY_FILES, REFERENCE_FILE] + (["config.yml"] if copy_config else [])
-    check_output_files(destination, outputs, force=force, argument="DST", what="an earlier conversion")
+    check_output_files(destination, outputs, force=config.force, argument="DST", what="an earlier conversion")
 
-    model, normalizer, run_config, files = load_pickled_model(source, trust_pickle=True, best=best, algo=algo)
-    recorded = run_config.get("env_id")
-    if env_id is not None and recorded is not None and env_id != recorded:
-        raise ValueError(
-            f"--env {env_id} differs from the id SRC's config.yml records ({recorded}): the converted policy would "
-            "carry the wrong id; leave out --env"
-        )
-    env_id = env_id or recorded
-    if env_id is not None:
-        import tether_gym
-
-        if env_id not in tether_gym.ENV_IDS:
-            raise ValueError(f"--env {env_id!r} is not a tether-gym id; ids are {list(tether_gym.ENV_IDS)}")
+    model, normalizer, run_config, files = load_pickled_model(
+        source, trust_pickle=True, best=config.best, algo=config.algo
+    )
+    env_id = _checked_env_id(config.env_id, run_config.get("env_id"))
     provenance = {
         "converted_from": [{"file": f.name, "sha256": sha256_hex(f.read_bytes())} for f in files],
         "seed": run_config.get("seed"),
@@ -122,10 +111,59 @@ def convert(config: ConvertConfig) -> Path:
         else None
     )
     mean, var = (normalizer.obs_rms.mean, normalizer.obs_rms.var) if normalizer is not None else (0.0, 1.0)
-    observations = reference_observations(check_observations, model.observation_space, mean, var, rng, rollout)
+    observations = reference_observations(config.check_observations, model.observation_space, mean, var, rng, rollout)
     expected = sb3_actions(model, normalizer, observations)
 
-    # Write into a scratch directory next to DST, check the result there, then move it in.
+    names = _write_checked(
+        destination, model, normalizer, env_id, provenance, config.training_state, observations, expected
+    )
+    if config_file is not None:
+        if copy_config:
+            atomic_write_bytes(destination / "config.yml", config_file.read_bytes())
+        names.append("config.yml")
+    if config.reference:
+        _write_reference(destination, observations, expected, provenance)
+        names.append(REFERENCE_FILE)
+    for stale in set(outputs) - set(names) - {MANIFEST_FILE, "config.yml"}:
+        (destination / stale).unlink(missing_ok=True)  # from an earlier conversion (only reached with --force)
+    write_manifest(destination, names)
+    print(
+        f"converted {', '.join(str(f) for f in files)} -> {destination} "
+        f"({len(observations)} observations checked: identical actions)"
+    )
+    return destination
+
+
+def _checked_env_id(given: str | None, recorded: str | None) -> str | None:
+    """The id the converted policy records: ``--env`` (``given``) or the one SRC's ``config.yml``
+    records, which must agree, and a tether-gym id."""
+    if given is not None and recorded is not None and given != recorded:
+        raise ValueError(
+            f"--env {given} differs from the id SRC's config.yml records ({recorded}): the converted policy would "
+            "carry the wrong id; leave out --env"
+        )
+    env_id = given or recorded
+    if env_id is not None:
+        import tether_gym
+
+        if env_id not in tether_gym.ENV_IDS:
+            raise ValueError(f"--env {env_id!r} is not a tether-gym id; ids are {list(tether_gym.ENV_IDS)}")
+    return env_id
+
+
+def _write_checked(
+    destination: Path,
+    model: Any,
+    normalizer: Any,
+    env_id: str | None,
+    provenance: dict[str, Any],
+    training_state: bool,
+    observations: np.ndarray,
+    expected: np.ndarray,
+) -> list[str]:
+    """Write ``model`` in the safe format into a scratch directory next to ``destination``, check
+    there that its actions on ``observations`` are ``expected`` to the bit, then move the files
+    in; returns their names (the manifest is written later, over every file)."""
     scratch = Path(tempfile.mkdtemp(dir=destination, prefix=".convert-"))
     try:
         save_policy(scratch, model, normalizer, env_id, provenance, training_state=training_state)
@@ -141,29 +179,22 @@ def convert(config: ConvertConfig) -> Path:
             shutil.move(str(scratch / name), str(destination / name))  # same file system: a rename
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    if config_file is not None:
-        if copy_config:
-            atomic_write_bytes(destination / "config.yml", config_file.read_bytes())
-        names.append("config.yml")
-    if reference:
-        atomic_write_bytes(
-            destination / REFERENCE_FILE,
-            tensor_bytes(
-                {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(expected))},
-                metadata={
-                    "source": ", ".join(
-                        f"{entry['file']} sha256 {entry['sha256']}" for entry in provenance["converted_from"]
-                    ),
-                    "pipeline": "VecNormalize.normalize_obs, then <Algorithm>.predict(deterministic=True)",
-                },
-            ),
-        )
-        names.append(REFERENCE_FILE)
-    for stale in set(outputs) - set(names) - {MANIFEST_FILE, "config.yml"}:
-        (destination / stale).unlink(missing_ok=True)  # from an earlier conversion (only reached with --force)
-    write_manifest(destination, names)
-    print(
-        f"converted {', '.join(str(f) for f in files)} -> {destination} "
-        f"({len(observations)} observations checked: identical actions)"
+    return names
+
+
+def _write_reference(
+    destination: Path, observations: np.ndarray, expected: np.ndarray, provenance: dict[str, Any]
+) -> None:
+    """``reference_actions.safetensors``: the checked observations and the original's actions."""
+    atomic_write_bytes(
+        destination / REFERENCE_FILE,
+        tensor_bytes(
+            {"observations": torch.from_numpy(observations), "actions": torch.from_numpy(np.asarray(expected))},
+            metadata={
+                "source": ", ".join(
+                    f"{entry['file']} sha256 {entry['sha256']}" for entry in provenance["converted_from"]
+                ),
+                "pipeline": "VecNormalize.normalize_obs, then <Algorithm>.predict(deterministic=True)",
+            },
+        ),
     )
-    return destination
