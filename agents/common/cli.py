@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 #: First held-out seed of the comparison and the benchmark (10 000 up; training evaluates on
-#: 1 000 000 up, agents.selection).
+#: 1 000 000 up, agents.training.selection).
 HELD_OUT_SEED = 10_000
 #: The controller that scores 100 in the benchmark by default: the model-predictive reference.
 REFERENCE = "mpc"

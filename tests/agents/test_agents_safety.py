@@ -41,12 +41,15 @@ import agents.convert
 import agents.evaluation.comparison
 import agents.policies
 import agents.train
+import agents.training.sb3
 from agents.common.files import OutputError, OutputExistsError, atomic_write_text
 from agents.convert import REFERENCE_FILE, convert
 from agents.evaluation.comparison import CompareConfig, compare
 from agents.evaluation.rollout import rollout
 from agents.policies import MODELS_DIR, OtherIdWarning, TrainedPolicy, make_controller, shipped_models
-from agents.train import HyperparameterError, make_training_env, train
+from agents.training.config import TrainConfig
+from agents.training.hyperparams import HyperparameterError, load_hyperparameters, validate_hyperparameters
+from agents.training.sb3 import make_training_env, train
 from tether_gym import ENV_IDS
 
 ENV = "TetherTetrahedron-v0"
@@ -448,7 +451,7 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
 
     monkeypatch.setattr(agents.evaluation.comparison, "rollout", forbidden)
     monkeypatch.setattr(agents.evaluation.comparison, "make_controller", forbidden)
-    monkeypatch.setattr(agents.train, "make_training_env", forbidden)
+    monkeypatch.setattr(agents.training.sb3, "make_training_env", forbidden)
 
 
 def bad_outputs(tmp_path: Path) -> dict[str, Path]:
@@ -523,47 +526,50 @@ TINY = dict(
 
 @pytest.mark.slow
 def test_train_refuses_to_overwrite_a_run_without_force(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    run = train("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=128, **TINY)
+    run = train(TrainConfig("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=128, **TINY))
     assert sorted(p.name for p in (run / "checkpoints").iterdir()) == ["ppo_128_steps", "ppo_256_steps"]
     config = (run / "config.yml").read_text()
     with monkeypatch.context() as patch:
-        patch.setattr(agents.train, "make_training_env", lambda *a, **k: pytest.fail("env built before the refusal"))
+        patch.setattr(
+            agents.training.sb3, "make_training_env", lambda *a, **k: pytest.fail("env built before the refusal")
+        )
         with pytest.raises(OutputExistsError, match=r"already holds a run .*--force"):
-            train("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=128, **TINY)
+            train(TrainConfig("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=128, **TINY))
     assert (run / "config.yml").read_text() == config
-    train("ppo", ENV, seed=4, out=tmp_path, checkpoint_freq=128, **TINY)  # another seed: another run directory
+    # Another seed: another run directory.
+    train(TrainConfig("ppo", ENV, seed=4, out=tmp_path, checkpoint_freq=128, **TINY))
     # --force replaces the run: the earlier checkpoints go, new ones come.
-    train("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=10_000, force=True, **TINY)
+    train(TrainConfig("ppo", ENV, seed=3, out=tmp_path, checkpoint_freq=10_000, force=True, **TINY))
     assert not (run / "checkpoints").exists() or not any((run / "checkpoints").iterdir())
     assert TrainedPolicy(run).metadata["num_timesteps"] == 256
     # A symlink anywhere in the run directory is refused, even with --force.
     (run / "best" / "evaluations.json").unlink()
     (run / "best" / "evaluations.json").symlink_to(tmp_path / "elsewhere.json")
     with pytest.raises(OutputError, match="symlink"):
-        train("ppo", ENV, seed=3, out=tmp_path, force=True, **TINY)
+        train(TrainConfig("ppo", ENV, seed=3, out=tmp_path, force=True, **TINY))
 
 
 @pytest.mark.slow
 def test_train_resumes_from_its_own_directory_with_force(tmp_path: Path) -> None:
-    run = train("ppo", ENV, seed=0, out=tmp_path, checkpoint_freq=128, **TINY)
+    run = train(TrainConfig("ppo", ENV, seed=0, out=tmp_path, checkpoint_freq=128, **TINY))
     checkpoint = run / "checkpoints" / "ppo_128_steps"
     with pytest.raises(OutputExistsError):
-        train("ppo", ENV, seed=0, out=tmp_path, resume=checkpoint, **TINY)
-    train("ppo", ENV, seed=0, out=tmp_path, resume=checkpoint, force=True, checkpoint_freq=10_000, **TINY)
+        train(TrainConfig("ppo", ENV, seed=0, out=tmp_path, resume=checkpoint, **TINY))
+    train(TrainConfig("ppo", ENV, seed=0, out=tmp_path, resume=checkpoint, force=True, checkpoint_freq=10_000, **TINY))
     assert TrainedPolicy(run).metadata["num_timesteps"] == 128 + 256
     assert checkpoint.is_dir() and not (run / "checkpoints" / "ppo_256_steps").exists()
 
 
 @pytest.mark.slow
 def test_resume_refuses_a_checkpoint_that_does_not_fit(tmp_path: Path) -> None:
-    run = train("ppo", ENV, seed=0, out=tmp_path / "a", checkpoint_freq=10_000, **TINY)
+    run = train(TrainConfig("ppo", ENV, seed=0, out=tmp_path / "a", checkpoint_freq=10_000, **TINY))
     overrides = {**TINY["overrides"], "policy_kwargs": {"net_arch": [16], "activation_fn": "relu"}}
     with pytest.raises(PolicyFormatError, match="net_arch.*resume with the run's hyperparameters"):
-        train("ppo", ENV, seed=0, out=tmp_path / "b", resume=run, **{**TINY, "overrides": overrides})
+        train(TrainConfig("ppo", ENV, seed=0, out=tmp_path / "b", resume=run, **{**TINY, "overrides": overrides}))
     with pytest.raises(PolicyFormatError, match="--algo ppo"):
-        train("sac", ENV, seed=0, out=tmp_path / "c", resume=run, **{**TINY, "overrides": {}})
+        train(TrainConfig("sac", ENV, seed=0, out=tmp_path / "c", resume=run, **{**TINY, "overrides": {}}))
     with pytest.raises(PolicyFormatError, match="inference only"):
-        train("ppo", ENV, seed=0, out=tmp_path / "d", resume=shipped_models(ENV)["ppo"], **TINY)
+        train(TrainConfig("ppo", ENV, seed=0, out=tmp_path / "d", resume=shipped_models(ENV)["ppo"], **TINY))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -615,7 +621,7 @@ def test_hyperparameter_errors_name_the_key(tmp_path: Path, text: str, message: 
     file = tmp_path / "ppo.yml"
     file.write_text(text)
     with pytest.raises(HyperparameterError, match=message):
-        train("ppo", ENV, out=tmp_path / "runs", hyperparams_file=file)
+        train(TrainConfig("ppo", ENV, out=tmp_path / "runs", hyperparams_file=file))
     assert not (tmp_path / "runs").exists()  # refused before anything was written
 
 
@@ -624,15 +630,15 @@ def test_ppo_schedules_are_unknown_keys_for_sac_and_td3() -> None:
     for algo in ("sac", "td3"):
         for key in ("clip_range", "clip_range_vf"):
             with pytest.raises(HyperparameterError, match=f"unknown key '{key}'; {algo}"):
-                agents.train.validate_hyperparameters(algo, {"n_timesteps": 100, key: 0.2})
-    assert agents.train.validate_hyperparameters("ppo", {"n_timesteps": 100, "clip_range": 0.2})["clip_range"] == 0.2
+                validate_hyperparameters(algo, {"n_timesteps": 100, key: 0.2})
+    assert validate_hyperparameters("ppo", {"n_timesteps": 100, "clip_range": 0.2})["clip_range"] == 0.2
 
 
 def test_hyperparameter_file_that_is_not_utf8(tmp_path: Path) -> None:
     file = tmp_path / "ppo.yml"
     file.write_bytes(b"default: {n_timesteps: \xff}")
     with pytest.raises(HyperparameterError, match="not UTF-8"):
-        agents.train.load_hyperparameters("ppo", ENV, file)
+        load_hyperparameters("ppo", ENV, file)
 
 
 def _quietly_on_another_id(model: Path) -> None:
@@ -660,11 +666,11 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
             lambda: rollout(make_controller("passive", gym.make_vec(ENV, num_envs=1)), ENV, [1.5]),
             r"seeds must be non-negative integers; got \[1\.5\]",
         ),
-        (lambda: train("ppo", ENV, seed=-1, out=out), "seed must be an integer >= 0"),
-        (lambda: train("ppo", ENV, eval_episodes=0, out=out), "eval_episodes must be an integer >= 1"),
-        (lambda: train("ppo", ENV, timesteps=0, out=out), "timesteps must be an integer >= 1"),
-        (lambda: train("a2c", ENV, out=out), "unknown algorithm 'a2c'"),
-        (lambda: train("ppo", "Nope-v0", out=out), "unknown env id 'Nope-v0'"),
+        (lambda: train(TrainConfig("ppo", ENV, seed=-1, out=out)), "seed must be an integer >= 0"),
+        (lambda: train(TrainConfig("ppo", ENV, eval_episodes=0, out=out)), "eval_episodes must be an integer >= 1"),
+        (lambda: train(TrainConfig("ppo", ENV, timesteps=0, out=out)), "timesteps must be an integer >= 1"),
+        (lambda: train(TrainConfig("a2c", ENV, out=out)), "unknown algorithm 'a2c'"),
+        (lambda: train(TrainConfig("ppo", "Nope-v0", out=out)), "unknown env id 'Nope-v0'"),
         (
             lambda: make_controller(
                 str(shipped_models("TetherSpinningTriangle-v0")["ppo"]), gym.make_vec(ENV, num_envs=1)

@@ -13,7 +13,9 @@ from agents.baselines import make_baseline
 from agents.decentralised import LocalTensionAwareController, LocalVelocityFeedbackController
 from agents.policies import make_controller
 from agents.safe_format import read_metadata
-from agents.train import HyperparameterError, train, validate_hyperparameters
+from agents.training.config import TrainConfig
+from agents.training.hyperparams import HyperparameterError, validate_hyperparameters
+from agents.training.sb3 import train
 from tether_gym.envs.arguments import EnvArgumentError
 from tether_gym.multiagent import parallel_env
 from tether_gym.multiagent.sb3 import AgentVecEnv, make_agent_vec_env
@@ -89,16 +91,18 @@ def test_multiagent_hyperparameters_are_checked() -> None:
 @pytest.mark.slow
 def test_ppo_trains_a_shared_decentralised_policy(tmp_path: Path) -> None:
     run = train(
-        env_id="TetherTetrahedron-v0",
-        seed=0,
-        out=tmp_path,
-        hyperparams_file=Path("agents/hyperparams/ppo_multiagent.yml"),
-        timesteps=16_384,
-        num_envs=4,
-        overrides={"n_steps": 256, "batch_size": 512, "multiagent": {"communication": {"hops": 1}}},
-        eval_freq=8_192,
-        eval_episodes=2,
-        progress_bar=False,
+        TrainConfig(
+            env_id="TetherTetrahedron-v0",
+            seed=0,
+            out=tmp_path,
+            hyperparams_file=Path("agents/hyperparams/ppo_multiagent.yml"),
+            timesteps=16_384,
+            num_envs=4,
+            overrides={"n_steps": 256, "batch_size": 512, "multiagent": {"communication": {"hops": 1}}},
+            eval_freq=8_192,
+            eval_episodes=2,
+            progress_bar=False,
+        )
     )
     assert run.name == "ppo_multiagent_seed0"
     metadata = read_metadata(run)
