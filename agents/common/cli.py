@@ -40,7 +40,7 @@ HELD_OUT_SEED = 10_000
 REFERENCE = "mpc"
 #: Where agents.convert --reference keeps the observations and actions it checked.
 REFERENCE_FILE = "reference_actions.safetensors"
-#: The SB3 algorithms agents.train trains (the keys of agents.safe_format.ALGORITHMS, which
+#: The SB3 algorithms agents.train trains (the keys of agents.policies.format.ALGORITHMS, which
 #: imports SB3; a test keeps the two equal).
 TRAIN_ALGORITHMS = ("ppo", "sac", "td3")
 #: The algorithm name of agents.train_rllib's runs (the run directory's prefix and config.yml's

@@ -120,7 +120,7 @@ class NormalizationStatistics:
             "obs_rms": {"mean": array(self.obs_mean), "var": array(self.obs_var), "count": self.obs_count},
             "ret_rms": {"mean": array(self.ret_mean), "var": array(self.ret_var), "count": self.ret_count},
         }
-        self._check(Path(NORMALIZATION_FILE))
+        self.check(Path(NORMALIZATION_FILE))
         return dump_json(data)
 
     @classmethod
@@ -166,10 +166,10 @@ class NormalizationStatistics:
             norm_obs=require_entry(table, "norm_obs", bool, where),
             norm_reward=require_entry(table, "norm_reward", bool, where),
         )
-        statistics._check(where)
+        statistics.check(where)
         return statistics
 
-    def _check(self, where: Path) -> None:
+    def check(self, where: Path) -> None:
         """Finite statistics, non-negative variances and positive clips, or an error naming them."""
         for name in ("obs_mean", "obs_var", "ret_mean", "ret_var"):
             values = getattr(self, name)

@@ -24,29 +24,25 @@ import numpy as np
 import pytest
 import torch
 import yaml
-from agents.pickled import PickleNotTrustedError, PickleTrustWarning
-from agents.safe_format import (
-    ChecksumError,
-    PolicyFormatError,
-    load_policy,
-    load_tensors,
-    load_training_state,
-    reference_observations,
-    save_policy,
-)
 from stable_baselines3 import PPO, SAC
 
 import agents.compare
 import agents.convert
 import agents.evaluation.comparison
 import agents.policies
+import agents.policies.loaded
 import agents.train
 import agents.training.sb3
+from agents.common.cli import REFERENCE_FILE
 from agents.common.files import OutputError, OutputExistsError, atomic_write_text
-from agents.convert import REFERENCE_FILE, convert
 from agents.evaluation.comparison import CompareConfig, compare
 from agents.evaluation.rollout import rollout
 from agents.policies import MODELS_DIR, OtherIdWarning, TrainedPolicy, make_controller, shipped_models
+from agents.policies.conversion import ConvertConfig, convert
+from agents.policies.format import load_policy, load_tensors, load_training_state, save_policy
+from agents.policies.layout import ChecksumError, PolicyFormatError
+from agents.policies.pickled import PickleNotTrustedError, PickleTrustWarning
+from agents.policies.reference import reference_observations
 from agents.training.config import TrainConfig
 from agents.training.hyperparams import HyperparameterError, load_hyperparameters, validate_hyperparameters
 from agents.training.sb3 import make_training_env, train
@@ -339,7 +335,7 @@ def test_sac_round_trip_and_resume_state(tmp_path: Path) -> None:
 def test_a_saved_optimizer_with_another_number_of_param_groups_is_refused(tmp_path: Path) -> None:
     """Extra saved param groups must not be dropped quietly: the optimizer would resume with
     settings that are not the ones it was saved with."""
-    from agents.safe_format import _restore_optimizer
+    from agents.policies.sb3_state import _restore_optimizer
 
     optimizer = torch.optim.Adam(torch.nn.Linear(2, 1).parameters())
     group = {
@@ -354,7 +350,7 @@ def test_a_saved_optimizer_with_another_number_of_param_groups_is_refused(tmp_pa
 def test_converter_output_matches_sb3_load(sb3_run: Path, tmp_path: Path) -> None:
     target = tmp_path / "converted"
     with pytest.warns(PickleTrustWarning):
-        convert(sb3_run, target, trust_pickle=True, reference=True)
+        convert(ConvertConfig(sb3_run, target, trust_pickle=True, reference=True))
     assert sorted(p.name for p in target.iterdir()) == sorted(
         ["MANIFEST.sha256", "config.yml", "normalization.json", "policy.json", "policy.safetensors", REFERENCE_FILE]
     )
@@ -367,9 +363,10 @@ def test_converter_output_matches_sb3_load(sb3_run: Path, tmp_path: Path) -> Non
     actions = TrainedPolicy(target).predict(observations)[0]
     assert actions.tobytes() == sb3_actions(loaded, normalizer, observations).tobytes()
     with pytest.raises(OutputExistsError, match="--force"):
-        convert(sb3_run, target, trust_pickle=True)
+        convert(ConvertConfig(sb3_run, target, trust_pickle=True))
     with pytest.warns(PickleTrustWarning):
-        convert(sb3_run, target, trust_pickle=True, force=True)  # no --reference this time: its file goes
+        # No --reference this time: its file goes.
+        convert(ConvertConfig(sb3_run, target, trust_pickle=True, force=True))
     assert not (target / REFERENCE_FILE).exists()
     TrainedPolicy(target)
 
@@ -378,7 +375,7 @@ def test_converter_refuses_an_env_that_contradicts_the_run(sb3_run: Path, tmp_pa
     """The converted policy.json records the id the policy runs on: --env cannot relabel a run."""
     other = next(env_id for env_id in ENV_IDS if env_id != ENV)
     with pytest.warns(PickleTrustWarning), pytest.raises(ValueError, match=f"--env {other} differs .*{ENV}"):
-        convert(sb3_run, tmp_path / "relabelled", trust_pickle=True, env_id=other)
+        convert(ConvertConfig(sb3_run, tmp_path / "relabelled", trust_pickle=True, env_id=other))
     assert not (tmp_path / "relabelled" / "policy.json").exists()
 
 
@@ -412,7 +409,7 @@ def fake_models_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """A copy of the shipped models, standing in for agents/models."""
     root = tmp_path / "models"
     shutil.copytree(MODELS_DIR, root)
-    monkeypatch.setattr(agents.policies, "MODELS_DIR", root.resolve())
+    monkeypatch.setattr(agents.policies.loaded, "MODELS_DIR", root.resolve())
     return root / ENV / "ppo"
 
 

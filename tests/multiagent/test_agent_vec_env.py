@@ -9,10 +9,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.baselines import make_baseline
-from agents.decentralised import LocalTensionAwareController, LocalVelocityFeedbackController
+from agents.controllers.decentralised import LocalTensionAwareController, LocalVelocityFeedbackController
+from agents.controllers.registry import make_baseline
 from agents.policies import make_controller
-from agents.safe_format import read_metadata
+from agents.policies.format import read_metadata
 from agents.training.config import TrainConfig
 from agents.training.hyperparams import HyperparameterError, validate_hyperparameters
 from agents.training.sb3 import train
@@ -144,15 +144,15 @@ def test_decentralised_models_ship_beside_the_centralised_ones() -> None:
 def test_single_agent_envs_refuse_what_they_cannot_reproduce() -> None:
     from stable_baselines3 import PPO
 
-    from agents.policies import TrainedPolicy
+    from agents.policies import PolicySpec, TrainedPolicy
 
     options = {"communication": {"hops": 1, "delay": 2}}
     model = PPO("MlpPolicy", make_agent_vec_env("TetherTriangle-v0", num_envs=1, seed=0, **options), device="cpu")
-    policy = TrainedPolicy.from_parts(model.policy, None, "TetherTriangle-v0", "ppo", multiagent=options)
+    policy = TrainedPolicy.from_parts(model.policy, None, "TetherTriangle-v0", "ppo", PolicySpec(multiagent=options))
     with pytest.raises(ValueError, match="evaluate it in tether_gym.multiagent.parallel_env"):
         policy.attach(gym.make("TetherTriangle-v0"))
     with pytest.raises(RuntimeError, match="attach"):
         policy.predict(np.zeros(gym.make("TetherTriangle-v0").observation_space.shape))
-    stateless = TrainedPolicy.from_parts(model.policy, None, "TetherTriangle-v0", "ppo", multiagent={})
+    stateless = TrainedPolicy.from_parts(model.policy, None, "TetherTriangle-v0", "ppo", PolicySpec(multiagent={}))
     with pytest.raises(ValueError, match="local observations of size"):
         stateless.attach(gym.make("TetherTriangle-v0"))  # trained with messages, attached without
