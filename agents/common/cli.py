@@ -17,9 +17,9 @@ import argparse
 import ast
 import sys
 from collections.abc import Callable
-from pathlib import Path
 
 from .commands import PACKAGE, description, program
+from .data import PACKAGE_DIR
 
 __all__ = [
     "HELD_OUT_SEED",
@@ -96,7 +96,7 @@ def _hyperparams(name: str) -> str:
 def _docstring(command: str) -> str:
     """The docstring of the command's module, read from its source without importing it (the
     import is what is slow)."""
-    source = (Path(__file__).resolve().parent.parent / f"{command}.py").read_text(encoding="utf-8")
+    source = (PACKAGE_DIR / f"{command}.py").read_text(encoding="utf-8")
     docstring = ast.get_docstring(ast.parse(source), clean=False)
     return docstring or ""
 

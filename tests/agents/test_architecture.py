@@ -208,3 +208,21 @@ def test_only_the_sb3_state_module_touches_private_attributes(module: str) -> No
         and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))
     ]
     assert not offending, "\n".join(offending)
+
+
+def test_an_old_module_name_says_where_its_contents_went() -> None:
+    """A module of the flat layout is refused with its new places, each of which exists; a name
+    that never existed keeps Python's own error."""
+    import importlib
+
+    from agents import MOVED_MODULES
+
+    found = modules()
+    for old, places in MOVED_MODULES.items():
+        assert f"{PACKAGE}.{old}" not in found, f"agents/{old}.py exists again: drop it from MOVED_MODULES"
+        for module, _ in places:
+            assert f"{PACKAGE}.{module}" in found, f"MOVED_MODULES names {module}, which does not exist"
+        with pytest.raises(ModuleNotFoundError, match=f"agents.{old} is gone: .*{places[0][0]}"):
+            importlib.import_module(f"{PACKAGE}.{old}")
+    with pytest.raises(ModuleNotFoundError, match="No module named 'agents.never_was'"):
+        importlib.import_module(f"{PACKAGE}.never_was")

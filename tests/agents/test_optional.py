@@ -107,8 +107,8 @@ def test_needs_extra_leaves_the_projects_own_modules_alone(monkeypatch: pytest.M
         ),
         (
             "matplotlib",
-            "import agents.common.files, tempfile; agents.common.files.prepare_table_outputs(tempfile.mkdtemp(), [], [], True, "
-            "False, 'x')",
+            "import agents.common.files, tempfile; "
+            "agents.common.files.prepare_table_outputs(tempfile.mkdtemp(), [], [], True, False, 'x')",
             ["matplotlib", "--no-plots", 'pip install "tether-gym[plots]"'],
         ),
     ],

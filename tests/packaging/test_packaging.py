@@ -41,7 +41,8 @@ def _package_files(folder: Path) -> set[str]:
 
 
 def _agents_modules() -> list[Path]:
-    return sorted((ROOT / "agents").glob("*.py"))
+    """Every module of the agents package, in its rooms too."""
+    return sorted((ROOT / "agents").rglob("*.py"))
 
 
 @pytest.fixture(scope="module")
@@ -97,26 +98,31 @@ def test_the_wheel_declares_the_console_scripts(wheel: zipfile.ZipFile) -> None:
 
 def test_runtime_files_are_read_from_inside_the_package() -> None:
     """Files found through ``__file__`` must lie in the package folder (which the wheel holds), not
-    beside it in the checkout (which an installed package does not have)."""
+    beside it in the checkout (which an installed package does not have): a module climbs at most
+    to its package's root folder."""
     for folder in INSTALLED_NAMES:
         for path in sorted((ROOT / folder).rglob("*.py")):
+            depth = len(path.relative_to(ROOT / folder).parts) - 1  # 0 for a module at the root
             for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
                 if "__file__" not in line:
                     continue
                 where = f"{path.relative_to(ROOT)}:{number}"
-                assert re.search(r"Path\(__file__\)\.resolve\(\)\.parent(?!\.parent)(?!s)", line), (
+                climb = re.search(r"Path\(__file__\)\.resolve\(\)((?:\.parent)+)(?!s)", line)
+                assert climb and climb.group(1).count(".parent") <= depth + 1, (
                     f"{where} reads a file outside its package folder: {line.strip()}"
                 )
     # The files those paths name exist (a renamed folder would leave the wheel without them).
-    from agents import policies, train
+    from agents.common import data
     from agents.controllers import mpc
 
     assert mpc.MPC_SETTINGS_FILE.is_file()
-    assert policies.MODELS_DIR.is_dir() and any(policies.MODELS_DIR.glob("*/*/MANIFEST.sha256"))
-    assert (train.HYPERPARAMS_DIR / "ppo.yml").is_file()
+    assert data.MODELS_DIR.is_dir() and any(data.MODELS_DIR.glob("*/*/MANIFEST.sha256"))
+    assert (data.HYPERPARAMS_DIR / "ppo.yml").is_file()
+    assert (data.REFERENCE_DIR / "reference_scores.json").is_file()
+    assert all((data.PACKAGE_DIR / f"{command}.py").is_file() for command in ("train", "compare", "benchmark"))
 
 
-@pytest.mark.parametrize("path", _agents_modules(), ids=lambda path: path.name)
+@pytest.mark.parametrize("path", _agents_modules(), ids=lambda path: str(path.relative_to(ROOT / "agents")))
 def test_agents_modules_import_each_other_relatively(path: Path) -> None:
     """Installed, the folder is ``tether_gym_agents``: an absolute ``agents`` import (at the top or
     inside a function) would fail there, or load another project's ``agents``."""
@@ -137,7 +143,7 @@ def test_agents_modules_import_each_other_relatively(path: Path) -> None:
 def test_console_scripts_match_the_command_modules() -> None:
     scripts = PYPROJECT["project"]["scripts"]
     for command, script in commands.SCRIPTS.items():
-        assert scripts[script] == f"tether_gym_agents.commands:{command}"
+        assert scripts[script] == f"tether_gym_agents.common.commands:{command}"
         assert callable(getattr(commands, command))
         module = (ROOT / "agents" / f"{command}.py").read_text(encoding="utf-8")
         # The parser is agents.common.cli's (the console script parses with it before the slow imports).
@@ -194,18 +200,19 @@ def test_the_agents_work_under_their_installed_name(tmp_path: Path) -> None:
 
         sys.meta_path.insert(0, NoAgents())
         import tether_gym_agents
-        from tether_gym_agents import commands, ship
+        from tether_gym_agents.common import commands
+        from tether_gym_agents.training import shipping
         from tether_gym_agents.policies import pickled
 
-        names = [info.name for info in pkgutil.iter_modules(tether_gym_agents.__path__)]
-        modules = {name: importlib.import_module(f"tether_gym_agents.{name}") for name in names}
+        names = [info.name for info in pkgutil.walk_packages(tether_gym_agents.__path__, "tether_gym_agents.")]
+        modules = {name.removeprefix("tether_gym_agents."): importlib.import_module(name) for name in names}
         for command in commands.SCRIPTS:
             parser = modules[command].build_parser()
             assert parser.prog == f"python -m tether_gym_agents.{command}", parser.prog
             assert "python -m agents." not in (parser.description or "") + (parser.epilog or ""), command
         assert commands.command_line("train", ["--seed", "3"]) == "python -m tether_gym_agents.train --seed 3"
         record = {"env_id": "TetherTetrahedron-v0", "algo": "ppo", "seed": 3}
-        assert ship.reproduce_command(record, "m").startswith("python -m tether_gym_agents.train --algo ppo")
+        assert shipping.reproduce_command(record, "m").startswith("python -m tether_gym_agents.train --algo ppo")
         try:
             pickled.refuse_untrusted("x.zip", "--trust-pickle")
         except pickled.PickleNotTrustedError as error:
@@ -224,7 +231,7 @@ def test_the_agents_work_under_their_installed_name(tmp_path: Path) -> None:
     )
     assert result.returncode == 0, result.stderr[-3000:]
     first_line, help_text = result.stdout.split("\n", 1)
-    assert first_line == f"modules {len(_agents_modules()) - 1}"  # all but __init__
+    assert first_line == f"modules {len(_agents_modules()) - 1}"  # all but the top __init__
     assert help_text.startswith("usage: python -m tether_gym_agents.compare ")
     assert "python -m tether_gym_agents.convert makes a safe copy" in " ".join(help_text.split())
 

@@ -12,7 +12,10 @@ import pytest
 import scipy.stats
 
 import tether_gym
-from agents.controllers.centralised import LQRController, PassiveController
+from agents.controllers.centralised import (
+    LQRController,
+    PassiveController,
+)
 from agents.controllers.linear_model import LinearModel
 from agents.evaluation.rollout import rollout
 from tether_gym.analysis import frame_stiffness, gyroscopic_matrix, tangent_stiffness
@@ -148,3 +151,10 @@ def test_models_and_arguments() -> None:
             LQRController(env, thrust_weight=weight)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="cables"):
         LQRController(env).closed_loop_eigenvalues(cables="half")
+
+
+@pytest.mark.parametrize("env_id", tether_gym.ENV_IDS)
+def test_lqr_closed_loop_is_stable_for_the_linear_model(env_id: str) -> None:
+    controller = LQRController(gym.make(env_id))
+    assert controller.closed_loop_eigenvalues(continuous=True).real.max() < 0
+    assert np.abs(controller.closed_loop_eigenvalues(continuous=False)).max() < 1

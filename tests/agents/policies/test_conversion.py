@@ -3,12 +3,22 @@ itself is tested end to end in tests/agents/test_agents_safety.py)."""
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 
+import numpy as np
 import pytest
+from stable_baselines3 import PPO
 
+from agents.common.cli import REFERENCE_FILE
+from agents.common.files import OutputExistsError
 from agents.convert import build_parser
+from agents.policies import TrainedPolicy
 from agents.policies.conversion import ConvertConfig, convert
+from agents.policies.pickled import PickleTrustWarning
+from agents.policies.reference import reference_observations
+from tests.agents.helpers import ENV, sb3_actions
+from tether_gym import ENV_IDS
 
 
 def test_the_config_takes_paths_as_text_and_keeps_them_as_paths() -> None:
@@ -29,3 +39,35 @@ def test_the_command_line_defaults_are_the_configs(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="SRC .* does not exist"):
         convert(ConvertConfig(tmp_path / "nowhere", tmp_path / "out", trust_pickle=True))
     assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+def test_converter_output_matches_sb3_load(sb3_run: Path, tmp_path: Path) -> None:
+    target = tmp_path / "converted"
+    with pytest.warns(PickleTrustWarning):
+        convert(ConvertConfig(sb3_run, target, trust_pickle=True, reference=True))
+    assert sorted(p.name for p in target.iterdir()) == sorted(
+        ["MANIFEST.sha256", "config.yml", "normalization.json", "policy.json", "policy.safetensors", REFERENCE_FILE]
+    )
+    loaded = PPO.load(sb3_run / "model.zip", device="cpu")
+    with open(sb3_run / "vecnormalize.pkl", "rb") as stream:
+        normalizer = pickle.load(stream)
+    observations = reference_observations(
+        3000, loaded.observation_space, normalizer.obs_rms.mean, normalizer.obs_rms.var, np.random.default_rng(3)
+    )
+    actions = TrainedPolicy(target).predict(observations)[0]
+    assert actions.tobytes() == sb3_actions(loaded, normalizer, observations).tobytes()
+    with pytest.raises(OutputExistsError, match="--force"):
+        convert(ConvertConfig(sb3_run, target, trust_pickle=True))
+    with pytest.warns(PickleTrustWarning):
+        # No --reference this time: its file goes.
+        convert(ConvertConfig(sb3_run, target, trust_pickle=True, force=True))
+    assert not (target / REFERENCE_FILE).exists()
+    TrainedPolicy(target)
+
+
+def test_converter_refuses_an_env_that_contradicts_the_run(sb3_run: Path, tmp_path: Path) -> None:
+    """The converted policy.json records the id the policy runs on: --env cannot relabel a run."""
+    other = next(env_id for env_id in ENV_IDS if env_id != ENV)
+    with pytest.warns(PickleTrustWarning), pytest.raises(ValueError, match=f"--env {other} differs .*{ENV}"):
+        convert(ConvertConfig(sb3_run, tmp_path / "relabelled", trust_pickle=True, env_id=other))
+    assert not (tmp_path / "relabelled" / "policy.json").exists()

@@ -5,30 +5,37 @@ from __future__ import annotations
 
 import inspect
 import json
+import operator
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from stable_baselines3 import PPO, SAC, TD3
 
+from agents.policies import TrainedPolicy
+from agents.policies.format import load_training_state, save_policy
 from agents.policies.layout import PolicyFormatError
+from agents.policies.reference import reference_observations
 from agents.policies.sb3_state import TRAINING_STATE_FORMAT, capture_training_state, restore_training_state
+from agents.training.sb3 import make_training_env
+from tests.agents.helpers import ENV, SHORT, sb3_actions
 from tether_gym.sb3 import make_sb3_vec_env
 
-ENV = "TetherTriangle-v0"
+TRIANGLE = "TetherTriangle-v0"
 AGENTS = Path(__file__).resolve().parents[3] / "agents"
 
 
 def tiny_ppo(seed: int) -> PPO:
-    venv = make_sb3_vec_env(ENV, 1, seed=seed, max_episode_steps=20)
+    venv = make_sb3_vec_env(TRIANGLE, 1, seed=seed, max_episode_steps=20)
     return PPO("MlpPolicy", venv, n_steps=16, batch_size=16, device="cpu", policy_kwargs={"net_arch": [8]}, seed=seed)
 
 
 def sb3_private_names() -> set[str]:
     """The private attributes and methods of SB3's algorithms (instances and classes), as SB3
     itself has them: read from the installed version, not listed by hand."""
-    venv = make_sb3_vec_env(ENV, 1, seed=0)
+    venv = make_sb3_vec_env(TRIANGLE, 1, seed=0)
     names: set[str] = set()
     settings = {PPO: {"n_steps": 16, "batch_size": 16}, SAC: {"buffer_size": 10}, TD3: {"buffer_size": 10}}
     for cls, kwargs in settings.items():
@@ -83,3 +90,52 @@ def test_a_state_that_does_not_fit_the_model_is_refused(tmp_path: Path) -> None:
         restore_training_state(tiny_ppo(1), {**meta, "optimizers": {"other.optimizer": {}}}, tensors, "ppo", *where)
     with pytest.raises(PolicyFormatError, match="'counters'"):
         restore_training_state(tiny_ppo(1), {k: v for k, v in meta.items() if k != "counters"}, tensors, "ppo", *where)
+
+
+def test_sac_round_trip_and_resume_state(tmp_path: Path) -> None:
+    venv = make_training_env(ENV, 2, seed=0, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
+    kwargs = dict(
+        learning_starts=20,
+        batch_size=16,
+        gradient_steps=1,
+        buffer_size=1000,
+        seed=0,
+        device="cpu",
+        policy_kwargs={"net_arch": [16, 16]},
+    )
+    model = SAC("MlpPolicy", venv, **kwargs)
+    model.learn(60)
+    directory = save_policy(tmp_path / "sac", model, venv, ENV, training_state=True)
+    observations = reference_observations(
+        500, model.observation_space, venv.obs_rms.mean, venv.obs_rms.var, np.random.default_rng(2)
+    )
+    assert (
+        TrainedPolicy(directory).predict(observations)[0].tobytes() == sb3_actions(model, venv, observations).tobytes()
+    )
+    fresh_venv = make_training_env(ENV, 2, seed=5, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
+    fresh = SAC("MlpPolicy", fresh_venv, **kwargs)
+    load_training_state(fresh, directory, fresh_venv)
+    assert fresh.num_timesteps == model.num_timesteps
+    assert torch.equal(fresh.log_ent_coef, model.log_ent_coef)
+    for name in ("actor.optimizer", "critic.optimizer", "ent_coef_optimizer"):
+        ours, theirs = (operator.attrgetter(name)(m).state_dict() for m in (fresh, model))
+        assert ours["param_groups"] == theirs["param_groups"]
+        for index, entries in theirs["state"].items():
+            for key, value in entries.items():
+                assert torch.equal(ours["state"][index][key], value), (name, index, key)
+    np.testing.assert_array_equal(fresh_venv.obs_rms.mean, venv.obs_rms.mean)
+
+
+def test_a_saved_optimizer_with_another_number_of_param_groups_is_refused(tmp_path: Path) -> None:
+    """Extra saved param groups must not be dropped quietly: the optimizer would resume with
+    settings that are not the ones it was saved with."""
+    from agents.policies.sb3_state import _restore_optimizer
+
+    optimizer = torch.optim.Adam(torch.nn.Linear(2, 1).parameters())
+    group = {
+        key: list(v) if isinstance(v, tuple) else v for key, v in optimizer.state_dict()["param_groups"][0].items()
+    }
+    _restore_optimizer(optimizer, {"param_groups": [group]}, {}, "actor.optimizer", tmp_path)  # the fitting case loads
+    for groups in ([group, dict(group)], []):
+        with pytest.raises(PolicyFormatError, match=f"has {len(groups)} param groups; this model's optimizer has 1"):
+            _restore_optimizer(optimizer, {"param_groups": groups}, {}, "actor.optimizer", tmp_path)

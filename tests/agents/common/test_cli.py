@@ -24,7 +24,7 @@ else:  # pragma: no cover - Python 3.10
 
 from agents.common import cli, commands
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SCRIPTS = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["scripts"]
 #: Generous: the target is 1.5 s, but this machine may be loaded by other jobs.
 HELP_SECONDS = 3.0
