@@ -21,7 +21,7 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
 
     parse_before_imports("ars")
 
-import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -34,10 +34,9 @@ from .training.ars import load_ars_settings, train_ars
 __all__ = ["build_parser", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``ars`` (defined in :mod:`agents.common.cli`, which the console script parses
-    with before this module's slow imports)."""
-    return cli.build_parser("ars")
+#: The command line of ``ars``, from :mod:`agents.common.cli` (where the console script parses it
+#: before this module's slow imports).
+build_parser = functools.partial(cli.build_parser, "ars")
 
 
 def main(argv: list[str] | None = None) -> Path:

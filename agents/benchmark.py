@@ -16,7 +16,7 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
 
     parse_before_imports("benchmark")
 
-import argparse
+import functools
 import sys
 from typing import Any
 
@@ -33,10 +33,9 @@ __all__ = ["build_parser", "main"]
 ERRORS = (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError, ImportError)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``benchmark`` (defined in :mod:`agents.common.cli`, which the console script parses
-    with before this module's slow imports)."""
-    return cli.build_parser("benchmark")
+#: The command line of ``benchmark``, from :mod:`agents.common.cli` (where the console script parses it
+#: before this module's slow imports).
+build_parser = functools.partial(cli.build_parser, "benchmark")
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -44,18 +43,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     in its outputs; returns its results (what ``benchmark.json`` holds)."""
     arguments = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(arguments)
-    config = BenchmarkConfig(
+    config = cli.config_from_args(
+        BenchmarkConfig,
+        args,
         env_ids=args.envs,
-        controllers=args.controllers,
-        episodes=args.episodes,
-        seed=args.seed,
-        out=args.out,
-        force=args.force,
         plots=not args.no_plots,
-        trust_pickle=args.trust_pickle,
-        allow_other_id=args.allow_other_id,
-        reference=args.reference,
-        bootstrap_reps=args.bootstrap_reps,
         command=command_line("benchmark", arguments),
     )
     return benchmark(config)

@@ -31,7 +31,7 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
 
     parse_before_imports("compare")
 
-import argparse
+import functools
 from typing import Any
 
 from .common import cli
@@ -48,28 +48,16 @@ __all__ = ["build_parser", "main"]
 ERRORS = (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError, ImportError)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``compare`` (defined in :mod:`agents.common.cli`, which the console script parses
-    with before this module's slow imports)."""
-    return cli.build_parser("compare")
+#: The command line of ``compare``, from :mod:`agents.common.cli` (where the console script parses it
+#: before this module's slow imports).
+build_parser = functools.partial(cli.build_parser, "compare")
 
 
 def main(argv: list[str] | None = None) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
     """Run the comparison with the command line ``argv`` (default: the process's arguments);
     returns the episode records and the summaries, in the controllers' order."""
     args = build_parser().parse_args(argv)
-    config = CompareConfig(
-        env_id=args.env,
-        controllers=args.controllers,
-        episodes=args.episodes,
-        seed=args.seed,
-        out=args.out,
-        satellite=args.satellite,
-        plots=not args.no_plots,
-        force=args.force,
-        trust_pickle=args.trust_pickle,
-        allow_other_id=args.allow_other_id,
-    )
+    config = cli.config_from_args(CompareConfig, args, env_id=args.env, plots=not args.no_plots)
     return compare(config)
 
 

@@ -24,7 +24,7 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
 
     parse_before_imports("convert")
 
-import argparse
+import functools
 from pathlib import Path
 
 from .common import cli
@@ -40,27 +40,15 @@ __all__ = ["build_parser", "main"]
 ERRORS = (PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``convert`` (defined in :mod:`agents.common.cli`, which the console script parses
-    with before this module's slow imports)."""
-    return cli.build_parser("convert")
+#: The command line of ``convert``, from :mod:`agents.common.cli` (where the console script parses it
+#: before this module's slow imports).
+build_parser = functools.partial(cli.build_parser, "convert")
 
 
 def main(argv: list[str] | None = None) -> Path:
     """Convert with the command line ``argv`` (default: the process's arguments); returns ``DST``."""
     args = build_parser().parse_args(argv)
-    config = ConvertConfig(
-        source=args.source,
-        destination=args.destination,
-        trust_pickle=args.trust_pickle,
-        best=args.best,
-        algo=args.algo,
-        env_id=args.env,
-        training_state=args.training_state,
-        check_observations=args.check_observations,
-        reference=args.reference,
-        force=args.force,
-    )
+    config = cli.config_from_args(ConvertConfig, args, env_id=args.env)
     return convert(config)
 
 

@@ -25,7 +25,7 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
 
     parse_before_imports("ship")
 
-import argparse
+import functools
 import sys
 from typing import Any
 
@@ -38,10 +38,9 @@ from .training.shipping import ship
 __all__ = ["build_parser", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``ship`` (defined in :mod:`agents.common.cli`, which the console script parses
-    with before this module's slow imports)."""
-    return cli.build_parser("ship")
+#: The command line of ``ship``, from :mod:`agents.common.cli` (where the console script parses it
+#: before this module's slow imports).
+build_parser = functools.partial(cli.build_parser, "ship")
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:

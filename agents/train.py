@@ -46,6 +46,7 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
     parse_before_imports("train")
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 from typing import Any
@@ -63,10 +64,9 @@ from .training.sb3 import train
 __all__ = ["build_parser", "config_from_args", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``train`` (defined in :mod:`agents.common.cli`, which the console script parses
-    with before this module's slow imports)."""
-    return cli.build_parser("train")
+#: The command line of ``train``, from :mod:`agents.common.cli` (where the console script parses it
+#: before this module's slow imports).
+build_parser = functools.partial(cli.build_parser, "train")
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any] | None:
@@ -84,25 +84,16 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any] | None:
 def config_from_args(args: argparse.Namespace, command: str | None = None) -> TrainConfig:
     """The run that the parsed command line ``args`` asks for; ``command`` (the command line) is
     recorded in its ``config.yml``."""
-    return TrainConfig(
-        algo=args.algo,
+    return cli.config_from_args(
+        TrainConfig,
+        args,
         env_id=args.env,
-        seed=args.seed,
-        out=args.out,
-        timesteps=args.timesteps,
         num_envs=args.n_envs,
         hyperparams_file=args.hyperparams
         or (HYPERPARAMS_DIR / f"{args.algo}_multiagent.yml" if args.multiagent else None),
         overrides=_overrides(args),
-        resume=args.resume,
-        eval_freq=args.eval_freq,
-        eval_episodes=args.eval_episodes,
-        checkpoint_freq=args.checkpoint_freq,
         progress_bar=not args.no_progress,
-        verbose=args.verbose,
         command=command,
-        force=args.force,
-        trust_pickle=args.trust_pickle,
     )
 
 

@@ -49,7 +49,7 @@ if __name__ == "__main__":  # --help and bad options answered before the slow im
 
     parse_before_imports("train_rllib")
 
-import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -64,33 +64,20 @@ from .training.rllib import ALGO, RayUnavailableError, RLlibConfig, train_rllib
 __all__ = ["build_parser", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``train_rllib`` (defined in :mod:`agents.common.cli`, which the console script parses
-    with before this module's slow imports)."""
-    return cli.build_parser("train_rllib")
+#: The command line of ``train_rllib``, from :mod:`agents.common.cli` (where the console script parses it
+#: before this module's slow imports).
+build_parser = functools.partial(cli.build_parser, "train_rllib")
 
 
 def main(argv: list[str] | None = None) -> Path:
     """Train as the command line ``argv`` (default: ``sys.argv[1:]``) asks; returns the run directory. A
     multi-agent run without ``--hyperparams`` reads the package's ``hyperparams/rllib_ppo_multiagent.yml``."""
     args = build_parser().parse_args(argv)
-    config = RLlibConfig(
+    config = cli.config_from_args(
+        RLlibConfig,
+        args,
         env_id=args.env,
-        seed=args.seed,
-        out=args.out,
-        timesteps=args.timesteps,
-        num_env_runners=args.num_env_runners,
-        envs_per_runner=args.envs_per_runner,
-        address=args.address,
-        num_cpus=args.num_cpus,
         hyperparams_file=args.hyperparams or (HYPERPARAMS_DIR / f"{ALGO}_multiagent.yml" if args.multiagent else None),
-        multiagent=args.multiagent,
-        resume=args.resume,
-        trust_pickle=args.trust_pickle,
-        eval_freq=args.eval_freq,
-        eval_episodes=args.eval_episodes,
-        checkpoint_freq=args.checkpoint_freq,
-        force=args.force,
         command=command_line("train_rllib", sys.argv[1:] if argv is None else argv),
     )
     return train_rllib(config)

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import argparse
 import ast
+import dataclasses
 import sys
 from collections.abc import Callable
+from typing import Any, TypeVar
 
 from .commands import PACKAGE, description, program
 from .data import PACKAGE_DIR
@@ -417,6 +419,26 @@ _PARSERS: dict[str, Callable[[], argparse.ArgumentParser]] = {
     "train_rllib": train_rllib_parser,
     "ars": ars_parser,
 }
+
+
+ConfigT = TypeVar("ConfigT")
+
+
+def config_from_args(config_class: type[ConfigT], args: argparse.Namespace, **given: Any) -> ConfigT:
+    """A command's config (a dataclass, ``config_class``) from its parsed command line ``args``:
+    each field is ``given[field]`` if given, else the option of the same name, else the field's
+    default. An option named otherwise than its field (``--env`` for ``env_id``, ``--no-plots``
+    for ``plots``) is passed in ``given``."""
+    names = [field.name for field in dataclasses.fields(config_class)]  # type: ignore[arg-type]
+    unknown = sorted(set(given) - set(names))
+    if unknown:
+        raise TypeError(f"{config_class.__name__} has no field {', '.join(unknown)}")
+    values = {
+        name: given[name] if name in given else getattr(args, name)
+        for name in names
+        if name in given or hasattr(args, name)
+    }
+    return config_class(**values)
 
 
 def parse_before_imports(command: str) -> None:

@@ -132,6 +132,7 @@ __all__ = [
     "ALGORITHMS",
     "POLICY_HOSTS",
     "LoadedPolicy",
+    "check_resumable",
     "is_policy_dir",
     "load_policy",
     "load_tensors",
@@ -523,6 +524,26 @@ def _load_state_dict(module: torch.nn.Module, weights: Mapping[str, torch.Tensor
     module.load_state_dict(weights, strict=True)
 
 
+def check_resumable(metadata: Mapping[str, Any], algo: str, label: str, env_id: str | None = None) -> None:
+    """Refuse to resume training ``algo`` (on ``env_id``, when given) from the policy directory
+    whose ``policy.json`` is ``metadata``: a :class:`PolicyFormatError` when it holds another
+    algorithm's model, was trained on another id, or keeps no optimizer state. ``label`` names the
+    directory at the start of the message (``--resume DIR``, or the file that was read)."""
+    if metadata["algo"] != algo:
+        raise PolicyFormatError(
+            f"{label} is a {metadata['algo']} checkpoint; resume it with --algo {metadata['algo']} (not {algo})"
+        )
+    if env_id is not None and metadata["env_id"] != env_id:
+        raise PolicyFormatError(
+            f"{label} was trained on {metadata['env_id']}; resume it with --env {metadata['env_id']} (not {env_id})"
+        )
+    if not metadata["training_state"]:
+        raise PolicyFormatError(
+            f"{label} holds a policy for inference only (no optimizer state): resume from a checkpoint that "
+            f"{program('train')} wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run directory)"
+        )
+
+
 def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer: VecNormalize | None) -> dict[str, Any]:
     """Resume ``model`` (freshly built with the run's hyperparameters) from the policy directory
     ``directory``: its weights, optimizer states, extra variables and counters, and the
@@ -537,16 +558,7 @@ def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer:
     metadata = read_metadata(directory, reader)
     where = directory / METADATA_FILE
     algo = _algo_name(model)
-    if metadata["algo"] != algo:
-        raise PolicyFormatError(
-            f"{where}: the checkpoint is a {metadata['algo']} model; resume it with --algo "
-            f"{metadata['algo']} (not {algo})"
-        )
-    if not metadata["training_state"]:
-        raise PolicyFormatError(
-            f"{directory} holds a policy for inference only (no optimizer state): resume from a checkpoint "
-            f"directory that {program('train')} wrote (checkpoints/<algo>_<steps>_steps, best/ or the run directory)"
-        )
+    check_resumable(metadata, algo, str(directory))
     ours = encode_policy_kwargs(policy_constructor_kwargs(model), model.policy_class)
     differing = sorted(
         key for key in set(ours) | set(metadata["policy_kwargs"]) if ours.get(key) != metadata["policy_kwargs"].get(key)

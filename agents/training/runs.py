@@ -7,10 +7,9 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from ..common.commands import program
 from ..common.files import OutputError, OutputExistsError, check_no_symlinks_inside, prepare_output_dir
-from ..policies.format import is_policy_dir, read_metadata
-from ..policies.layout import METADATA_FILE, POLICY_FILES, PolicyFormatError
+from ..policies.format import check_resumable, is_policy_dir, read_metadata
+from ..policies.layout import METADATA_FILE, POLICY_FILES
 from ..policies.pickled import is_pickle_model, normalization_file_of, refuse_untrusted, sb3_model_file
 from .selection import EVALUATIONS_FILE
 
@@ -98,23 +97,7 @@ def resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: str
             f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory"
         )
     if is_policy_dir(path):
-        metadata = read_metadata(path)
-        if metadata["algo"] != algo:
-            raise PolicyFormatError(
-                f"--resume {path} is a {metadata['algo']} checkpoint; resume it with --algo "
-                f"{metadata['algo']} (not {algo})"
-            )
-        if metadata["env_id"] != env_id:
-            raise PolicyFormatError(
-                f"--resume {path} was trained on {metadata['env_id']}; resume it with --env "
-                f"{metadata['env_id']} (not {env_id})"
-            )
-        if not metadata["training_state"]:
-            raise PolicyFormatError(
-                f"--resume {path} holds a policy for inference only (no optimizer state): resume from a checkpoint "
-                f"that {program('train')} wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run "
-                "directory)"
-            )
+        check_resumable(read_metadata(path), algo, f"--resume {path}", env_id)
         return "safe", path, {path}
     if is_pickle_model(path):
         if not trust_pickle:

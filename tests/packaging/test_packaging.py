@@ -146,8 +146,9 @@ def test_console_scripts_match_the_command_modules() -> None:
         assert scripts[script] == f"tether_gym_agents.common.commands:{command}"
         assert callable(getattr(commands, command))
         module = (ROOT / "agents" / f"{command}.py").read_text(encoding="utf-8")
-        # The parser is agents.common.cli's (the console script parses with it before the slow imports).
-        assert 'if __name__ == "__main__":' in module and f'cli.build_parser("{command}")' in module
+        # The module parses with agents.common.cli's parser before its slow imports (tests/agents/common/test_cli.py
+        # checks that its build_parser is that parser).
+        assert 'if __name__ == "__main__":' in module and f'parse_before_imports("{command}")' in module
     agents_scripts = {name for name, target in scripts.items() if target.startswith("tether_gym_agents.")}
     assert agents_scripts == set(commands.SCRIPTS.values())
     # The core's command takes no package name of the agents.
