@@ -308,13 +308,19 @@ def tensor_bytes(tensors: Mapping[str, torch.Tensor], metadata: Mapping[str, str
 
 
 def load_tensors(data: bytes, where: Path) -> dict[str, torch.Tensor]:
-    """The tensors of a safetensors file's bytes; a PolicyFormatError naming ``where`` if malformed."""
+    """The tensors of a safetensors file's bytes, by name in sorted order; a PolicyFormatError
+    naming ``where`` if malformed.
+
+    Sorted because safetensors hands them back in an order that changes from process to process
+    (a hash map's), and what is built from them keeps it: a resumed run wrote its optimizer
+    state in that order, so the same seed gave different bytes."""
     try:
-        return _safetensors().load(data)
+        tensors = _safetensors().load(data)
     except Exception as error:  # noqa: BLE001 - safetensors raises its own error types for bad headers
         raise PolicyFormatError(
             f"{where} is not a valid safetensors file ({error}): restore or re-create it"
         ) from error
+    return dict(sorted(tensors.items()))
 
 
 def policy_metadata(

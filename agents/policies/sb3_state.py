@@ -146,6 +146,9 @@ def _restore_optimizer(
             state.setdefault(int(index), {})[entry] = tensor
     for index, entries in (saved.get("scalars") or {}).items():
         state.setdefault(int(index), {}).update(entries)
+    # In parameter order, as the optimizer built it: load_state_dict keeps the order it is given,
+    # and the next save writes it.
+    state = dict(sorted(state.items()))
     try:
         optimizer.load_state_dict({"state": state, "param_groups": groups})
     except (ValueError, KeyError, TypeError) as error:

@@ -15,7 +15,7 @@ import torch
 from stable_baselines3 import PPO, SAC, TD3
 
 from agents.policies import TrainedPolicy
-from agents.policies.format import load_training_state, save_policy
+from agents.policies.format import load_tensors, load_training_state, save_policy, tensor_bytes
 from agents.policies.layout import PolicyFormatError
 from agents.policies.reference import reference_observations
 from agents.policies.sb3_state import TRAINING_STATE_FORMAT, capture_training_state, restore_training_state
@@ -79,6 +79,31 @@ def test_the_training_state_goes_back_into_a_fresh_model(tmp_path: Path) -> None
     for index, entries in theirs["state"].items():
         for key, value in entries.items():
             assert torch.equal(torch.as_tensor(ours["state"][index][key]), torch.as_tensor(value)), (index, key)
+
+
+def test_a_restored_state_saves_the_same_bytes_whatever_order_the_tensors_came_in(tmp_path: Path) -> None:
+    """safetensors gives a file's tensors back in an order that changes between processes; the
+    restored optimizer, and so the next checkpoint's training.json, must not depend on it."""
+    model = tiny_ppo(seed=0)
+    model.learn(32)
+    tensors, meta = capture_training_state(model)
+    meta = json.loads(json.dumps(meta, allow_nan=False))
+    saved = json.dumps(meta, sort_keys=False)
+    where = (tmp_path / "training.json", tmp_path / "training.safetensors")
+    shuffled = dict(reversed(list(tensors.items())))  # the worst order: every index before its predecessors
+    assert list(shuffled) != list(tensors)
+    for order in (tensors, shuffled):
+        fresh = tiny_ppo(seed=1)
+        restore_training_state(fresh, meta, order, "ppo", *where)
+        again_tensors, again = capture_training_state(fresh)
+        assert json.dumps(json.loads(json.dumps(again, allow_nan=False)), sort_keys=False) == saved
+        assert list(fresh.policy.optimizer.state_dict()["state"]) == list(model.policy.optimizer.state_dict()["state"])
+
+
+def test_tensors_load_in_sorted_order(tmp_path: Path) -> None:
+    names = [f"policy.optimizer/state/{index}/exp_avg" for index in (12, 0, 7, 1, 10)]
+    data = tensor_bytes({name: torch.zeros(1) for name in names})
+    assert list(load_tensors(data, tmp_path / "training.safetensors")) == sorted(names)
 
 
 def test_a_state_that_does_not_fit_the_model_is_refused(tmp_path: Path) -> None:
