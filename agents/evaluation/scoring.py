@@ -190,7 +190,7 @@ def _held_out_seeds(entry: dict[str, Any], env_id: str, episodes: int | None, se
         raise ReferenceDataError("pass episodes or seeds, not both")
     if seeds is None:
         count = len(held) if episodes is None else episodes
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 2 <= count <= len(held):
+        if not is_whole_number(count) or not 2 <= count <= len(held):
             raise ReferenceDataError(
                 f"episodes must be an integer from 2 (for an interval) to {len(held)}: the reference scores of "
                 f"{env_id} hold {span}; got {episodes!r}"

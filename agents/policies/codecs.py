@@ -27,6 +27,7 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
+from ..common.checks import is_count
 from .layout import PolicyFormatError
 
 with needs_extra("train", "the policy files"):
@@ -196,11 +197,7 @@ def decode_space(data: Any, where: str) -> gymnasium.spaces.Box:
     if not isinstance(data, dict) or data.get("type") != "Box":
         raise PolicyFormatError(f"{where} must be an object with type 'Box'; got {data!r}")
     shape = data.get("shape")
-    if not (
-        isinstance(shape, list)
-        and shape
-        and all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in shape)
-    ):
+    if not (isinstance(shape, list) and shape and all(is_count(n) for n in shape)):
         raise PolicyFormatError(f"{where}.shape must be a list of positive integers; got {shape!r}")
     dtype = data.get("dtype")
     if dtype not in ("float32", "float64"):

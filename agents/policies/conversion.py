@@ -19,6 +19,7 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
+from ..common.checks import check_int
 from ..common.cli import REFERENCE_FILE
 from ..common.files import atomic_write_bytes, check_output_files, prepare_output_dir
 from .format import save_policy, sha256_hex, tensor_bytes, write_manifest
@@ -61,9 +62,7 @@ class ConvertConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "source", Path(self.source))
         object.__setattr__(self, "destination", Path(self.destination))
-        check = self.check_observations
-        if isinstance(check, bool) or not isinstance(check, int) or check < 16:
-            raise ValueError(f"check_observations must be an integer >= 16; got {check!r}")
+        object.__setattr__(self, "check_observations", check_int("check_observations", self.check_observations, 16))
 
 
 def convert(config: ConvertConfig) -> Path:

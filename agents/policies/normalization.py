@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from tether_gym.limits import is_whole_number
+
 from .codecs import decode_float, dump_json, encode_float, parse_json, require_entry
 from .layout import FORMAT_VERSION, NORMALIZATION_FILE, PolicyFormatError
 
@@ -140,10 +142,7 @@ class NormalizationStatistics:
             if not isinstance(entry, dict):
                 raise PolicyFormatError(f"{label} must be an object with shape, dtype and values")
             shape, dtype, values = entry.get("shape"), entry.get("dtype"), entry.get("values")
-            if not (
-                isinstance(shape, list)
-                and all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape)
-            ):
+            if not (isinstance(shape, list) and all(is_whole_number(n) and n >= 0 for n in shape)):
                 raise PolicyFormatError(f"{label}.shape must be a list of non-negative integers; got {shape!r}")
             if dtype not in ("float32", "float64"):
                 raise PolicyFormatError(f"{label}.dtype must be 'float32' or 'float64'; got {dtype!r}")

@@ -19,6 +19,7 @@ from typing import Any
 
 from tether_gym._optional import needs_extra
 
+from ..common.checks import is_count
 from ..common.commands import program
 from ..common.data import HYPERPARAMS_DIR
 from ..controllers.residual import check_residual_on
@@ -461,9 +462,7 @@ def _check_curriculum(value: Any, where: str) -> dict[str, float] | None:
 
 def _check_net_arch(value: Any, where: str) -> Any:
     def layers(sizes: Any, label: str) -> list[int]:
-        if not isinstance(sizes, list) or not all(
-            isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in sizes
-        ):
+        if not isinstance(sizes, list) or not all(is_count(n) for n in sizes):
             raise HyperparameterError(f"{where}: {label!r} must be a list of positive layer sizes; got {sizes!r}")
         return sizes
 
