@@ -93,7 +93,7 @@ done
 step "using the installed packages: every id, the shipped models and settings, the console scripts"
 # -I: isolated mode, neither the environment nor the current directory adds anything to sys.path.
 "$venv/python" -I - "$checkout" <<'EOF'
-import importlib.metadata, importlib.util, subprocess, sys, sysconfig
+import importlib.metadata, importlib.util, pkgutil, subprocess, sys, sysconfig
 from pathlib import Path
 
 import gymnasium as gym
@@ -102,7 +102,9 @@ import numpy as np
 import tether_gym
 import tether_gym_agents
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
-from tether_gym_agents import commands, mpc, policies, train
+from tether_gym_agents import policies
+from tether_gym_agents.common import commands, data
+from tether_gym_agents.controllers import mpc
 
 checkout = Path(sys.argv[1]).resolve()
 site = Path(sysconfig.get_paths()["purelib"]).resolve()
@@ -112,6 +114,14 @@ for package in (tether_gym, tether_gym_agents):
 assert importlib.util.find_spec("agents") is None, "the wheel installed a top-level 'agents'"
 for package in ("tether_gym", "tether_gym_agents"):
     assert (site / package / "py.typed").is_file(), f"{package} has no py.typed"
+# Every module of every room is in the wheel and imports from it (a room missing from
+# pyproject.toml's package list would be left out).
+rooms = [info.name for info in pkgutil.walk_packages(tether_gym_agents.__path__, "tether_gym_agents.")]
+for name in rooms:
+    assert Path(importlib.import_module(name).__file__).resolve().is_relative_to(site), name
+sources = sorted(path for path in (checkout / "agents").rglob("*.py") if path.name != "__init__.py" or path.parent.name != "agents")
+assert len(rooms) == len(sources), (len(rooms), len(sources))
+print(f"  {len(rooms)} modules of tether_gym_agents imported from the wheel")
 
 for env_id in ENV_IDS:
     env = gym.make(env_id)
@@ -129,7 +139,7 @@ print(f"  gym.make: {len(ENV_IDS)} ids stepped; gym.make_vec: {DEFAULT_ENV_ID} x
 
 # The data the agents read at run time, from site-packages: hyperparameters, MPC settings, and
 # every shipped model (its checksum manifest verified as it loads).
-hyperparams = sorted(path.name for path in train.HYPERPARAMS_DIR.glob("*.yml"))
+hyperparams = sorted(path.name for path in data.HYPERPARAMS_DIR.glob("*.yml"))
 assert "ppo.yml" in hyperparams and "mpc.yml" in hyperparams, hyperparams
 mpc.load_mpc_settings(DEFAULT_ENV_ID)
 shipped = {env_id: policies.shipped_models(env_id) for env_id in ENV_IDS}
