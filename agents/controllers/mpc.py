@@ -33,7 +33,6 @@ environment and control step.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 import zlib
 from pathlib import Path
@@ -295,8 +294,3 @@ class MPCController:
             f"MPCController(samples={s.samples}, horizon={s.horizon}, knots={s.knots}, noise={s.noise}, "
             f"iterations={s.iterations}, temperature={s.temperature}, prior={s.prior}, batch={self.batch})"
         )
-
-
-def expected_env_steps(settings: MPCSettings, episodes: int, steps: int) -> int:
-    """Env steps the planner simulates for ``episodes`` episodes of ``steps`` control steps."""
-    return math.prod((settings.samples, settings.horizon, settings.iterations, episodes, steps))
