@@ -38,6 +38,8 @@ __all__ = [
     "ACTIVATIONS",
     "CLASS_KWARGS",
     "FEATURE_EXTRACTORS",
+    "MAX_JSON_BYTES",
+    "MAX_JSON_DEPTH",
     "OPTIMIZERS",
     "decode_float",
     "decode_policy_kwargs",
@@ -46,6 +48,7 @@ __all__ = [
     "encode_float",
     "encode_policy_kwargs",
     "encode_space",
+    "json_depth",
     "json_value",
     "parse_json",
     "require_entry",
@@ -95,9 +98,52 @@ def _finite_float(text: str) -> float:
     return value
 
 
+#: The largest JSON file of a policy directory read, bytes: a policy.json or normalization.json of
+#: the largest network and observation the envs have is a few hundred KB.
+MAX_JSON_BYTES = 16 * 2**20
+#: The deepest nesting of lists and objects read: the format's own files nest 5 deep.
+MAX_JSON_DEPTH = 32
+
+
+def json_depth(data: bytes, limit: int) -> int:
+    """The nesting depth of the JSON text ``data`` (brackets inside strings not counted), read up
+    to the first point deeper than ``limit`` (then ``limit + 1``): found before parsing, so that a
+    crafted file cannot make the parser recurse."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in data:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:  # quote
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):  # [ {
+            depth += 1
+            if depth > limit:
+                return depth
+            deepest = max(deepest, depth)
+        elif byte in (0x5D, 0x7D):  # ] }
+            depth -= 1
+    return deepest
+
+
 def parse_json(data: bytes, where: Path) -> Any:
-    """Strict JSON (UTF-8, no NaN/Infinity literals, no numbers that overflow to inf) with errors
-    that name the file."""
+    """Strict JSON (UTF-8, no NaN/Infinity literals, no numbers that overflow to inf, at most
+    :data:`MAX_JSON_BYTES` long and :data:`MAX_JSON_DEPTH` deep) with errors that name the file."""
+    if len(data) > MAX_JSON_BYTES:
+        raise PolicyFormatError(
+            f"{where} is {len(data):,} bytes, more than a policy file can be ({MAX_JSON_BYTES:,}): "
+            "restore or re-create the file"
+        )
+    if json_depth(data, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
+        raise PolicyFormatError(
+            f"{where} nests lists or objects more than {MAX_JSON_DEPTH} deep, which no policy file does: "
+            "restore or re-create the file"
+        )
     try:
         return json.loads(data.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float)
     except (UnicodeDecodeError, ValueError) as error:

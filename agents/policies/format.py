@@ -240,6 +240,10 @@ def read_manifest(directory: Path) -> dict[str, str] | None:
         match = _SHA256_LINE.match(line)
         if match is None or match.group(2) in (".", ".."):
             raise ChecksumError(f"{path}, line {number}: expected '<64 hex digits>  <file name>'; got {line[:100]!r}")
+        if match.group(2) in entries:
+            raise ChecksumError(
+                f"{path}, line {number}: {match.group(2)} is listed a second time (each file once): restore it"
+            )
         entries[match.group(2)] = match.group(1)
     return entries
 
@@ -320,6 +324,9 @@ def load_tensors(data: bytes, where: Path) -> dict[str, torch.Tensor]:
         raise PolicyFormatError(
             f"{where} is not a valid safetensors file ({error}): restore or re-create it"
         ) from error
+    for name, tensor in tensors.items():
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise PolicyFormatError(f"{where}: tensor {name!r} has NaN or infinite entries: restore or re-create it")
     return dict(sorted(tensors.items()))
 
 

@@ -182,3 +182,9 @@ class NormalizationStatistics:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0) and not (name == "epsilon" and value == 0):
                 raise PolicyFormatError(f"{where}: {name} must be a positive finite number; got {value}")
+        if self.epsilon == 0 and (np.any(self.obs_var == 0) or np.any(self.ret_var == 0)):
+            # (x - mean) / sqrt(var + epsilon) divides by zero: every such observation would be NaN.
+            raise PolicyFormatError(
+                f"{where}: epsilon is 0 and a variance is 0, which normalises to NaN: epsilon must be > 0 "
+                "(SB3's default is 1e-8)"
+            )

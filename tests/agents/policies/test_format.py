@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import time
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,8 @@ import torch
 from stable_baselines3 import PPO
 
 from agents.policies import TrainedPolicy
-from agents.policies.format import load_policy, save_policy
+from agents.policies.codecs import MAX_JSON_BYTES, MAX_JSON_DEPTH, json_depth
+from agents.policies.format import load_policy, load_tensors, save_policy, tensor_bytes
 from agents.policies.layout import ChecksumError, PolicyFormatError
 from agents.policies.reference import reference_observations
 from tests.agents.helpers import ENV, payload, sb3_actions
@@ -79,3 +81,67 @@ def test_safe_round_trip_gives_bit_identical_actions(sb3_model: tuple[PPO, objec
     assert policy.predict(observations)[0].tobytes() == sb3_actions(model, venv, observations).tobytes()
     for row in observations[:20]:  # one observation at a time too (torch may round a batch differently)
         assert policy.predict(row)[0].tobytes() == sb3_actions(model, venv, row).tobytes()
+
+
+@pytest.mark.parametrize("name", ["policy.json", "normalization.json"])
+def test_deeply_nested_or_huge_json_is_refused_before_it_is_parsed(
+    sb3_model: tuple[PPO, object], tmp_path: Path, name: str
+) -> None:
+    """A few KB of brackets made the parser raise a bare RecursionError; a huge file would be read
+    whole. Both are refused by name, quickly, in every JSON file of a policy directory."""
+    model, venv = sb3_model
+    directory = save_policy(tmp_path / "policy", model, venv, ENV)
+    (directory / "MANIFEST.sha256").unlink()
+    (directory / name).write_text("[" * 100_000 + "]" * 100_000)
+    start = time.perf_counter()
+    with pytest.raises(PolicyFormatError, match=f"{name} nests lists or objects more than {MAX_JSON_DEPTH} deep"):
+        load_policy(directory)
+    assert time.perf_counter() - start < 1.0
+    (directory / name).write_bytes(b" " * (MAX_JSON_BYTES + 1))
+    with pytest.raises(PolicyFormatError, match=f"{name} is .* bytes, more than a policy file can be"):
+        load_policy(directory)
+
+
+def test_json_depth_ignores_brackets_inside_strings() -> None:
+    assert json_depth(b'{"a": [1, {"b": "[[[[\\"{{"}]}', 32) == 3
+    assert json_depth(b"[" * 40, 32) == 33  # stops counting past the limit
+    assert json_depth(b"3", 32) == 0
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_weights_that_are_not_finite_are_refused(sb3_model: tuple[PPO, object], tmp_path: Path, value: float) -> None:
+    """NaN or infinite weights loaded and failed late inside torch, or saturated every action."""
+    model, venv = sb3_model
+    directory = save_policy(tmp_path / "policy", model, venv, ENV)
+    weights = load_tensors((directory / "policy.safetensors").read_bytes(), directory / "policy.safetensors")
+    name = sorted(weights)[0]
+    weights[name].view(-1)[0] = value
+    (directory / "policy.safetensors").write_bytes(tensor_bytes(weights))
+    (directory / "MANIFEST.sha256").unlink()
+    with pytest.raises(PolicyFormatError, match=f"tensor {name!r} has NaN or infinite entries"):
+        load_policy(directory)
+
+
+def test_a_file_listed_twice_in_the_manifest_is_refused(sb3_model: tuple[PPO, object], tmp_path: Path) -> None:
+    """Only the last entry of a file listed twice was kept, so a wrong first hash went unseen."""
+    model, venv = sb3_model
+    directory = save_policy(tmp_path / "policy", model, venv, ENV)
+    manifest = directory / "MANIFEST.sha256"
+    line = next(line for line in manifest.read_text().splitlines() if line.endswith("policy.json"))
+    manifest.write_text(f"{'0' * 64}  policy.json\n" + manifest.read_text())
+    with pytest.raises(ChecksumError, match="policy.json is listed a second time"):
+        load_policy(directory, require_manifest=True)
+    assert line in manifest.read_text()
+
+
+def test_zero_epsilon_with_a_zero_variance_is_refused(sb3_model: tuple[PPO, object], tmp_path: Path) -> None:
+    """(x - mean) / sqrt(var + epsilon) with both zero is NaN for every observation."""
+    model, venv = sb3_model
+    directory = save_policy(tmp_path / "policy", model, venv, ENV)
+    table = json.loads((directory / "normalization.json").read_text())
+    table["epsilon"] = 0
+    table["obs_rms"]["var"]["values"][0] = 0
+    (directory / "normalization.json").write_text(json.dumps(table))
+    (directory / "MANIFEST.sha256").unlink()
+    with pytest.raises(PolicyFormatError, match="epsilon is 0 and a variance is 0"):
+        load_policy(directory)
