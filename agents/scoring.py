@@ -17,9 +17,9 @@ score_policy``, the documented path of earlier releases); its module is
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
+from .common.commands import exit_on_error, program
 from .evaluation.scoring import REFERENCE_FILE, ReferenceDataError, score_policy, write_reference
 
 __all__ = ["build_parser", "main", "score_policy"]
@@ -28,7 +28,7 @@ __all__ = ["build_parser", "main", "score_policy"]
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``scoring``."""
     parser = argparse.ArgumentParser(
-        prog=f"python -m {__package__}.scoring",
+        prog=program("scoring"),
         description="Write the reference scores that agents.scoring.score_policy scores against, from the "
         "benchmark.json of a run of python -m agents.benchmark (on the ids' own settings). Every statistic is "
         "checked against the per-episode returns on the way.",
@@ -56,9 +56,4 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    # Not one of agents.common.commands.SCRIPTS (no console script), so not exit_on_error: the same
-    # message shape, with the module's own name.
-    try:
-        main()
-    except (ReferenceDataError, OSError, ValueError) as error:
-        sys.exit(f"python -m {__package__}.scoring: error: {error}")
+    exit_on_error("scoring", main, (ReferenceDataError, OSError, ValueError))

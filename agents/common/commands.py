@@ -27,6 +27,7 @@ from typing import Any
 from tether_gym._optional import MissingExtraError
 
 __all__ = [
+    "MODULE_ONLY_COMMANDS",
     "PACKAGE",
     "SCRIPTS",
     "ars",
@@ -53,6 +54,10 @@ SCRIPTS: dict[str, str] = {
     "ars": "tether-gym-train-ars",
 }
 
+#: Command modules run only as ``python -m`` (no console script): ``scoring``, the maintainers'
+#: converter that writes the shipped reference scores.
+MODULE_ONLY_COMMANDS = ("scoring",)
+
 #: The agents package as it is imported now: ``agents`` in a checkout, ``tether_gym_agents`` installed
 #: (this module lives in its ``common`` sub-package).
 PACKAGE = (__package__ or "agents.common").rpartition(".")[0]
@@ -63,12 +68,14 @@ _running_script: str | None = None
 
 
 def program(command: str) -> str:
-    """How the user runs ``command`` (a key of :data:`SCRIPTS`): its console script's name when
-    that is what runs now, else ``python -m <package>.<command>``. It is the argparse ``prog``
-    (usage lines and error prefixes) and the head of the command lines a run records."""
-    if command not in SCRIPTS:
-        raise ValueError(f"unknown command {command!r}: expected one of {', '.join(SCRIPTS)}")
-    if _running_script == SCRIPTS[command]:
+    """How the user runs ``command`` (a key of :data:`SCRIPTS`, or one of
+    :data:`MODULE_ONLY_COMMANDS`): its console script's name when that is what runs now, else
+    ``python -m <package>.<command>``. It is the argparse ``prog`` (usage lines and error
+    prefixes) and the head of the command lines a run records."""
+    if command not in SCRIPTS and command not in MODULE_ONLY_COMMANDS:
+        known = ", ".join((*SCRIPTS, *MODULE_ONLY_COMMANDS))
+        raise ValueError(f"unknown command {command!r}: expected one of {known}")
+    if _running_script is not None and _running_script == SCRIPTS.get(command):
         return _running_script
     return f"python -m {PACKAGE}.{command}"
 
