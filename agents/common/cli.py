@@ -16,8 +16,10 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import difflib
+import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 from .commands import PACKAGE, description, program
@@ -31,6 +33,8 @@ __all__ = [
     "add_allow_other_id_argument",
     "add_env_argument",
     "build_parser",
+    "did_you_mean",
+    "float_between",
     "int_at_least",
     "parse_before_imports",
 ]
@@ -64,6 +68,28 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
         return value
 
     return parse
+
+
+def float_between(low: float, high: float) -> Callable[[str], float]:
+    """An argparse ``type`` for finite numbers in [``low``, ``high``]: NaN, infinities and values
+    outside are reported by argparse under the option's name."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a number; got {text!r}") from None
+        if not math.isfinite(value) or not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be a finite number in [{low:g}, {high:g}]; got {text}")
+        return value
+
+    return parse
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """``" (did you mean 'x'?)"`` for the known name closest to a misspelt ``name``, or ``""``."""
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def add_env_argument(parser: argparse.ArgumentParser) -> None:
@@ -164,7 +190,7 @@ def train_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--curriculum",
         nargs=2,
-        type=float,
+        type=float_between(0.0, 1.0),
         metavar=("START", "FRACTION"),
         help="raise the difficulty from START to 1 over the first FRACTION of the run",
     )
@@ -176,9 +202,10 @@ def train_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--eval-episodes",
-        type=int_at_least(1),
+        type=int_at_least(2),
         default=32,
-        help="evaluation episodes, the same seeds (1 000 000 up) at every evaluation (default 32)",
+        help="evaluation episodes, the same seeds (1 000 000 up) at every evaluation (default 32; at least 2, "
+        "for the interval of the paired difference)",
     )
     parser.add_argument(
         "--checkpoint-freq",
@@ -230,7 +257,10 @@ def train_rllib_parser() -> argparse.ArgumentParser:
         "--eval-freq", type=int_at_least(1), default=50_000, help="env steps between evaluations (default 50000)"
     )
     parser.add_argument(
-        "--eval-episodes", type=int_at_least(1), default=32, help="evaluation episodes (seeds 1 000 000 up; default 32)"
+        "--eval-episodes",
+        type=int_at_least(2),
+        default=32,
+        help="evaluation episodes (seeds 1 000 000 up; default 32; at least 2, for the paired difference's interval)",
     )
     parser.add_argument(
         "--checkpoint-freq",

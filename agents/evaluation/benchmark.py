@@ -87,8 +87,8 @@ import numpy as np
 from tether_gym.registration import ENV_IDS
 
 from ..common.checks import check_int
-from ..common.cli import HELD_OUT_SEED, REFERENCE
-from ..common.files import prepare_table_outputs
+from ..common.cli import HELD_OUT_SEED, REFERENCE, did_you_mean
+from ..common.files import holds_output_claims, prepare_table_outputs
 from ..common.versions import BENCHMARK_PACKAGES, package_versions
 from ..controllers.registry import BASELINES
 from ..policies import OtherIdError, make_controller, shipped_models
@@ -263,6 +263,7 @@ def _reason(error: Exception) -> str:
     return text if len(text) <= 160 else text[:157] + "..."
 
 
+@holds_output_claims
 def benchmark(config: BenchmarkConfig) -> dict[str, Any]:
     """Run the benchmark ``config`` describes and write its files to ``config.out``; returns
     everything written to ``benchmark.json`` as a dict (see the module docstring for the
@@ -280,6 +281,7 @@ def benchmark(config: BenchmarkConfig) -> dict[str, Any]:
         config.out, TABLE_FILES, PLOT_FILES, config.plots, config.force, what="an earlier benchmark"
     )
     shipped = {env_id: shipped_models(env_id) for env_id in ids}
+    _check_reference(config, shipped)
     requested = _requested_controllers(config, shipped)
     units, missing = _load_controllers(config, ids, requested, shipped)
     seeds = list(range(config.seed, config.seed + config.episodes))
@@ -310,6 +312,20 @@ def benchmark(config: BenchmarkConfig) -> dict[str, Any]:
     return results
 
 
+def _check_reference(config: BenchmarkConfig, shipped: dict[str, dict[str, Path]]) -> None:
+    """Refuse, before any rollout, a ``reference`` that names no controller of the selected ids (a
+    misspelt one would run nothing and leave every score "not available"), with the closest name."""
+    known = [*BASELINES, REFERENCE, *(m for models in shipped.values() for m in models)]
+    reference = config.reference
+    if reference in known or reference in (config.controllers or ()) or Path(reference).exists():
+        return
+    raise ValueError(
+        f"--reference {reference!r} is no controller of the selected ids{did_you_mean(reference, known)}: "
+        f"pass a baseline ({', '.join(BASELINES)}), {REFERENCE}, a model shipped for the selected ids, or an "
+        "existing policy directory"
+    )
+
+
 def _requested_controllers(config: BenchmarkConfig, shipped: dict[str, dict[str, Path]]) -> list[str] | None:
     """The controllers to run on every id, passive first when the config does not name it (None:
     each id's default set). ValueError for a name that is no controller of the selected ids."""
@@ -319,8 +335,9 @@ def _requested_controllers(config: BenchmarkConfig, shipped: dict[str, dict[str,
     known = {*BASELINES, REFERENCE, config.reference, *(m for models in shipped.values() for m in models)}
     unknown = [name for name in names if name not in known and not Path(name).exists()]
     if unknown:
+        hints = "".join(did_you_mean(name, known) for name in unknown)
         raise ValueError(
-            f"unknown controllers {unknown}: not a baseline ({', '.join(BASELINES)}), {REFERENCE}, the "
+            f"unknown controllers {unknown}{hints}: not a baseline ({', '.join(BASELINES)}), {REFERENCE}, the "
             f"reference {config.reference!r}, a model shipped for the selected ids, or an existing policy "
             "directory"
         )

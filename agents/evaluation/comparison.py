@@ -22,7 +22,7 @@ from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 from ..common.checks import check_int
 from ..common.cli import HELD_OUT_SEED
-from ..common.files import prepare_table_outputs
+from ..common.files import holds_output_claims, prepare_table_outputs
 from ..controllers.registry import BASELINES
 from ..policies import make_controller, shipped_models
 from .plots import plot_displacement, plot_energy
@@ -103,6 +103,7 @@ def _progress_printer(name: str) -> Any:
     return report
 
 
+@holds_output_claims
 def compare(config: CompareConfig) -> tuple[list[EpisodeRecord], list[dict[str, Any]]]:
     """Evaluate ``config.controllers`` on ``config.episodes`` episodes seeded ``seed, seed+1,
     ...``; write the table and plots to ``config.out``. Returns the episode records and the

@@ -21,7 +21,13 @@ from tether_gym._optional import needs_extra
 
 from ..common.checks import check_int
 from ..common.cli import REFERENCE_FILE
-from ..common.files import atomic_write_bytes, check_output_files, prepare_output_dir
+from ..common.files import (
+    atomic_directory,
+    atomic_write_bytes,
+    check_output_files,
+    holds_output_claims,
+    prepare_output_dir,
+)
 from .format import save_policy, sha256_hex, tensor_bytes, write_manifest
 from .layout import MANIFEST_FILE, POLICY_FILES, PolicyFormatError
 from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted, sb3_model_file
@@ -65,6 +71,7 @@ class ConvertConfig:
         object.__setattr__(self, "check_observations", check_int("check_observations", self.check_observations, 16))
 
 
+@holds_output_claims
 def convert(config: ConvertConfig) -> Path:
     """Convert the pickle-based SB3 model ``config.source`` to the safe format in
     ``config.destination`` (see :mod:`agents.convert`); returns the destination.
@@ -113,19 +120,20 @@ def convert(config: ConvertConfig) -> Path:
     observations = reference_observations(config.check_observations, model.observation_space, mean, var, rng, rollout)
     expected = sb3_actions(model, normalizer, observations)
 
-    names = _write_checked(
-        destination, model, normalizer, env_id, provenance, config.training_state, observations, expected
-    )
-    if config_file is not None:
-        if copy_config:
-            atomic_write_bytes(destination / "config.yml", config_file.read_bytes())
-        names.append("config.yml")
-    if config.reference:
-        _write_reference(destination, observations, expected, provenance)
-        names.append(REFERENCE_FILE)
-    for stale in set(outputs) - set(names) - {MANIFEST_FILE, "config.yml"}:
-        (destination / stale).unlink(missing_ok=True)  # from an earlier conversion (only reached with --force)
-    write_manifest(destination, names)
+    # The conversion lands as a whole: written into a new directory that then replaces DST, so an
+    # interrupt leaves an earlier conversion whole. Files of DST the conversion does not write (SRC's
+    # own, when DST is SRC's directory) are carried over; its own stale ones are dropped.
+    with atomic_directory(destination, ours=[*outputs, "config.yml"]) as staging:
+        names = _write_checked(
+            staging, model, normalizer, env_id, provenance, config.training_state, observations, expected
+        )
+        if config_file is not None:
+            atomic_write_bytes(staging / "config.yml", config_file.read_bytes())
+            names.append("config.yml")
+        if config.reference:
+            _write_reference(staging, observations, expected, provenance)
+            names.append(REFERENCE_FILE)
+        write_manifest(staging, names)
     print(
         f"converted {', '.join(str(f) for f in files)} -> {destination} "
         f"({len(observations)} observations checked: identical actions)"

@@ -49,12 +49,12 @@ from tether_gym._optional import needs_extra, require
 from ..common.checks import check_int
 from ..common.commands import command_line
 from ..common.data import HYPERPARAMS_DIR
-from ..common.files import atomic_write_text
+from ..common.files import atomic_directory, atomic_write_text, holds_output_claims
 from ..common.settings import load_settings
 from ..controllers.registry import BASELINES, make_baseline
 from ..controllers.residual import residual_actions
 from ..policies.format import save_policy
-from ..policies.layout import PolicyFormatError
+from ..policies.layout import POLICY_FILES, PolicyFormatError
 from ..policies.normalization import NormalizationStatistics
 from ..policies.spec import PolicySpec
 from .runs import clear_earlier_run, prepare_run_dir
@@ -237,9 +237,12 @@ def save_linear_policy(
     timesteps: int,
     provenance: dict[str, Any],
     extra_files: tuple[str, ...] = (),
+    whole_directory: bool = False,
 ) -> Path:
     """Write ``theta`` (A, O + 1) in the safe format, as the linear actor of an SB3
-    ``ActorCriticPolicy`` (``net_arch: {pi: [], vf: []}``) with ``algo: ars``."""
+    ``ActorCriticPolicy`` (``net_arch: {pi: [], vf: []}``) with ``algo: ars``. With
+    ``whole_directory`` (``best/``), the save replaces ``directory`` as a whole
+    (:func:`agents.common.files.atomic_directory`), so an interrupt never leaves it half-written."""
     import torch
     from stable_baselines3 import PPO
 
@@ -264,9 +267,17 @@ def save_linear_policy(
     model.num_timesteps = int(timesteps)
     venv.close()
     spec = PolicySpec(residual_on=residual_on)
-    return save_policy(directory, model, statistics, env_id, provenance, extra_files=extra_files, spec=spec, algo="ars")
+    if not whole_directory:
+        return save_policy(
+            directory, model, statistics, env_id, provenance, extra_files=extra_files, spec=spec, algo="ars"
+        )
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_directory(directory, ours=POLICY_FILES) as staging:
+        save_policy(staging, model, statistics, env_id, provenance, extra_files=extra_files, spec=spec, algo="ars")
+    return directory
 
 
+@holds_output_claims
 def train_ars(
     env_id: str,
     seed: int = 1,
@@ -352,13 +363,17 @@ def train_ars(
                 logger.record(f"eval/{key}", entry[key])
             if new_best:
                 best_iteration = iteration
-                save_linear_policy(run / "best", env_id, s.residual_on, statistics, theta, timesteps, provenance)
+                save_linear_policy(
+                    run / "best", env_id, s.residual_on, statistics, theta, timesteps, provenance, whole_directory=True
+                )
             bar_update(f"eval {entry['mean_return']:.2f}, {paired.mean:+.2f} vs {bar}")
         logger.dump(timesteps)
         bar_update(None)
     log.finish(timesteps, best_iteration=best_iteration)
     if best_iteration == 0:  # never above the baseline: best/ is the starting point, the baseline itself
-        save_linear_policy(run / "best", env_id, s.residual_on, statistics, np.zeros_like(theta), 0, provenance)
+        save_linear_policy(
+            run / "best", env_id, s.residual_on, statistics, np.zeros_like(theta), 0, provenance, whole_directory=True
+        )
     log.write(run / "best")
     final = (run, env_id, s.residual_on, statistics, theta, timesteps, provenance)
     save_linear_policy(*final, extra_files=("config.yml",))

@@ -11,7 +11,9 @@ from typing import Any
 
 from tether_gym._optional import needs_extra
 
+from ..common.files import atomic_directory
 from ..policies.format import save_policy
+from ..policies.layout import POLICY_FILES
 from ..policies.spec import PolicySpec
 
 with needs_extra("train", "training"):
@@ -110,15 +112,20 @@ class SafePolicySaver(BaseCallback):
         return True
 
     def _save(self, directory: Path) -> None:
-        save_policy(
-            directory,
-            self.model,
-            self.model.get_vec_normalize_env(),
-            self.env_id,
-            self.provenance,
-            training_state=self.training_state,
-            spec=self.spec,
-        )
+        # The whole save lands at once (a new directory renamed into place): an interrupt leaves the
+        # earlier best/ whole, verifying against its manifest, never half-replaced. The policy files
+        # of the earlier save are replaced; anything else there (best/evaluations.json) is carried over.
+        directory.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_directory(directory, ours=POLICY_FILES) as staging:
+            save_policy(
+                staging,
+                self.model,
+                self.model.get_vec_normalize_env(),
+                self.env_id,
+                self.provenance,
+                training_state=self.training_state,
+                spec=self.spec,
+            )
 
 
 class DifficultyCurriculum(BaseCallback):

@@ -56,7 +56,7 @@ class TrainConfig:
     """Env steps (over all envs, >= 1) between evaluations on the evaluation seeds."""
 
     eval_episodes: int = 32
-    """Episodes (>= 1) of each evaluation, one per evaluation seed."""
+    """Episodes (>= 2, for the paired difference's interval) of each evaluation, one per evaluation seed."""
 
     checkpoint_freq: int = 250_000
     """Env steps (over all envs, >= 1) between checkpoints in ``checkpoints/``."""
@@ -83,7 +83,8 @@ class TrainConfig:
         if self.env_id not in ENV_IDS:
             raise ValueError(f"unknown env id {self.env_id!r}; tether-gym ids are {list(ENV_IDS)}")
         # As Python ints: a numpy integer passes the check, and config.yml records these values.
-        minimums = {"seed": 0, "eval_freq": 1, "eval_episodes": 1, "checkpoint_freq": 1, "verbose": 0}
+        # Two evaluation episodes at least: each evaluation's paired difference has a t interval.
+        minimums = {"seed": 0, "eval_freq": 1, "eval_episodes": 2, "checkpoint_freq": 1, "verbose": 0}
         for name, minimum in minimums.items():
             object.__setattr__(self, name, check_int(name, getattr(self, name), minimum))
         for name in ("timesteps", "num_envs"):

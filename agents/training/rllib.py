@@ -37,7 +37,7 @@ from ..common.checks import check_int, is_count
 from ..common.cli import RLLIB_ALGO as ALGO  # the run directory's prefix and config.yml's algo
 from ..common.commands import program
 from ..common.data import HYPERPARAMS_DIR
-from ..common.files import atomic_write_text
+from ..common.files import atomic_write_text, holds_output_claims
 from ..policies.layout import PolicyFormatError
 from ..policies.pickled import PickleNotTrustedError
 from ..policies.spec import PolicySpec
@@ -617,7 +617,7 @@ class RLlibConfig:
             ("seed", 0),
             ("num_env_runners", 0),
             ("eval_freq", 1),
-            ("eval_episodes", 1),
+            ("eval_episodes", 2),  # each evaluation's paired difference has a t interval
             ("checkpoint_freq", 1),
             ("num_cpus", 1),
             ("timesteps", 1),
@@ -632,6 +632,7 @@ class RLlibConfig:
             )
 
 
+@holds_output_claims
 def train_rllib(config: RLlibConfig) -> Path:
     """Train PPO with RLlib as ``config`` says and return the run directory (see the command's
     docstring, :mod:`agents.train_rllib`, for what the directory holds).

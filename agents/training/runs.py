@@ -4,13 +4,19 @@ when it is replaced, and what ``--resume`` names checked against the run to be t
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
-from ..common.files import OutputError, OutputExistsError, check_no_symlinks_inside, prepare_output_dir
+from ..common.files import (
+    OutputError,
+    OutputExistsError,
+    check_no_symlinks_inside,
+    prepare_output_dir,
+    remove_written_files,
+)
 from ..policies.format import check_resumable, is_policy_dir, read_metadata
 from ..policies.layout import METADATA_FILE, POLICY_FILES
 from ..policies.pickled import is_pickle_model, normalization_file_of, refuse_untrusted, sb3_model_file
+from ..policies.spec import PolicySpec
 from .selection import EVALUATIONS_FILE
 
 __all__ = [
@@ -38,12 +44,15 @@ def earlier_run_files(run: Path) -> list[str]:
 
 def prepare_run_dir(out: str | Path, env_id: str, algo: str, seed: int, force: bool) -> Path:
     """The run directory ``out/env_id/algo_seed<seed>`` (``algo`` may carry a suffix, e.g.
-    ``ppo_multiagent``), checked before any work: usable, no symlinks in it, and no earlier run
-    unless ``force``."""
+    ``ppo_multiagent``), checked before any work: usable, no symlink on the way from ``out`` to
+    it nor inside it, claimed by this command (a second command on it is refused while this one
+    runs: :func:`agents.common.files.claim_output_dir`), and no earlier run unless ``force``.
+    The claim comes before the check for an earlier run, so two runs started together cannot
+    both find the directory empty."""
     out = Path(out)
     if out.is_symlink():
         raise OutputError(f"--out {out} is a symlink; refusing to write through it: pass the real directory")
-    run = prepare_output_dir(out / env_id / f"{algo}_seed{seed}", argument="--out")
+    run = prepare_output_dir(out / env_id / f"{algo}_seed{seed}", argument="--out", root=out)
     check_no_symlinks_inside(run)
     earlier = earlier_run_files(run)
     if earlier and not force:
@@ -57,15 +66,16 @@ def prepare_run_dir(out: str | Path, env_id: str, algo: str, seed: int, force: b
 
 def clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
     """Delete what an earlier run wrote (models, best/, checkpoints/), except the paths in
-    ``keep`` (the checkpoint being resumed). TensorBoard logs stay: SB3 numbers each run's
-    subdirectory, so they do not mix."""
+    ``keep`` (the checkpoint being resumed), by the file names the trainers write: any other
+    file there is kept (and its directory with it). TensorBoard logs stay: SB3 numbers each
+    run's subdirectory, so they do not mix."""
     keep = {path.resolve() for path in keep}
 
     def remove(path: Path) -> None:
         if path.resolve() in keep or not (path.exists() or path.is_symlink()):
             return
         if path.is_dir() and not path.is_symlink():
-            shutil.rmtree(path)
+            remove_written_files(path, (*POLICY_FILES, "config.yml", EVALUATIONS_FILE))
         else:
             path.unlink()
 
@@ -74,8 +84,7 @@ def clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
             remove(run / name)
     best = run / "best"
     if best.is_dir() and best.resolve() not in keep:
-        for name in (*POLICY_FILES, EVALUATIONS_FILE, *LEGACY_BEST_FILES):
-            remove(best / name)
+        remove_written_files(best, (*POLICY_FILES, EVALUATIONS_FILE, *LEGACY_BEST_FILES))
     checkpoints = run / "checkpoints"
     if checkpoints.is_dir():
         for entry in checkpoints.iterdir():
@@ -86,10 +95,19 @@ def clear_earlier_run(run: Path, algo: str, keep: set[Path]) -> None:
                 remove(entry)
 
 
-def resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: str) -> tuple[str, Path, set[Path]]:
+def resume_source(
+    resume: str | Path,
+    trust_pickle: bool,
+    algo: str,
+    env_id: str,
+    spec: PolicySpec | None = None,
+    normalize: bool | None = None,
+) -> tuple[str, Path, set[Path]]:
     """What ``--resume`` names: ``("safe", policy directory, paths)`` or ``("pickle", model .zip,
     paths)``, checked before any work: PickleNotTrustedError for a pickle without the opt-in,
-    PolicyFormatError for a safe checkpoint of another algorithm or env, or without training state."""
+    PolicyFormatError for a safe checkpoint of another algorithm or env, without training state,
+    or recorded with other settings than the run's (``spec``: ``residual_on`` and ``multiagent``;
+    ``normalize``: whether observations are normalised), when those are given."""
     path = Path(resume)
     if not path.exists():
         raise FileNotFoundError(
@@ -97,7 +115,7 @@ def resume_source(resume: str | Path, trust_pickle: bool, algo: str, env_id: str
             f"(<run>/checkpoints/<algo>_<steps>_steps), <run>/best or a run directory"
         )
     if is_policy_dir(path):
-        check_resumable(read_metadata(path), algo, f"--resume {path}", env_id)
+        check_resumable(read_metadata(path), algo, f"--resume {path}", env_id, spec=spec, normalize=normalize)
         return "safe", path, {path}
     if is_pickle_model(path):
         if not trust_pickle:

@@ -27,7 +27,7 @@ import tether_gym
 from tether_gym._optional import needs_extra, require
 from tether_gym.sb3 import make_sb3_vec_env
 
-from ..common.files import atomic_write_text
+from ..common.files import atomic_write_text, holds_output_claims
 from ..policies.codecs import CLASS_KWARGS
 from ..policies.format import ALGORITHMS, load_training_state, save_policy
 from ..policies.pickled import load_pickled_model
@@ -65,6 +65,7 @@ __all__ = [
 ]
 
 
+@holds_output_claims
 def train(config: TrainConfig) -> Path:
     """Train ``config.algo`` on ``config.env_id`` and return the run directory (see the module
     docstring for the steps, :mod:`agents.train` for what the directory holds).
@@ -75,12 +76,19 @@ def train(config: TrainConfig) -> Path:
     require_extras(config.progress_bar)
     hyperparams = resolve_hyperparameters(config)
     n_envs = int(hyperparams.get("n_envs", 1))
+    spec = policy_spec(hyperparams)
     resume_kind, resume_path, keep = (
-        resume_source(config.resume, config.trust_pickle, config.algo, config.env_id)
+        resume_source(
+            config.resume,
+            config.trust_pickle,
+            config.algo,
+            config.env_id,
+            spec=spec,
+            normalize=bool(hyperparams.get("normalize", False)),
+        )
         if config.resume is not None
         else (None, None, set())
     )
-    spec = policy_spec(hyperparams)
     name = model_name({"algo": config.algo, "multiagent": spec.multiagent})  # ppo or ppo_multiagent
     run = prepare_run_dir(config.out, config.env_id, name, config.seed, config.force)
     record = _run_record(config, hyperparams, resume_path)
@@ -426,7 +434,9 @@ def _build_model(
         start_at_the_baseline(model)
     if resume_kind == "safe":
         assert resume_path is not None
-        load_training_state(model, resume_path, venv if isinstance(venv, VecNormalize) else None)
+        load_training_state(
+            model, resume_path, venv if isinstance(venv, VecNormalize) else None, spec=policy_spec(hyperparams)
+        )
     return model
 
 

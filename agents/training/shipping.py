@@ -28,10 +28,22 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
+from ..common.cli import REFERENCE_FILE
 from ..common.commands import program
-from ..common.files import OutputError, atomic_write_bytes, atomic_write_text, prepare_output_dir
+from ..common.files import (
+    OutputError,
+    atomic_directory,
+    atomic_write_bytes,
+    atomic_write_text,
+    check_no_symlinks_between,
+    check_output_files,
+    holds_output_claims,
+    make_dirs_below,
+    prepare_output_dir,
+)
+from ..policies.codecs import parse_json
 from ..policies.format import POLICY_HOSTS, is_policy_dir, read_metadata, write_manifest
-from ..policies.layout import METADATA_FILE, NORMALIZATION_FILE, WEIGHTS_FILE, PolicyFormatError
+from ..policies.layout import MANIFEST_FILE, METADATA_FILE, NORMALIZATION_FILE, WEIGHTS_FILE, PolicyFormatError
 from .selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
 
 with needs_extra("train", "shipping models"):
@@ -41,14 +53,24 @@ __all__ = [
     "MULTIAGENT_SUFFIX",
     "RUNS_TABLE",
     "SHIPPED_FILES",
+    "RunFileError",
     "evaluate_candidates",
     "model_name",
+    "read_runs_table",
     "reproduce_command",
     "ship",
 ]
 
 SHIPPED_FILES = (METADATA_FILE, WEIGHTS_FILE, NORMALIZATION_FILE)
 RUNS_TABLE = "training_runs"
+#: Every file ship writes into a shipped model's directory: the only ones it ever replaces there.
+INSTALLED_FILES = (*SHIPPED_FILES, "config.yml", EVALUATIONS_FILE, REFERENCE_FILE, MANIFEST_FILE)
+
+
+class RunFileError(ValueError):
+    """A file ship reads (a run's ``config.yml`` or ``best/evaluations.json``, or the runs table
+    ``training_runs.json`` it merges into) that does not hold what ship needs; the message names
+    the file, the key and the fix. Raised before any rollout."""
 
 
 #: What a shared decentralised policy's model name adds to its algorithm's (``ppo_multiagent``),
@@ -69,18 +91,138 @@ def _policy_dir(run: Path) -> Path:
     raise FileNotFoundError(f"{run} holds no policy (neither {run}/best/{METADATA_FILE} nor {run}/{METADATA_FILE})")
 
 
+def _number_or_none(value: Any) -> bool:
+    return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value))
+
+
+def _require(condition: bool, path: Path, key: str, expected: str, value: Any) -> None:
+    if not condition:
+        raise RunFileError(
+            f"{path}: {key} must be {expected}; got {value!r}: restore the file from its run, or leave that run out"
+        )
+
+
+def _check_first_beat(path: Path, key: str, first_beat: Any) -> None:
+    _require(first_beat is None or isinstance(first_beat, dict), path, key, "an object or null", first_beat)
+    for name, found in (first_beat or {}).items():
+        where = f"{key}.{name}"
+        if found is None:
+            continue
+        _require(isinstance(found, dict), path, where, "an object or null", found)
+        for field in ("wall_time_s", "timesteps"):
+            value = found.get(field)
+            _require(value is not None and _number_or_none(value), path, f"{where}.{field}", "a finite number", value)
+
+
 def _training_log(run: Path, policy_dir: Path) -> dict[str, Any] | None:
+    """The run's evaluation log (``evaluations.json``), checked for the keys ship reads."""
     for path in (policy_dir / EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE):
         if path.is_file():
-            return json.loads(path.read_text(encoding="utf-8"))
+            try:
+                log = parse_json(path.read_bytes(), path)
+            except PolicyFormatError as error:
+                raise RunFileError(str(error)) from error
+            _require(isinstance(log, dict), path, "the file", "a JSON object", type(log).__name__)
+            training = log.get("training")
+            _require(training is None or isinstance(training, dict), path, "training", "an object or null", training)
+            wall = (training or {}).get("wall_time_s")
+            _require(_number_or_none(wall), path, "training.wall_time_s", "a finite number or null", wall)
+            _check_first_beat(path, "first_beat", log.get("first_beat"))
+            return log
     return None
 
 
 def _config(run: Path, policy_dir: Path) -> dict[str, Any]:
+    """The run's ``config.yml`` (safe YAML), checked for the keys ship reads (``seed``, ``command``)."""
     for path in (policy_dir / "config.yml", run / "config.yml"):
         if path.is_file():
-            return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+            try:
+                config = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+            except (yaml.YAMLError, UnicodeDecodeError, RecursionError) as error:
+                raise RunFileError(f"{path} is not valid YAML ({error}): restore it from its run") from error
+            _require(isinstance(config, dict), path, "the file", "a mapping", type(config).__name__)
+            seed = config.get("seed")
+            _require(
+                seed is None or (isinstance(seed, int) and not isinstance(seed, bool)), path, "seed", "an integer", seed
+            )
+            command = config.get("command")
+            _require(command is None or isinstance(command, str), path, "command", "a string", command)
+            if isinstance(command, str):
+                try:
+                    shlex.split(command)
+                except ValueError as error:
+                    raise RunFileError(f"{path}: command is not a shell command line ({error}): {command!r}") from None
+            return config
     return {}
+
+
+#: The keys of a runs-table entry, and what each must be ("number": finite; "text": a string).
+_ENTRY_KEYS = {
+    "env_id": "text",
+    "algo": "text",
+    "timesteps": "number",
+    "mean_return": "number",
+    "bar": "text",
+    "bar_mean_return": "number",
+    "difference": "number",
+    "difference_low": "number",
+    "difference_high": "number",
+}
+
+
+def read_runs_table(out: Path) -> list[dict[str, Any]]:
+    """The entries of ``out/training_runs.json`` (none when it is absent), checked for everything
+    the merged table is written from: a malformed file is refused (:class:`RunFileError`, naming
+    the file, the entry and the key) before any rollout, not after them."""
+    table = out / f"{RUNS_TABLE}.json"
+    if not table.is_file():
+        return []
+    try:
+        data = parse_json(table.read_bytes(), table)
+    except PolicyFormatError as error:
+        raise RunFileError(f"{error} (or move it away: ship then starts a new table)") from error
+    _require(isinstance(data, dict) and isinstance(data.get("runs"), list), table, "runs", "a list", data)
+    entries = data["runs"]
+    for index, entry in enumerate(entries):
+        where = f"runs[{index}]"
+        _require(isinstance(entry, dict), table, where, "an object", entry)
+        for key, kind in _ENTRY_KEYS.items():
+            value = entry.get(key)
+            good = isinstance(value, str) if kind == "text" else value is not None and _number_or_none(value)
+            _require(good, table, f"{where}.{key}", "a string" if kind == "text" else "a finite number", value)
+        _require(
+            _number_or_none(entry.get("wall_time_s")),
+            table,
+            f"{where}.wall_time_s",
+            "a number or null",
+            entry.get("wall_time_s"),
+        )
+        seeds = entry.get("seeds")
+        _require(
+            isinstance(seeds, list) and len(seeds) == 2 and all(isinstance(v, int) for v in seeds),
+            table,
+            f"{where}.seeds",
+            "a list of two integers",
+            seeds,
+        )
+        _require(
+            isinstance(entry.get("shipped"), bool), table, f"{where}.shipped", "true or false", entry.get("shipped")
+        )
+        for key in ("residual_on", "command", "reproduce"):
+            value = entry.get(key)
+            _require(value is None or isinstance(value, str), table, f"{where}.{key}", "a string or null", value)
+        _check_first_beat(table, f"{where}.first_beat", entry.get("first_beat"))
+    return entries
+
+
+def _check_run(run: Path) -> tuple[Path, dict[str, Any], dict[str, Any], dict[str, Any] | None]:
+    """What ship reads of ``run``, checked before any rollout: its policy directory and metadata
+    (with an env id), its ``config.yml`` and its evaluation log."""
+    policy_dir = _policy_dir(run)
+    metadata = read_metadata(policy_dir)
+    if metadata["env_id"] is None:
+        raise PolicyFormatError(f"{policy_dir}/{METADATA_FILE} names no env id: it cannot be shipped for one")
+    return policy_dir, metadata, _config(run, policy_dir), _training_log(run, policy_dir)
 
 
 def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[dict[str, Any]]:
@@ -96,16 +238,13 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
     candidates = []
     weights_seen: set[str] = set()
     for run in map(Path, runs):
-        policy_dir = _policy_dir(run)
+        policy_dir, metadata, config, log = _check_run(run)
         # A shipped model passed beside the run it came from is one candidate, not two.
         weights = hashlib.sha256((policy_dir / WEIGHTS_FILE).read_bytes()).hexdigest()
         if weights in weights_seen:
             continue
         weights_seen.add(weights)
-        metadata = read_metadata(policy_dir)
         env_id = metadata["env_id"]
-        if env_id is None:
-            raise PolicyFormatError(f"{policy_dir}/{METADATA_FILE} names no env id: it cannot be shipped for one")
         if env_id not in baselines:
             baselines[env_id] = baseline_returns(env_id, seeds)
         by_name, bar = baselines[env_id]
@@ -115,7 +254,6 @@ def evaluate_candidates(runs: Sequence[str | Path], episodes: int = 64) -> list[
         env.close()
         returns = episode_returns(policy, env_id, seeds)
         paired = paired_difference(returns, by_name[bar])
-        config, log = _config(run, policy_dir), _training_log(run, policy_dir)
         training = (log or {}).get("training") or {}
         candidates.append(
             {
@@ -253,27 +391,44 @@ def reproduce_command(candidate: Mapping[str, Any], shipped_at: str) -> str:
     return shlex.join([*kept, "--hyperparams", str(Path(shipped_at) / env_id / algo / "config.yml")])
 
 
+@holds_output_claims
 def ship(
     runs: Sequence[str | Path], out: str | Path, episodes: int = 64, force: bool = False, command: str | None = None
 ) -> list[dict[str, Any]]:
     """Evaluate ``runs``, ship the best per id and algorithm into ``out`` (see the module
     docstring) and return every candidate's record (with ``shipped``).
 
-    An existing shipped model is replaced only with ``force``; to keep it in the running, pass
-    its directory among ``runs`` (every candidate is evaluated before anything is replaced)."""
+    Before any rollout it checks every output and every file it reads: ``out`` (usable, claimed
+    against a second command), the runs table it merges into (:func:`read_runs_table`), each
+    run's files, and each target directory ``out/<id>/<algo>`` (no symlink on the way, nothing
+    there that ship does not write, and no shipped model unless ``force``). An existing shipped
+    model is replaced only with ``force``; to keep it in the running, pass its directory among
+    ``runs``. A model is installed as a whole (a new directory renamed into place)."""
     shipped_at = str(out)
+    root = Path(out)
     out = prepare_output_dir(out, argument="--out")
+    check_output_files(out, (f"{RUNS_TABLE}.json", f"{RUNS_TABLE}.md"), force=True, argument="--out")
+    read_runs_table(out)
+    keys: dict[tuple[str, str], list[Path]] = {}
+    for run in map(Path, runs):
+        policy_dir, metadata, _, _ = _check_run(run)
+        keys.setdefault((metadata["env_id"], model_name(metadata)), []).append(policy_dir.resolve())
+    for (env_id, algo), sources in keys.items():
+        _check_target(root, out / env_id / algo, force, sources)
     candidates = evaluate_candidates(runs, episodes)
     chosen = _best_per_id_and_algo(candidates)
     for (env_id, algo), candidate in chosen.items():
         target = out / env_id / algo
         if (target / METADATA_FILE).exists() and not force and Path(candidate["policy"]).resolve() != target.resolve():
-            raise OutputError(f"{target} already holds a shipped model: pass --force to replace it")
+            raise OutputError(
+                f"{target} already holds a shipped model, which {candidate['policy']} beat: pass --force to replace it"
+            )
     for candidate in candidates:
         candidate["shipped"] = chosen[(candidate["env_id"], candidate["algo"])] is candidate
         if candidate["shipped"]:
             candidate["reproduce"] = reproduce_command(candidate, shipped_at)
     for (env_id, algo), candidate in chosen.items():
+        make_dirs_below(root, out / env_id)
         _install(candidate, out / env_id / algo, env_id)
     _write_runs_table(out, candidates, command)
     for candidate in candidates:
@@ -283,6 +438,29 @@ def ship(
             f"{candidate['difference_high']:+.2f}]){'  <- shipped' if candidate['shipped'] else ''}"
         )
     return candidates
+
+
+def _check_target(root: Path, target: Path, force: bool, sources: Sequence[Path]) -> None:
+    """Refuse, before any rollout, a target directory ship must not write: one reached through a
+    symlink below ``--out``, a file, one holding files ship does not write (never deleted, with
+    ``force`` too), or a shipped model without ``force`` when no candidate of ``sources`` is it."""
+    check_no_symlinks_between(root, target)
+    if target.exists() and not target.is_dir():
+        raise OutputError(f"{target} is a file where a shipped model's directory goes: move it away")
+    if not target.is_dir():
+        return
+    foreign = sorted(p.name for p in target.iterdir() if p.name not in INSTALLED_FILES or not p.is_file())
+    if foreign:
+        raise OutputError(
+            f"{target} holds {', '.join(foreign)}, which ship does not write: move "
+            f"{'them' if len(foreign) > 1 else 'it'} away (ship never deletes files it did not write, "
+            "with --force too)"
+        )
+    if (target / METADATA_FILE).exists() and not force and target.resolve() not in sources:
+        raise OutputError(
+            f"{target} already holds a shipped model: pass --force to replace it, or pass {target} among the runs "
+            "to keep it in the running"
+        )
 
 
 def _best_per_id_and_algo(candidates: Sequence[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
@@ -297,38 +475,31 @@ def _best_per_id_and_algo(candidates: Sequence[dict[str, Any]]) -> dict[tuple[st
 
 def _install(candidate: Mapping[str, Any], target: Path, env_id: str) -> None:
     """Copy ``candidate``'s policy, its run's ``config.yml`` and evaluations, reference actions of
-    ``env_id`` and a checksum manifest into ``target``. Staged beside it and renamed at the end, so a
-    failure leaves the earlier shipped model in place; nothing happens when the candidate is ``target``."""
+    ``env_id`` and a checksum manifest into ``target``, as a whole: the files are written into a
+    new directory beside it, which then replaces it (:func:`agents.common.files.atomic_directory`),
+    so a failure or interrupt leaves the earlier shipped model whole. Nothing happens when the
+    candidate is ``target``."""
     source = Path(candidate["policy"])
     if source.resolve() == target.resolve():
         return
-    staging = target.parent / f".{target.name}.staging"
-    shutil.rmtree(staging, ignore_errors=True)
-    staging.mkdir(parents=True)
-    for name in SHIPPED_FILES:
-        if (source / name).is_file():
-            shutil.copy2(source / name, staging / name)
     run = Path(candidate["run"])
-    for name, origin in (("config.yml", run / "config.yml"), (EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE)):
-        if origin.is_file():
-            shutil.copy2(origin, staging / name)
-    try:
+    with atomic_directory(target, ours=INSTALLED_FILES, others="refuse") as staging:
+        for name in SHIPPED_FILES:
+            if (source / name).is_file():
+                shutil.copy2(source / name, staging / name)
+        for name, origin in (("config.yml", run / "config.yml"), (EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE)):
+            if origin.is_file():
+                shutil.copy2(origin, staging / name)
         write_manifest(staging, [p.name for p in staging.iterdir()])  # loading inside agents/models needs it
         _write_reference_actions(staging, env_id)
         write_manifest(staging, [p.name for p in staging.iterdir()])
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    if target.exists():
-        shutil.rmtree(target)
-    staging.rename(target)
 
 
 def _write_runs_table(out: Path, candidates: Sequence[dict[str, Any]], command: str | None) -> None:
     """Merge ``candidates`` into the runs table in ``out`` (JSON and Markdown): they replace the
     earlier entries of every (env id, algorithm) they cover."""
     table = out / f"{RUNS_TABLE}.json"
-    earlier = json.loads(table.read_text(encoding="utf-8"))["runs"] if table.is_file() else []
+    earlier = read_runs_table(out)
     replaced = {(c["env_id"], c["algo"]) for c in candidates}
     entries = [e for e in earlier if (e["env_id"], e["algo"]) not in replaced] + list(candidates)
     atomic_write_text(table, json.dumps({"command": command, "runs": entries}, indent=1) + "\n")

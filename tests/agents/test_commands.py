@@ -50,7 +50,7 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
             r"seeds must be non-negative integers; got \[1\.5\]",
         ),
         (lambda: train(TrainConfig("ppo", ENV, seed=-1, out=out)), "seed must be an integer >= 0"),
-        (lambda: train(TrainConfig("ppo", ENV, eval_episodes=0, out=out)), "eval_episodes must be an integer >= 1"),
+        (lambda: train(TrainConfig("ppo", ENV, eval_episodes=1, out=out)), "eval_episodes must be an integer >= 2"),
         (lambda: train(TrainConfig("ppo", ENV, timesteps=0, out=out)), "timesteps must be an integer >= 1"),
         (lambda: train(TrainConfig("a2c", ENV, out=out)), "unknown algorithm 'a2c'"),
         (lambda: train(TrainConfig("ppo", "Nope-v0", out=out)), "unknown env id 'Nope-v0'"),

@@ -1,13 +1,31 @@
-"""Careful output files: an atomic write keeps the old file when writing fails."""
+"""Careful output files: an atomic write keeps the old file when writing fails; a command's
+claim on its output refuses a second command; no write goes through a symlink below the output
+root; a multi-file save replaces its directory as a whole; and a command deletes only its own files."""
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from agents.common.files import atomic_write_text
+from agents.common.files import (
+    OutputBusyError,
+    OutputError,
+    atomic_directory,
+    atomic_write_text,
+    check_no_symlinks_between,
+    claim_output_dir,
+    holding_output_claims,
+    holds_output_claims,
+    make_dirs_below,
+    prepare_output_dir,
+    remove_written_files,
+)
+from agents.policies.format import verify_manifest, write_manifest
 
 
 def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path: Path) -> None:
@@ -23,3 +41,181 @@ def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path: Path) -> N
     umask = os.umask(0)
     os.umask(umask)
     assert target.stat().st_mode & 0o777 == 0o666 & ~umask  # the mode a plain open() would give
+
+
+# ---------------------------------------------------------------------------------------------
+# A command's exclusive claim on its output directory
+# ---------------------------------------------------------------------------------------------
+
+#: A second process that claims ``argv[1]`` as a command does, says so, and holds it until stdin closes.
+HOLDER = """
+import sys
+from agents.common.files import claim_output_dir
+claim_output_dir(sys.argv[1])
+print("claimed", flush=True)
+sys.stdin.read()
+"""
+
+
+def _holder(directory: Path) -> subprocess.Popen[str]:
+    process = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(directory)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).resolve().parents[3],
+    )
+    assert process.stdout is not None and process.stdout.readline().strip() == "claimed"
+    return process
+
+
+def _end(process: subprocess.Popen[str]) -> None:
+    assert process.stdin is not None
+    process.stdin.close()
+    assert process.wait(timeout=60) == 0
+
+
+def test_a_directory_another_process_claims_is_refused_until_it_ends(tmp_path: Path) -> None:
+    holder = _holder(tmp_path)
+    try:
+        with pytest.raises(OutputBusyError, match=r"--out .* in use by another running command"):
+            prepare_output_dir(tmp_path)
+        with pytest.raises(OutputBusyError, match="DST"):
+            claim_output_dir(tmp_path, argument="DST")
+    finally:
+        _end(holder)
+    with holding_output_claims():
+        prepare_output_dir(tmp_path)
+        prepare_output_dir(tmp_path)  # this process's own claim again: no conflict
+        # While this process holds it, another process is refused in turn.
+        refused = subprocess.run(
+            [sys.executable, "-c", HOLDER, str(tmp_path)], capture_output=True, text=True, input="", timeout=60
+        )
+        assert refused.returncode != 0 and "OutputBusyError" in refused.stderr
+    _end(_holder(tmp_path))  # the scope released it: another process claims it at once
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # the lock leaves no file behind
+
+
+def test_a_decorated_command_releases_its_claims_on_error(tmp_path: Path) -> None:
+    @holds_output_claims
+    def command() -> None:
+        prepare_output_dir(tmp_path)
+        raise RuntimeError("failed midway")
+
+    with pytest.raises(RuntimeError):
+        command()
+    _end(_holder(tmp_path))
+
+
+# ---------------------------------------------------------------------------------------------
+# Symlinks at every level below the output root
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("depth", [0, 1, 2])
+def test_a_symlink_at_any_level_below_the_root_is_refused(tmp_path: Path, depth: int) -> None:
+    root, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    parts = ["TetherChain-v0", "ppo_seed0", "best"]
+    if depth == 0:
+        root.symlink_to(elsewhere)
+    else:
+        (root / Path(*parts[: depth - 1])).mkdir(parents=True)
+        (root / Path(*parts[:depth])).symlink_to(elsewhere)
+    target = root / Path(*parts)
+    with pytest.raises(OutputError, match=r"is a symlink .*refusing to write through it"):
+        prepare_output_dir(target, root=root, claim=False)
+    with pytest.raises(OutputError, match="symlink"):
+        make_dirs_below(root, target)
+    assert list(elsewhere.iterdir()) == []  # nothing was written through the link
+
+
+def test_output_directories_are_made_below_the_root(tmp_path: Path) -> None:
+    target = tmp_path / "out" / "a" / "b"
+    assert prepare_output_dir(target, root=tmp_path / "out", claim=False) == target and target.is_dir()
+    with pytest.raises(ValueError, match="not below"):
+        check_no_symlinks_between(tmp_path / "out", tmp_path / "other")
+
+
+# ---------------------------------------------------------------------------------------------
+# Multi-file saves replace a directory as a whole
+# ---------------------------------------------------------------------------------------------
+
+
+def _save(directory: Path, version: str, fail_after: int | None = None) -> None:
+    """A multi-file save with a manifest written last, as the policy saves are."""
+    names = ["policy.json", "policy.safetensors", "normalization.json"]
+    for index, name in enumerate(names):
+        if fail_after is not None and index == fail_after:
+            raise KeyboardInterrupt  # an interrupt midway through the save
+        (directory / name).write_text(f"{name} {version}")
+    write_manifest(directory, names)
+
+
+@pytest.mark.parametrize("fail_after", [0, 1, 2])
+def test_an_interrupted_directory_save_leaves_the_old_one_verifying(tmp_path: Path, fail_after: int) -> None:
+    best = tmp_path / "best"
+    with atomic_directory(best) as staging:
+        _save(staging, "old")
+    verify_manifest(best)
+    with pytest.raises(KeyboardInterrupt), atomic_directory(best) as staging:
+        _save(staging, "new", fail_after=fail_after)
+    verify_manifest(best)
+    assert (best / "policy.json").read_text() == "policy.json old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["best"]  # no staging directory left behind
+
+
+def test_an_interrupt_between_the_renames_puts_the_old_directory_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    best = tmp_path / "best"
+    with atomic_directory(best) as staging:
+        _save(staging, "old")
+    real_replace, calls = os.replace, []
+
+    def replace(source: Any, destination: Any) -> None:
+        calls.append(destination)
+        if len(calls) == 2:  # the new directory's rename into place
+            raise KeyboardInterrupt
+        real_replace(source, destination)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt), atomic_directory(best) as staging:
+        _save(staging, "new")
+    monkeypatch.undo()
+    verify_manifest(best)
+    assert (best / "policy.json").read_text() == "policy.json old" and len(calls) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["best"]
+
+
+def test_a_directory_save_replaces_its_own_files_and_keeps_the_others(tmp_path: Path) -> None:
+    best = tmp_path / "best"
+    best.mkdir()
+    (best / "evaluations.json").write_text("{}")  # not the save's: carried over
+    (best / "training.json").write_text("stale")  # the save's own, not written this time: dropped
+    ours = ("policy.json", "policy.safetensors", "normalization.json", "MANIFEST.sha256", "training.json")
+    with atomic_directory(best, ours=ours) as staging:
+        _save(staging, "new")
+    assert sorted(p.name for p in best.iterdir()) == [
+        "MANIFEST.sha256",
+        "evaluations.json",
+        "normalization.json",
+        "policy.json",
+        "policy.safetensors",
+    ]
+    assert (best / "evaluations.json").read_text() == "{}"
+    # Where the manifest must list every file, a file the command does not write is refused before any work.
+    (best / "notes.txt").write_text("mine")
+    with pytest.raises(OutputError, match=r"notes\.txt, which this command does not write"):
+        with atomic_directory(best, ours=ours, others="refuse"):
+            pytest.fail("the writer ran before the refusal")
+    assert (best / "notes.txt").read_text() == "mine"
+
+
+def test_removing_a_commands_files_keeps_everything_else(tmp_path: Path) -> None:
+    (tmp_path / "policy.json").write_text("{}")
+    (tmp_path / "notes.txt").write_text("mine")
+    assert remove_written_files(tmp_path, ["policy.json", "MANIFEST.sha256"]) == ["notes.txt"]
+    assert (tmp_path / "notes.txt").read_text() == "mine" and not (tmp_path / "policy.json").exists()
+    (tmp_path / "notes.txt").unlink()
+    assert remove_written_files(tmp_path, ["policy.json"]) == [] and not tmp_path.exists()
