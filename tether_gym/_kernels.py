@@ -103,7 +103,8 @@ DISSIPATED = 8  # J, damping and broken cables since the reset
 INITIAL_ENERGY = 9  # J, at the reset
 STEP_MIN = 10  # s, the smallest sub-step of the last advance (inf if it took none)
 STEP_MAX = 11  # s, the largest sub-step of the last advance (0 if it took none)
-CLUSTER_COLUMNS = 12
+ENERGY_SCALE = 12  # J, the largest energy scale of the books since the reset (see _energy_runaway)
+CLUSTER_COLUMNS = 13
 
 # The counter table, (B, COUNTER_COLUMNS) int64: one row per cluster.
 STATUS = 0  # a STATUS_* code; a cluster that is not STATUS_OK is frozen until reset
@@ -126,6 +127,7 @@ LAYOUT = (
     (STIFFNESS, REST_LENGTH, PRETENSION, INV_SPLIT_MASS_SUM, BREAKING_LOAD, AXIAL_DAMPING, TENSION, INTACT),
     (PEAK_TENSION, CABLE_COLUMNS),
     (FRAME_RATE, FRAME_TIDAL, TIME, LAST_STEP, OMEGA2, WORK, DISSIPATED, INITIAL_ENERGY, STEP_MIN, STEP_MAX),
+    (ENERGY_SCALE,),
     (CLUSTER_COLUMNS, STATUS, SUBSTEPS, COUNTER_COLUMNS),
     (SAFETY_FACTOR, MAX_STEP, MAX_SUBSTEPS, LINEARISED, SETTINGS),
 )
@@ -133,10 +135,30 @@ LAYOUT = (
 #: key their cache on it (numba keys a cache only on the file of the kernel itself).
 SOURCE_SHA256 = hashlib.sha256((Path(__file__).resolve().parent / "_kernels.py").read_bytes()).hexdigest()
 
-# Status codes of a cluster in a batch.
+# Status codes of a cluster in a batch.  STATUS_NON_FINITE and STATUS_ENERGY_RUNAWAY freeze the
+# cluster until reset; STATUS_TOO_MANY_SUBSTEPS refuses one interval and puts the cluster back at
+# its start, so that the cluster may try again over shorter intervals.
 STATUS_OK = 0
 STATUS_NON_FINITE = 1  # a non-finite state, or a cable of zero length
-STATUS_TOO_MANY_SUBSTEPS = 2
+STATUS_TOO_MANY_SUBSTEPS = 2  # the interval needed more than MAX_SUBSTEPS sub-steps: refused, rolled back
+STATUS_ENERGY_RUNAWAY = 3  # the energy left its books by more than ENERGY_TOLERANCE (see _energy_runaway)
+#: Every status code, for checks of states from outside (a restored state).
+STATUS_CODES = (STATUS_OK, STATUS_NON_FINITE, STATUS_TOO_MANY_SUBSTEPS, STATUS_ENERGY_RUNAWAY)
+
+#: The energy balance's largest relative residual before a cluster is flagged STATUS_ENERGY_RUNAWAY:
+#: ``|kinetic + strain + frame potential - initial + dissipated - work|`` over the largest of
+#: ``|initial|``, ``kinetic + strain + |frame potential|``, ``|work|`` and ``dissipated`` at the end
+#: of any interval since the reset (the largest so far: a cluster pushed and brought back to rest
+#: holds round-off of the energy it once had, not of zero).  The
+#: residual of the exact solution is zero, and the integrator's is O(h^2); chosen from data
+#: (docs/verification.md, "The runaway guard").
+ENERGY_TOLERANCE = 0.25
+
+#: Node columns saved at the start of each interval, from POSITION on (positions, half-step
+#: velocities, velocities, internal forces): with each cable's TENSION and INTACT and the cluster's
+#: OMEGA2, all that sub-steps overwrite before the interval ends.  An interval refused for its
+#: sub-step budget puts them back.
+SAVED_NODE_COLUMNS = INTERNAL_FORCE + 3 - POSITION
 
 #: Chunks the parallel drivers split a batch into: enough to even out clusters that sub-step more
 #: over any likely number of threads, few enough that the per-chunk call costs nothing.
@@ -520,18 +542,33 @@ def _hold_cluster(cables: np.ndarray, cluster: np.ndarray, counters: np.ndarray)
 
 
 @njit(inline="always", error_model="numpy")
-def _begin_advance(settings: np.ndarray, nodes: np.ndarray, cables: np.ndarray, cluster: np.ndarray) -> tuple:
-    """What stays fixed over one cluster's interval, ``(tidal_max, turning, viscous, h_damping)``,
-    and the running values its sub-steps carry, ``(elapsed, count, h_lo, h_hi, work, dissipated,
-    h_last)``; also starts each cable's ``PEAK_TENSION`` at its tension."""
+def _begin_advance(
+    settings: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    cluster: np.ndarray,
+    saved: np.ndarray,
+) -> tuple:
+    """What stays fixed over one cluster's interval, ``(tidal_max, turning, viscous, h_damping,
+    omega2, saved)``, and the running values its sub-steps carry, ``(elapsed, count, h_lo, h_hi,
+    work, dissipated, h_last)``; also starts each cable's ``PEAK_TENSION`` at its tension, and
+    saves what the sub-steps overwrite for :func:`_roll_back`: in ``saved`` (n + m,
+    SAVED_NODE_COLUMNS) each node's columns from POSITION on, then each cable's TENSION and
+    INTACT; ``omega2`` in ``fixed``."""
+    n = nodes.shape[0]
     tidal_max = _largest_tidal(cluster)
     turning = cluster[FRAME_RATE] != 0.0 or tidal_max != 0.0
     viscous = False
     for c in range(cables.shape[0]):
         viscous = viscous or cables[c, AXIAL_DAMPING] > 0.0
         cables[c, PEAK_TENSION] = cables[c, TENSION]
+        saved[n + c, 0] = cables[c, TENSION]
+        saved[n + c, 1] = cables[c, INTACT]
+    for i in range(n):
+        for column in range(SAVED_NODE_COLUMNS):
+            saved[i, column] = nodes[i, POSITION + column]
     h_damping = _damping_step(nodes, settings[SAFETY_FACTOR])
-    fixed = (tidal_max, turning, viscous, h_damping)
+    fixed = (tidal_max, turning, viscous, h_damping, cluster[OMEGA2], saved)
     running = (0.0, 0, math.inf, 0.0, cluster[WORK], cluster[DISSIPATED], cluster[LAST_STEP])
     return fixed, running
 
@@ -559,7 +596,7 @@ def _substep(
     positions): ``(done, running)``, ``done`` when the interval ends (``last``) or the cluster is
     flagged."""
     h, last = step
-    tidal_max, turning, viscous, _ = fixed
+    tidal_max, turning, viscous, _, _, _ = fixed
     elapsed, count, h_lo, h_hi, work, dissipated, h_last = running
     if h == 0.0:
         counters[STATUS] = STATUS_TOO_MANY_SUBSTEPS
@@ -593,10 +630,110 @@ def _substep(
     return done, (elapsed, count, h_lo, h_hi, work, dissipated, h_last)
 
 
+@njit(error_model="numpy")  # called, not inlined: it runs once per interval, on a refusal only
+def _roll_back(
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    cluster: np.ndarray,
+    counters: np.ndarray,
+    saved: np.ndarray,
+    omega2: float,
+) -> None:
+    """Put a cluster back at the start of an interval refused for its sub-step budget, from what
+    :func:`_begin_advance` saved: its state is then bit for bit what it was before the advance
+    (the running totals were never stored), and it measures as a cluster that took no step."""
+    n = nodes.shape[0]
+    for i in range(n):
+        for column in range(SAVED_NODE_COLUMNS):
+            nodes[i, POSITION + column] = saved[i, column]
+    for c in range(cables.shape[0]):
+        cables[c, TENSION] = saved[n + c, 0]
+        cables[c, INTACT] = saved[n + c, 1]
+    cluster[OMEGA2] = omega2
+    _hold_cluster(cables, cluster, counters)
+
+
+@njit(error_model="numpy")  # called, not inlined: once per interval, next to its sub-steps
+def _energy_runaway(
+    nodes: np.ndarray, cables: np.ndarray, cluster: np.ndarray, topology: np.ndarray, linearised: bool, viscous: bool
+) -> bool:
+    """Whether a cluster's energy has left its books: the balance ``kinetic + strain + frame
+    potential - initial + dissipated - work`` (the residual of
+    :class:`~tether_gym.simulator.EnergyReport`, J) exceeds ``ENERGY_TOLERANCE`` times the
+    largest of ``|initial|``, ``kinetic + strain + |frame potential|``, ``|work|`` and
+    ``dissipated`` since the reset, which it keeps in ``ENERGY_SCALE``.  A NaN residual counts as
+    a runaway.  Reads the velocities at the end of the interval; changes nothing else."""
+    kinetic = 0.0
+    frame_potential = 0.0
+    for i in range(nodes.shape[0]):
+        mass = nodes[i, MASS]
+        for d in range(3):
+            velocity = nodes[i, VELOCITY + d]
+            position = nodes[i, POSITION + d]
+            kinetic += mass * velocity * velocity
+            frame_potential -= mass * cluster[FRAME_TIDAL + d] * position * position
+    kinetic *= 0.5
+    frame_potential *= 0.5
+    strain = 0.0
+    for c in range(cables.shape[0]):
+        cable = cables[c]
+        if cable[INTACT] == 0.0:
+            continue
+        # With axial damping the tension holds a viscous part; the strain energy is elastic only.
+        elastic = (
+            _elastic_tension(nodes, cable, topology[c, 0], topology[c, 1], linearised) if viscous else cable[TENSION]
+        )
+        strain += 0.5 * elastic * elastic / cable[STIFFNESS]
+    initial, work, dissipated = cluster[INITIAL_ENERGY], cluster[WORK], cluster[DISSIPATED]
+    residual = kinetic + strain + frame_potential - initial + dissipated - work
+    scale = max(cluster[ENERGY_SCALE], abs(initial), kinetic + strain + abs(frame_potential), abs(work), dissipated)
+    cluster[ENERGY_SCALE] = scale
+    return not abs(residual) <= ENERGY_TOLERANCE * scale
+
+
 @njit(inline="always", error_model="numpy")
-def _end_advance(duration: float, nodes: np.ndarray, cluster: np.ndarray, counters: np.ndarray, running: tuple) -> None:
-    """Store a cluster's measurements of the interval, and its velocity at the end of it."""
+def _elastic_tension(nodes: np.ndarray, cable: np.ndarray, i: int, j: int, linearised: bool) -> float:
+    """The elastic part ``max(0, N0 + EA/L0 dL)`` of an intact cable's tension at the current
+    positions, N (as :func:`cable_forces` measures the elongation)."""
+    dx = nodes[j, POSITION] - nodes[i, POSITION]
+    dy = nodes[j, POSITION + 1] - nodes[i, POSITION + 1]
+    dz = nodes[j, POSITION + 2] - nodes[i, POSITION + 2]
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if linearised:
+        elongation = (
+            (dx - (nodes[j, REFERENCE] - nodes[i, REFERENCE])) * dx
+            + (dy - (nodes[j, REFERENCE + 1] - nodes[i, REFERENCE + 1])) * dy
+            + (dz - (nodes[j, REFERENCE + 2] - nodes[i, REFERENCE + 2])) * dz
+        ) / length
+    else:
+        elongation = length - cable[REST_LENGTH]
+    tension = cable[PRETENSION] + cable[STIFFNESS] * elongation
+    return tension if tension > 0.0 else 0.0
+
+
+@njit(inline="always", error_model="numpy")
+def _end_advance(
+    duration: float,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    cluster: np.ndarray,
+    counters: np.ndarray,
+    fixed: tuple,
+    running: tuple,
+) -> None:
+    """Store a cluster's measurements of the interval, and its velocity at the end of it; or,
+    for an interval refused for its sub-step budget, put the cluster back at its start.  A
+    cluster that stays healthy has ``duration`` added to its ``TIME`` and its energy balance
+    checked (:func:`_energy_runaway`)."""
     _, count, h_lo, h_hi, work, dissipated, h_last = running
+    if counters[STATUS] == STATUS_TOO_MANY_SUBSTEPS:
+        if count > 0:
+            _roll_back(nodes, cables, cluster, counters, fixed[5], fixed[4])
+        else:  # refused before its first step: the state is exactly as it was
+            _hold_cluster(cables, cluster, counters)
+        return
     cluster[LAST_STEP] = h_last
     cluster[WORK] = work
     cluster[DISSIPATED] = dissipated
@@ -611,6 +748,8 @@ def _end_advance(duration: float, nodes: np.ndarray, cluster: np.ndarray, counte
     _synchronise_velocity(nodes, cluster, h_last)
     if counters[STATUS] == STATUS_OK:
         cluster[TIME] += duration
+        if _energy_runaway(nodes, cables, cluster, topology, settings[LINEARISED] != 0.0, fixed[2]):
+            counters[STATUS] = STATUS_ENERGY_RUNAWAY
 
 
 @njit(error_model="numpy")  # called, not inlined: see above
@@ -662,17 +801,22 @@ def _advance_pair(
     re-estimated at every configuration, then shortened so that the rest of the interval splits
     into equal steps; the interval ends exactly at ``duration``.  A cluster whose remaining
     sub-steps at the current step size would exceed the settings' ``MAX_SUBSTEPS`` is flagged
-    ``STATUS_TOO_MANY_SUBSTEPS`` without taking them.  ``omega_est^2`` is the largest element value
+    ``STATUS_TOO_MANY_SUBSTEPS`` without taking them, and put back at the start of the interval
+    (:func:`_roll_back`), from where it may advance again.  ``omega_est^2`` is the largest element value
     of :func:`cable_forces` plus ``max |T|``.  Cables whose tension passes their breaking load
     break and the cluster goes on without them.  The cable table's ``PEAK_TENSION`` receives each
     cable's largest tension over the interval, N; ``step_record`` (R,) the first R sub-steps, s.
-    A cluster that stays healthy has ``duration`` added to its ``TIME``.
+    A cluster that stays healthy has ``duration`` added to its ``TIME``; one whose energy then
+    leaves its books is flagged ``STATUS_ENERGY_RUNAWAY`` (:func:`_energy_runaway`).
     """
     alone = b < 0
     if alone:
         b = a  # read, never stepped, so both chains have values of one type (its peaks restart at the same tensions)
-    fixed_a, running_a = _begin_advance(settings, nodes[a], cables[a], clusters[a])
-    fixed_b, running_b = _begin_advance(settings, nodes[b], cables[b], clusters[b])
+    # The start states, for a refusal (see _roll_back); an allocation per pair and interval costs
+    # about 0.1 us, little next to the sub-steps, and keeps the kernels' signatures short.
+    saved = np.empty((2, nodes.shape[1] + cables.shape[1], SAVED_NODE_COLUMNS))
+    fixed_a, running_a = _begin_advance(settings, nodes[a], cables[a], clusters[a], saved[0])
+    fixed_b, running_b = _begin_advance(settings, nodes[b], cables[b], clusters[b], saved[1])
     done_a = False
     done_b = alone
     while not (done_a and done_b):
@@ -705,9 +849,29 @@ def _advance_pair(
                 fixed_b,
                 running_b,
             )
-    _end_advance(duration, nodes[a], clusters[a], counters[a], running_a)
+    _end_advance(
+        duration,
+        settings,
+        topology,
+        nodes[a],
+        cables[a],
+        clusters[a],
+        counters[a],
+        fixed_a,
+        running_a,
+    )
     if not alone:
-        _end_advance(duration, nodes[b], clusters[b], counters[b], running_b)
+        _end_advance(
+            duration,
+            settings,
+            topology,
+            nodes[b],
+            cables[b],
+            clusters[b],
+            counters[b],
+            fixed_b,
+            running_b,
+        )
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -723,7 +887,8 @@ def _advance_clusters(
     step_record: np.ndarray,
 ) -> None:
     """Advance every cluster of the given tables (a batch, or a chunk of one) by ``duration`` s:
-    those ``active`` and healthy by :func:`_advance_pair`, two at a time, the others held.  ``step_record``
+    those ``active`` and healthy (or whose last interval was refused for its sub-step budget) by
+    :func:`_advance_pair`, two at a time, the others held.  ``step_record``
     (B, R) receives the first R sub-steps of each cluster.
 
     It is the one-thread driver, and :func:`advance_parallel` calls it on chunks: compiled once
@@ -735,6 +900,8 @@ def _advance_clusters(
     # loop's values widen it, and would compile the called pair once more for that first guess.
     waiting = np.int64(-1)  # a healthy cluster waiting for a partner
     for b in range(batch + 1):
+        if b < batch and active[b] and counters[b, STATUS] == STATUS_TOO_MANY_SUBSTEPS:
+            counters[b, STATUS] = STATUS_OK  # its refused interval left it as it was: it may try again
         if b < batch and not (active[b] and counters[b, STATUS] == STATUS_OK):
             _hold_cluster(cables[b], clusters[b], counters[b])
         elif b < batch and waiting < 0:
@@ -742,7 +909,16 @@ def _advance_clusters(
         elif waiting >= 0:  # a partner, or the end of the batch: the waiting cluster goes alone
             partner = b if b < batch else -1
             _advance_pair(
-                duration, settings, topology, nodes, cables, clusters, counters, step_record, waiting, partner
+                duration,
+                settings,
+                topology,
+                nodes,
+                cables,
+                clusters,
+                counters,
+                step_record,
+                waiting,
+                partner,
             )
             waiting = -1
 

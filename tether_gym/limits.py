@@ -140,9 +140,10 @@ def check_range(
 ) -> None:
     """Raise ``error`` naming ``name``, the first offending ``where`` (e.g. "cable") and the
     accepted range when any of ``values`` lies outside ``[low, high]`` (``(low, high]`` when not
-    ``low_inclusive``)."""
+    ``low_inclusive``).  NaN is outside every range: both comparisons with NaN are false, so
+    it is looked for on its own."""
     too_low = values < low if low_inclusive else values <= low
-    bad = too_low | (values > high)
+    bad = too_low | (values > high) | np.isnan(values)
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0]) if values.ndim else ()
         at = f" ({where} {index[0] if len(index) == 1 else index})" if index else ""

@@ -9,6 +9,7 @@ seen as a single cluster, with ``(n, 3)`` arrays.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -27,11 +28,15 @@ from tether_gym.limits import (
     is_real_number,
     is_whole_number,
     real_array,
+    short_repr,
     to_float,
 )
 
 __all__ = [
     "DEFAULT_SAFETY_FACTOR",
+    "ENERGY_RUNAWAY_TOLERANCE",
+    "MAX_STABLE_SAFETY_FACTOR",
+    "UnstableSafetyFactorWarning",
     "AdvanceStats",
     "BatchSimulator",
     "EnergyReport",
@@ -48,6 +53,17 @@ __all__ = [
 #: benchmarks/safety_factor.py``); at 0.2 both are 3-6x larger.  Each snap adds a small energy
 #: error of random sign, so over very long undamped runs use 0.025-0.05.
 DEFAULT_SAFETY_FACTOR = 0.1
+
+#: The largest safety factor accepted without ``allow_unstable_safety_factor=True``.  Through
+#: slack and snap the linear stability limit (1.0) means nothing: the energy drift of undamped,
+#: snapping clusters stays bounded up to 0.4 and grows without bound from about 0.5 on
+#: (docs/verification.md, "Choosing the safety factor").
+MAX_STABLE_SAFETY_FACTOR = 0.4
+
+#: A cluster whose energy balance (the :class:`EnergyReport` residual) exceeds this fraction of
+#: its energy scale after an advance is flagged as diverged (status 3); see
+#: :data:`tether_gym._kernels.ENERGY_TOLERANCE`.
+ENERGY_RUNAWAY_TOLERANCE = _kernels.ENERGY_TOLERANCE
 
 #: Batches at least this large are integrated by the multi-threaded kernel; smaller ones by the
 #: serial kernel, whose start-up cost is lower.  Both give bit-identical results.
@@ -66,7 +82,12 @@ CriticalStepMethod = Literal["closed-form", "finite-difference"]
 
 
 class SimulationDiverged(FloatingPointError):
-    """The integration produced a non-finite state or needed too many sub-steps."""
+    """The integration produced a non-finite state, its energy left its books, or an interval
+    needed too many sub-steps."""
+
+
+class UnstableSafetyFactorWarning(UserWarning):
+    """A safety factor above :data:`MAX_STABLE_SAFETY_FACTOR` was asked for explicitly."""
 
 
 @dataclass(frozen=True)
@@ -77,7 +98,9 @@ class AdvanceStats:
         substeps: (B,) number of sub-steps taken (0 for inactive or frozen clusters).
         step_min: (B,) smallest sub-step, s (inf where none was taken).
         step_max: (B,) largest sub-step, s.
-        status: (B,) 0 ok, 1 non-finite state, 2 sub-step limit reached.
+        status: (B,) 0 ok; 1 non-finite state and 3 energy runaway (the cluster is frozen until
+            reset); 2 sub-step limit reached (the interval was refused and the cluster put back
+            at its start: it may advance again over shorter intervals).
         step_sizes: (B, R) the first R sub-step sizes, s, when ``record_steps=R`` was asked
             (NaN-padded), else shape (B, 0).
         peak_tension: (B, m) each cable's largest tension over the interval (sub-step ends), N.
@@ -92,7 +115,7 @@ class AdvanceStats:
 
     @property
     def diverged(self) -> np.ndarray:
-        """(B,) bool: clusters whose integration failed."""
+        """(B,) bool: clusters whose integration failed (or whose interval was refused)."""
         return self.status != _kernels.STATUS_OK
 
 
@@ -141,7 +164,70 @@ STATE_FIELDS: dict[str, str] = {
     "dissipated": "_dissipated",  # (k,) J
     "initial_energy": "_energy0",  # (k,) J
     "status": "status",  # (k,) STATUS_* code
+    "energy_scale": "_energy_scale",  # (k,) J, the largest energy of the books since the reset (the runaway guard's)
 }
+
+
+def check_safety_factor(
+    safety_factor: object, allow_unstable: object, *, error: type[Exception] = ValueError, warn: bool = True
+) -> float:
+    """``safety_factor`` as a float in (0, :data:`MAX_STABLE_SAFETY_FACTOR`], or in (0, 1] with
+    ``allow_unstable`` (then a value above the stable range warns with
+    :class:`UnstableSafetyFactorWarning` unless ``warn`` is False); anything else, NaN included,
+    raises ``error`` naming ``safety_factor`` or ``allow_unstable_safety_factor``."""
+    if not isinstance(allow_unstable, (bool, np.bool_)):
+        raise error(f"allow_unstable_safety_factor must be True or False; got {short_repr(allow_unstable)}")
+    try:
+        value = check_real("safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, "")
+    except ValueError as exc:
+        raise error(str(exc)) from None
+    if value > MAX_STABLE_SAFETY_FACTOR:
+        risk = (
+            f"safety_factor {value:g} is above {MAX_STABLE_SAFETY_FACTOR:g}, where the energy of clusters whose "
+            "cables go slack and snap taut grows without bound (see 'Choosing the safety factor' in "
+            "docs/verification.md)"
+        )
+        if not allow_unstable:
+            raise error(
+                f"{risk}; use at most {MAX_STABLE_SAFETY_FACTOR:g} (the default is {DEFAULT_SAFETY_FACTOR:g}), "
+                "or pass allow_unstable_safety_factor=True to accept it"
+            )
+        if warn:
+            warnings.warn(
+                f"{risk}; accepted because allow_unstable_safety_factor=True", UnstableSafetyFactorWarning, stacklevel=3
+            )
+    return value
+
+
+def checked_indices(name: str, indices: object, count: int) -> np.ndarray:
+    """``indices`` of ``count`` clusters as a (k,) int64 array: a 1-D sequence or array of whole
+    numbers in 0..count-1 (repeats allowed, in any order), or a (count,) boolean mask.  Anything
+    else (floats, booleans mixed with numbers, nested or ragged sequences, scalars) raises a
+    ``ValueError`` naming ``name``: nothing is truncated, wrapped around or read as a mask by
+    accident."""
+    try:
+        idx = np.asarray(indices)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 1-D sequence of cluster indices; got {short_repr(indices)}") from None
+    if idx.dtype == np.bool_:
+        if idx.shape != (count,):
+            raise ValueError(
+                f"{name} given as a boolean mask must have shape ({count},), one flag per cluster; "
+                f"got shape {idx.shape}"
+            )
+        return np.flatnonzero(idx)
+    if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer):
+        raise ValueError(
+            f"{name} must be a 1-D sequence of whole cluster indices in 0..{count - 1} or a ({count},) boolean "
+            f"mask; got {short_repr(indices)}"
+        )
+    if isinstance(indices, (list, tuple)) and any(isinstance(item, (bool, np.bool_)) for item in indices):
+        raise ValueError(
+            f"{name} mixes booleans with indices; give whole numbers or a boolean mask: {short_repr(indices)}"
+        )
+    if idx.size and (idx.min() < 0 or idx.max() >= count):
+        raise ValueError(f"{name}: cluster indices must be in 0..{count - 1}; got {short_repr(idx.tolist())}")
+    return idx.astype(np.int64)
 
 
 def read_only_rows(arrays: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -178,9 +264,10 @@ class SimulatorState:
         return len(self.clusters)
 
     def select(self, rows: Sequence[int] | np.ndarray) -> SimulatorState:
-        """The state of clusters ``rows`` of this state, in that order; rows may repeat (e.g.
-        ``np.repeat(np.arange(k), n)`` makes n copies of each cluster for planning)."""
-        rows = np.asarray(rows, dtype=np.int64)
+        """The state of clusters ``rows`` of this state, in that order: whole numbers in 0..k-1,
+        which may repeat (e.g. ``np.repeat(np.arange(k), n)`` makes n copies of each cluster for
+        planning), or a (k,) boolean mask.  Anything else raises ``ValueError`` naming ``rows``."""
+        rows = checked_indices("rows", rows, self.num_clusters)
         return SimulatorState(
             tuple(self.clusters[int(r)] for r in rows), read_only_rows(self.arrays, rows), self.settings
         )
@@ -189,6 +276,27 @@ class SimulatorState:
         if name in STATE_FIELDS:
             return self.arrays[name]
         raise AttributeError(f"SimulatorState has no attribute {name!r}; its arrays are {list(STATE_FIELDS)}")
+
+
+#: What :meth:`BatchSimulator.restore` accepts in each array of a state: (shape, with "k", "n", "m"
+#: for the clusters, satellites and cables; dtype; lowest and highest value; unit).
+_STATE_CHECKS: dict[str, tuple[tuple[int | str, ...], type, float, float, str]] = {
+    "positions": (("k", "n", 3), np.float64, -MAX_COORDINATE, MAX_COORDINATE, "m"),
+    "half_step_velocities": (("k", "n", 3), np.float64, -MAX_SPEED, MAX_SPEED, "m/s"),
+    "velocities": (("k", "n", 3), np.float64, -MAX_SPEED, MAX_SPEED, "m/s"),
+    "internal_forces": (("k", "n", 3), np.float64, -math.inf, math.inf, "N"),
+    "tension": (("k", "m"), np.float64, 0.0, math.inf, "N"),
+    "intact": (("k", "m"), np.bool_, 0.0, 1.0, ""),
+    "last_step": (("k",), np.float64, 0.0, math.inf, "s"),
+    "omega2": (("k",), np.float64, 0.0, math.inf, "(rad/s)^2"),
+    "previous_force": (("k", "n", 3), np.float64, -MAX_FORCE, MAX_FORCE, "N"),
+    "time": (("k",), np.float64, 0.0, math.inf, "s"),
+    "work": (("k",), np.float64, -math.inf, math.inf, "J"),
+    "dissipated": (("k",), np.float64, 0.0, math.inf, "J"),
+    "initial_energy": (("k",), np.float64, -math.inf, math.inf, "J"),
+    "status": (("k",), np.int64, 0.0, 0.0, ""),
+    "energy_scale": (("k",), np.float64, 0.0, math.inf, "J"),
+}
 
 
 def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str, limit: float = math.inf) -> np.ndarray:
@@ -254,13 +362,16 @@ class BatchSimulator:
             EA, L0, N0 may differ: domain randomisation).
         num_clusters: B when a single cluster is given.
         safety_factor: sub-step as a fraction of the estimated critical step ``2 / omega_max``;
-            in (0, 1].
+            in (0, :data:`MAX_STABLE_SAFETY_FACTOR`] = (0, 0.4], or (0, 1] with
+            ``allow_unstable_safety_factor``.
         elongation: ``"exact"`` (``|x_j - x_i| - L0``, default) or ``"linearised"`` (the paper's
             eq. 11: end displacements from the cluster's positions projected on the current cable
             direction; it strains cables under large rigid rotations).
         max_step: an upper bound on the sub-step, s (default: none).
-        max_substeps: sub-steps allowed in one :meth:`advance` per cluster before the cluster is
-            flagged as diverged.
+        max_substeps: sub-steps allowed in one :meth:`advance` per cluster: an interval that
+            needs more is refused (status 2) and the cluster put back at its start.
+        allow_unstable_safety_factor: accept a ``safety_factor`` above
+            :data:`MAX_STABLE_SAFETY_FACTOR` (up to 1), with an :class:`UnstableSafetyFactorWarning`.
 
     The state after construction is every cluster at rest at its nominal positions.
 
@@ -300,6 +411,7 @@ class BatchSimulator:
     _work = _cluster(_kernels.WORK, "(B,) external work since the reset, J.")
     _dissipated = _cluster(_kernels.DISSIPATED, "(B,) energy dissipated since the reset, J.")
     _energy0 = _cluster(_kernels.INITIAL_ENERGY, "(B,) mechanical energy at the reset, J.")
+    _energy_scale = _cluster(_kernels.ENERGY_SCALE, "(B,) largest energy of the books since the reset, J.")
     status = TableColumns("counter_table", _kernels.STATUS, 1, "(B,) status code of each cluster (0: healthy).")
     positions = _node(_kernels.POSITION, "(B, n, 3) current node positions, m (a read-only view).", 3, read_only=True)
     velocities = _node(
@@ -324,6 +436,7 @@ class BatchSimulator:
         elongation: Elongation = "exact",
         max_step: float = math.inf,
         max_substeps: int = 10_000_000,
+        allow_unstable_safety_factor: bool = False,
     ) -> None:
         if isinstance(clusters, Cluster):
             count = 1 if num_clusters is None else num_clusters
@@ -336,7 +449,7 @@ class BatchSimulator:
                 raise TypeError("clusters must be a Cluster or a non-empty sequence of Cluster objects")
             if num_clusters is not None and num_clusters != len(cluster_list):
                 raise ValueError(f"num_clusters={num_clusters} disagrees with the {len(cluster_list)} clusters given")
-        self.safety_factor = check_real("safety_factor (a fraction of the critical step)", safety_factor, 0.0, 1.0, "")
+        self.safety_factor = check_safety_factor(safety_factor, allow_unstable_safety_factor)
         if not isinstance(elongation, str) or elongation not in ("exact", "linearised"):
             raise ValueError(f"elongation must be 'exact' or 'linearised'; got {elongation!r}")
         self.elongation: Elongation = elongation
@@ -441,21 +554,7 @@ class BatchSimulator:
         problem."""
         if indices is None:
             return np.arange(self.num_clusters)
-        try:
-            idx = np.asarray(indices)
-        except (TypeError, ValueError):
-            raise ValueError(f"indices must be a 1-D sequence of cluster indices; got {indices!r}") from None
-        if idx.dtype == np.bool_:
-            if idx.shape != (self.num_clusters,):
-                raise ValueError(
-                    f"indices given as a boolean mask must have shape ({self.num_clusters},); got {indices!r}"
-                )
-            return np.flatnonzero(idx)
-        if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer):
-            raise ValueError(f"indices must be a 1-D sequence of cluster indices; got {indices!r}")
-        if idx.size and (idx.min() < 0 or idx.max() >= self.num_clusters):
-            raise ValueError(f"cluster indices must be in 0..{self.num_clusters - 1}; got {idx.tolist()}")
-        return idx
+        return checked_indices("indices", indices, self.num_clusters)
 
     def reset(
         self,
@@ -503,6 +602,9 @@ class BatchSimulator:
         self.counter_table[idx, k.SUBSTEPS] = 0
         report = self.energy()
         self.cluster_table[idx, k.INITIAL_ENERGY] = report.total[idx]
+        self.cluster_table[idx, k.ENERGY_SCALE] = np.maximum(
+            np.abs(report.total[idx]), report.kinetic[idx] + report.strain[idx] + np.abs(report.frame_potential[idx])
+        )
 
     # ------------------------------------------------------------------ snapshots
     @property
@@ -523,38 +625,84 @@ class BatchSimulator:
         parameters included; a state of one cluster may be restored into any number of clusters
         (cloning, e.g. for sampling-based planning).  Each restored cluster then continues
         bit-identically to the cluster the state was taken from.  The state must come from a
-        batch of the same topology and :attr:`settings`; nothing changes when it is refused."""
+        batch of the same topology and :attr:`settings`.  A state may also be built by hand: each
+        of its arrays is checked (shape, dtype, finiteness, range, status codes) before anything
+        is written, and nothing changes when it is refused."""
         if not isinstance(state, SimulatorState):
             raise TypeError(f"state must be a SimulatorState from BatchSimulator.snapshot; got {type(state).__name__}")
-        idx = np.arange(state.num_clusters) if indices is None else self.cluster_indices(indices)
-        if state.num_clusters not in (1, idx.size):
+        arrays = self._checked_state(state)
+        count = len(state.clusters)
+        idx = np.arange(count) if indices is None else self.cluster_indices(indices)
+        if count not in (1, idx.size):
             raise ValueError(
-                f"state holds {state.num_clusters} clusters and cannot fill the {idx.size} clusters of indices; "
+                f"state holds {count} clusters and cannot fill the {idx.size} clusters of indices; "
                 "give one index per cluster of the state, or a state of one cluster to clone"
             )
         if idx.size and (idx.max() >= self.num_clusters):
             raise ValueError(f"indices must be in 0..{self.num_clusters - 1}; got {idx.tolist()}")
-        template = state.clusters[0]
-        if template.num_nodes != self.num_nodes or not np.array_equal(template.cables, self.cables):
-            raise ValueError(
-                f"state has a different topology ({template.num_nodes} satellites, {template.num_cables} cables) "
-                f"from this batch ({self.num_nodes} satellites, {self.num_cables} cables)"
-            )
-        if state.settings != self.settings:
-            raise ValueError(
-                "state was taken with settings (safety_factor, elongation, max_step, max_substeps) = "
-                f"{state.settings}, this batch has {self.settings}; a restored cluster would not continue the same way"
-            )
-        source = np.zeros(idx.size, dtype=np.int64) if state.num_clusters == 1 else np.arange(idx.size)
+        # Everything is checked above; from here on nothing can refuse the state.
+        source = np.zeros(idx.size, dtype=np.int64) if count == 1 else np.arange(idx.size)
         for k, b in zip(source, idx, strict=True):
             cluster = state.clusters[int(k)]
             if self.clusters[int(b)] is not cluster:
                 self.set_cluster(int(b), cluster, reset=False)
         for name, attribute in STATE_FIELDS.items():
             if name == "intact":  # a flag column: the attribute is a bool copy
-                self.cable_table[idx, :, _kernels.INTACT] = state.arrays[name][source]
+                self.cable_table[idx, :, _kernels.INTACT] = arrays[name][source]
             else:
-                getattr(self, attribute)[idx] = state.arrays[name][source]
+                getattr(self, attribute)[idx] = arrays[name][source]
+
+    def _checked_state(self, state: SimulatorState) -> dict[str, np.ndarray]:
+        """The arrays of ``state`` once every part of it is checked against this batch: its
+        clusters (a non-empty tuple of :class:`Cluster` of this topology), its settings, and each
+        array of :data:`STATE_FIELDS` (the exact set of names; numpy arrays of shape (k, ...)
+        exactly, no broadcasting; dtype float64, bool for ``intact``, int64 for ``status``;
+        finite; within the ranges of :mod:`tether_gym.limits` and of physics: positions within
+        MAX_COORDINATE, velocities within MAX_SPEED, non-negative time, last step, omega^2,
+        tensions and dissipated energy, a known status code).  A ``ValueError`` or ``TypeError``
+        names the first bad part."""
+        clusters = state.clusters
+        if not isinstance(clusters, tuple) or not clusters or not all(isinstance(c, Cluster) for c in clusters):
+            raise TypeError("state.clusters must be a non-empty tuple of tether_gym.Cluster objects")
+        for position, cluster in enumerate(clusters):
+            if cluster.num_nodes != self.num_nodes or not np.array_equal(cluster.cables, self.cables):
+                raise ValueError(
+                    f"state.clusters[{position}] has a different topology ({cluster.num_nodes} satellites, "
+                    f"{cluster.num_cables} cables) from this batch ({self.num_nodes} satellites, "
+                    f"{self.num_cables} cables, same cable list required)"
+                )
+        if state.settings != self.settings:
+            raise ValueError(
+                "state was taken with settings (safety_factor, elongation, max_step, max_substeps) = "
+                f"{short_repr(state.settings)}, this batch has {self.settings}; a restored cluster would not "
+                "continue the same way"
+            )
+        arrays = state.arrays
+        if not isinstance(arrays, dict) or set(arrays) != set(STATE_FIELDS):
+            given = sorted(arrays) if isinstance(arrays, dict) else type(arrays).__name__
+            raise ValueError(f"state.arrays must hold exactly the arrays {list(STATE_FIELDS)}; got {given}")
+        k, n, m = len(clusters), self.num_nodes, self.num_cables
+        for name, value in arrays.items():
+            shape, dtype, low, high, unit = _STATE_CHECKS[name]
+            full = tuple({"k": k, "n": n, "m": m}.get(axis, axis) for axis in shape)
+            if not isinstance(value, np.ndarray) or value.dtype != dtype:
+                got = f"dtype {value.dtype}" if isinstance(value, np.ndarray) else type(value).__name__
+                raise TypeError(f"state.arrays[{name!r}] must be a numpy array of dtype {np.dtype(dtype)}; got {got}")
+            if value.shape != full:
+                raise ValueError(
+                    f"state.arrays[{name!r}] must have shape {full} (k={k} clusters, n={n} satellites, m={m} "
+                    f"cables); got shape {value.shape}"
+                )
+            if dtype == np.float64:
+                if not np.isfinite(value).all():
+                    raise ValueError(f"state.arrays[{name!r}] must be finite; it holds NaN or an infinity")
+                check_range(f"state.arrays[{name!r}]", value, low, high, unit)
+            elif name == "status" and not np.isin(value, _kernels.STATUS_CODES).all():
+                raise ValueError(
+                    f"state.arrays['status'] must hold status codes {list(_kernels.STATUS_CODES)}; "
+                    f"got {short_repr(value.tolist())}"
+                )
+        return arrays
 
     def evaluate_at(
         self,
@@ -807,7 +955,10 @@ class Simulator:
         """Integrate over ``duration`` s with the external force (n, 3), N, held constant.
 
         Returns the :class:`AdvanceStats` of the batch of one (arrays of shape (1,)).  Raises
-        :class:`SimulationDiverged` if the state became non-finite or the sub-step limit was hit.
+        :class:`SimulationDiverged` if the state became non-finite or its energy left its books
+        (then only :meth:`reset` revives it), or if the interval needed more than ``max_substeps``
+        sub-steps (then the cluster is back where it was before the call, and may advance again
+        over shorter intervals).
         """
         p = None if force is None else _check_array("force", force, (self.cluster.num_nodes, 3), "N", MAX_FORCE)[None]
         stats = self.batch.advance(duration, p, record_steps=record_steps)
@@ -816,10 +967,19 @@ class Simulator:
                 "the state became non-finite (a cable reached zero length or the motion blew up); "
                 "reduce safety_factor or the initial conditions, then reset()"
             )
+        if stats.status[0] == _kernels.STATUS_ENERGY_RUNAWAY:
+            report = self.energy()
+            raise SimulationDiverged(
+                f"the energy left its books: residual {report.residual:.3g} J against initial {report.initial:.3g} J, "
+                f"work {report.work:.3g} J, dissipated {report.dissipated:.3g} J (more than "
+                f"{ENERGY_RUNAWAY_TOLERANCE:g} of its scale); the integration is unstable: reduce safety_factor "
+                f"(now {self.batch.safety_factor:g}) or max_step, then reset()"
+            )
         if stats.status[0] == _kernels.STATUS_TOO_MANY_SUBSTEPS:
             raise SimulationDiverged(
-                f"more than max_substeps={self.batch.max_substeps} sub-steps were needed; advance over "
-                "shorter intervals or raise max_substeps"
+                f"more than max_substeps={self.batch.max_substeps} sub-steps were needed for {to_float(duration):g} s; "
+                "the simulator is back where it was before this call: advance over shorter intervals or raise "
+                "max_substeps"
             )
         return stats
 

@@ -10,6 +10,10 @@ import pytest
 import tether_gym as tg
 from tests.helpers import pair, reference_internal_forces, separation
 
+#: Some checks run the scheme at its linear limit (safety factor up to 1, the step set by max_step)
+#: on purpose: the opt-in warns, which is expected here.
+pytestmark = pytest.mark.filterwarnings("ignore::tether_gym.simulator.UnstableSafetyFactorWarning")
+
 
 def tetrahedron_ics(cluster: tg.Cluster, rng: np.random.Generator, amplitude: float, speed: float):
     x0 = cluster.positions + amplitude * rng.standard_normal(cluster.positions.shape)
@@ -62,7 +66,7 @@ def test_preloaded_pair_oscillates_at_the_central_difference_frequency() -> None
     omega = math.sqrt(k * (1 / m1 + 1 / m2))
     h = 1.0 / omega  # omega h = 1: the discrete frequency is 4.7 % above omega
     c = pair(m1, m2, L, EA)
-    sim = tg.Simulator(c, safety_factor=1.0, max_step=h)
+    sim = tg.Simulator(c, safety_factor=1.0, max_step=h, allow_unstable_safety_factor=True)
     F = 5.0
     p = np.array([[-F, 0, 0], [F, 0, 0]])
     # Equilibrium: stretch F/k (check: zero net force there).
@@ -142,7 +146,7 @@ def test_spinning_pair_equilibrium_and_radial_frequency() -> None:
 def max_energy_error(step: float) -> float:
     """Largest |E(t) - E0| of an undamped, always-taut tetrahedron over 20 s at a fixed step, J."""
     c = tg.make_cluster("tetrahedron", N0=20.0, damping_rate=0.0)
-    sim = tg.Simulator(c, safety_factor=1.0, max_step=step)
+    sim = tg.Simulator(c, safety_factor=1.0, max_step=step, allow_unstable_safety_factor=True)
     bias = sim.internal_forces(c.positions)
     x0, v0 = tetrahedron_ics(c, np.random.default_rng(3), 0.004, 0.02)
     sim.reset(x0, v0)
@@ -207,7 +211,7 @@ def test_centred_damping_keeps_the_undamped_stability_limit(zeta: float) -> None
     omega = math.sqrt(2 * k / m)
     c_node = 2 * zeta * omega * m / 2  # relative-motion damping ratio zeta
     c = pair(m, m, L, EA, N0=50.0, damping=c_node)
-    sim = tg.Simulator(c, safety_factor=0.98)
+    sim = tg.Simulator(c, safety_factor=0.98, allow_unstable_safety_factor=True)
     bias = sim.internal_forces(c.positions)
     sim.reset(c.positions + np.array([[0, 0, 0], [0.05, 0, 0]]))
     start = sim.energy().strain
@@ -301,7 +305,9 @@ def test_sub_step_limit_flags_the_cluster_before_it_steps() -> None:
     assert all(
         np.array_equal(a, b) for a, b in zip(before, (batch.positions, batch.velocities, batch.time), strict=True)
     )
-    assert batch.advance(0.1).substeps.tolist() == [0, 0]  # frozen until reset
+    # Not frozen: the refusal left the clusters as they were, and a shorter interval goes through.
+    stats = batch.advance(0.1)
+    assert stats.status.tolist() == [0, 0] and (stats.substeps > 0).all()
 
 
 @pytest.mark.parametrize("duration", [1e6, 1e300, np.finfo(float).max])
@@ -370,7 +376,10 @@ def worst_energy_balance_residual(**step_options: float) -> float:
 
 
 def test_work_and_dissipation_close_the_energy_balance_at_second_order() -> None:
-    residuals = [worst_energy_balance_residual(safety_factor=1.0, max_step=0.1 / n) for n in (4, 8, 16)]
+    residuals = [
+        worst_energy_balance_residual(safety_factor=1.0, max_step=0.1 / n, allow_unstable_safety_factor=True)
+        for n in (4, 8, 16)
+    ]
     ratios = np.array(residuals[:-1]) / np.array(residuals[1:])
     assert np.all((ratios > 3.0) & (ratios < 5.0)), (residuals, ratios)
     assert worst_energy_balance_residual() < 5e-3  # default safety factor
@@ -466,7 +475,7 @@ def test_every_force_switch_delivers_its_exact_impulse(safety_factor: float) -> 
     velocity after a sequence of thrust pulses has a closed form, whatever the sub-steps.
     """
     c = tg.Cluster(positions=[[0, 0, 0], [100, 0, 0]], masses=[10.0, 4.0], cables=[(0, 1)], EA=1e3, L0=300.0)
-    sim = tg.Simulator(c, safety_factor=safety_factor)
+    sim = tg.Simulator(c, safety_factor=safety_factor, allow_unstable_safety_factor=safety_factor > 0.4)
     pulses = [(0.1, 1.0), (0.07, 0.0), (0.1, -2.5), (0.3, 0.5), (0.1, 0.0)]
     expected = 0.0
     for duration, thrust in pulses:

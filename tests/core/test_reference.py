@@ -9,6 +9,10 @@ from scipy.integrate import solve_ivp
 import tether_gym as tg
 from tests.helpers import reference_internal_forces
 
+#: Some checks run the scheme at its linear limit (safety factor up to 1, the step set by max_step)
+#: on purpose: the opt-in warns, which is expected here.
+pytestmark = pytest.mark.filterwarnings("ignore::tether_gym.simulator.UnstableSafetyFactorWarning")
+
 DURATION = 5.0
 INTERVAL = 0.02  # fine enough to see the short taut phases of a bouncing cluster
 
@@ -67,7 +71,9 @@ def test_error_shrinks_at_second_order(problem: dict) -> None:
     sub_steps = np.array([2, 4, 8, 16, 32])
     errors = []
     for n in sub_steps:
-        error, slack_changes = worst_error(problem, safety_factor=1.0, max_step=INTERVAL / n)
+        error, slack_changes = worst_error(
+            problem, safety_factor=1.0, max_step=INTERVAL / n, allow_unstable_safety_factor=True
+        )
         assert slack_changes >= 30  # the comparison covers many slack-taut transitions
         errors.append(error)
     # Each snap taut perturbs the local error, so fit the order over the whole refinement.

@@ -91,6 +91,7 @@ def test_every_kernel_takes_at_most_ten_arguments() -> None:
                 **{n: 1 for n in ("TIME", "LAST_STEP", "OMEGA2", "WORK", "DISSIPATED", "INITIAL_ENERGY")},
                 "STEP_MIN": 1,
                 "STEP_MAX": 1,
+                "ENERGY_SCALE": 1,
             },
             "CLUSTER_COLUMNS",
         ),
@@ -248,6 +249,7 @@ FLAT_ARGUMENTS = {
     "observed_satellites": (1, 3),
     "randomize": {"masses": 0.1},
     "safety_factor": 0.2,
+    "allow_unstable_safety_factor": False,
     "impulse_magnitude": 0.5,
     "impulse_rate": 0.2,
     "periodic_amplitude": 0.1,
@@ -267,7 +269,8 @@ def test_task_config_groups_hold_every_setting_of_their_concern() -> None:
     config = TaskConfig(**FLAT_ARGUMENTS)
     grouped = {name for group in TASK_CONFIG_GROUPS.values() for name in group.__dataclass_fields__}
     top_level = {"control_interval", "thrusters", "max_thrust", "thrust_limit", "max_deviation", "observe_tensions"}
-    top_level |= {"observation_noise", "observed_satellites", "safety_factor", "difficulty"}
+    top_level |= {"observation_noise", "observed_satellites", "safety_factor", "allow_unstable_safety_factor"}
+    top_level |= {"difficulty"}
     assert grouped | top_level == set(FLAT_ARGUMENTS) == set(TaskConfig.__dataclass_fields__)
     assert not grouped & top_level
     for attribute, group_type in TASK_CONFIG_GROUPS.items():

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Mapping
 from typing import Any, Literal
 
@@ -39,7 +40,12 @@ from tether_gym.envs.arguments import (
 )
 from tether_gym.envs.disturbances import CableFailure, DisturbanceConfig, FaultConfig
 from tether_gym.limits import MAX_SPEED, short_repr
-from tether_gym.simulator import DEFAULT_SAFETY_FACTOR, BatchSimulator
+from tether_gym.simulator import (
+    DEFAULT_SAFETY_FACTOR,
+    BatchSimulator,
+    UnstableSafetyFactorWarning,
+    check_safety_factor,
+)
 
 __all__ = [
     "RANDOMISABLE",
@@ -57,6 +63,18 @@ ThrustLimit = Literal["per_axis", "magnitude"]
 
 #: The cluster parameters domain randomisation may draw.
 RANDOMISABLE = ("masses", "EA", "damping", "N0", "axial_damping")
+
+
+def env_simulator(
+    cluster: Cluster, count: int, safety_factor: float, allow_unstable_safety_factor: bool
+) -> BatchSimulator:
+    """A :class:`BatchSimulator` of ``count`` copies of ``cluster`` for a task whose config has
+    already checked (and warned about) its safety factor: the config's one warning is enough."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnstableSafetyFactorWarning)
+        return BatchSimulator(
+            cluster, count, safety_factor=safety_factor, allow_unstable_safety_factor=allow_unstable_safety_factor
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,9 +96,11 @@ class ClusterScales:
     max_substeps: int
 
     @classmethod
-    def of(cls, cluster: Cluster, safety_factor: float = DEFAULT_SAFETY_FACTOR) -> ClusterScales:
+    def of(
+        cls, cluster: Cluster, safety_factor: float = DEFAULT_SAFETY_FACTOR, allow_unstable_safety_factor: bool = False
+    ) -> ClusterScales:
         """The scales of ``cluster``, from a one-cluster simulator at its nominal state."""
-        probe = BatchSimulator(cluster, 1, safety_factor=safety_factor)
+        probe = env_simulator(cluster, 1, safety_factor, allow_unstable_safety_factor)
         damped = cluster.damping > 0
         damping_step = math.inf
         if damped.any():
@@ -218,7 +238,11 @@ class TaskConfig:
         observation_noise: std of Gaussian noise added to the observation (its own units).
         observed_satellites: satellites whose displacements and velocities are observed (None:
             all).
-        safety_factor: the simulator's sub-step as a fraction of the critical step.
+        safety_factor: the simulator's sub-step as a fraction of the critical step, in (0, 0.4]
+            (:data:`~tether_gym.simulator.MAX_STABLE_SAFETY_FACTOR`).
+        allow_unstable_safety_factor: accept a safety_factor up to 1, above the range where the
+            energy stays bounded through slack and snap, with an
+            :class:`~tether_gym.simulator.UnstableSafetyFactorWarning`.
         difficulty: in [0, 1], scales the initial displacement and velocity, the randomisation
             spreads and the disturbances (impulses, periodic force, thrust noise) together, for
             curriculum training; change it between episodes with ``set_difficulty``.  The
@@ -253,6 +277,7 @@ class TaskConfig:
     observed_satellites: tuple[int, ...] | None = None
     randomize: Mapping[str, float] = dataclasses.field(default_factory=dict)
     safety_factor: float = DEFAULT_SAFETY_FACTOR
+    allow_unstable_safety_factor: bool = False
     impulse_magnitude: float = DisturbanceConfig.impulse_magnitude
     impulse_rate: float = DisturbanceConfig.impulse_rate
     periodic_amplitude: float = DisturbanceConfig.periodic_amplitude
@@ -281,6 +306,9 @@ class TaskConfig:
             "safety_factor": number(
                 "safety_factor", self.safety_factor, 0.0, 1.0, low_open=True, fix="a fraction of the critical step"
             ),
+            "allow_unstable_safety_factor": check_bool(
+                "allow_unstable_safety_factor", self.allow_unstable_safety_factor
+            ),
             "difficulty": check_difficulty(self.difficulty),
         }
         if self.max_deviation is not None and real_or_none(self.max_deviation) != math.inf:
@@ -300,6 +328,8 @@ class TaskConfig:
             group = group_type(**{name: getattr(self, name) for name in names})
             object.__setattr__(self, "_" + group_name, group)
             fields.update({name: getattr(group, name) for name in names})
+        # The simulator's own bound on the safety factor, with its opt-in, named as env arguments.
+        check_safety_factor(fields["safety_factor"], fields["allow_unstable_safety_factor"], error=EnvArgumentError)
         for name, value in fields.items():
             object.__setattr__(self, name, value)
         self.disturbances.check_sampling(self.control_interval)
@@ -399,7 +429,7 @@ class TaskConfig:
             raise EnvArgumentError(
                 f"max_thrust must be a scalar or one value per thruster ({count}); got {len(self.max_thrust)} values"
             )
-        scales = ClusterScales.of(cluster, self.safety_factor)
+        scales = ClusterScales.of(cluster, self.safety_factor, self.allow_unstable_safety_factor)
         for name, limit, unit in (
             ("initial_displacement", scales.displacement_limit, "m"),
             ("initial_velocity", scales.speed_limit, "m/s"),

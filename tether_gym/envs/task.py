@@ -66,6 +66,7 @@ from tether_gym.envs.config import (
     InitialStateConfig,
     RewardConfig,
     TaskConfig,
+    env_simulator,
 )
 from tether_gym.envs.contract import (
     END_REASONS,
@@ -377,7 +378,7 @@ class DampingTask:
         self.config = config
         self.num_clusters = B = num_clusters
         n, m = cluster.num_nodes, cluster.num_cables
-        self.sim = BatchSimulator(cluster, B, safety_factor=config.safety_factor)
+        self.sim = env_simulator(cluster, B, config.safety_factor, config.allow_unstable_safety_factor)
         self.thrusters = np.arange(n) if config.thrusters is None else np.array(config.thrusters, dtype=np.int64)
         self.observed = np.arange(n) if config.observed_satellites is None else np.array(config.observed_satellites)
         self.max_thrust = np.broadcast_to(np.asarray(config.max_thrust, dtype=float), self.thrusters.shape).copy()
@@ -449,7 +450,7 @@ class DampingTask:
         nominal cluster drawn with a fixed seed (so it is the same for every env instance)."""
         count = 64
         x0, v0 = self.sample_initial_state(np.random.default_rng(0), count, difficulty=1.0)
-        probe = BatchSimulator(self.cluster, count, safety_factor=self.config.safety_factor)
+        probe = env_simulator(self.cluster, count, self.config.safety_factor, self.config.allow_unstable_safety_factor)
         probe.reset(x0, v0)
         tk = _task_kernels
         task_nodes = np.ascontiguousarray(

@@ -1,0 +1,192 @@
+"""Settings that would blow up silently: NaN settings, safety factors above the stable range, a
+cluster whose energy leaves its books, and an interval refused for its sub-step budget."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import tether_gym as tg
+from tether_gym import Cluster, SimulationDiverged
+from tether_gym.envs import EnvArgumentError, TaskConfig
+from tether_gym.limits import check_range, check_real
+from tether_gym.simulator import (
+    ENERGY_RUNAWAY_TOLERANCE,
+    MAX_STABLE_SAFETY_FACTOR,
+    STATE_FIELDS,
+    UnstableSafetyFactorWarning,
+)
+
+STATUS_ENERGY_RUNAWAY = 3
+
+
+# ---------------------------------------------------------------------- NaN settings
+@pytest.mark.parametrize("option", ["safety_factor", "max_step"])
+def test_nan_settings_are_refused_by_the_simulator_itself(option: str) -> None:
+    with pytest.raises(ValueError, match=option):
+        tg.Simulator(tg.make_cluster("triangle"), **{option: math.nan})
+    with pytest.raises(ValueError, match=option):
+        tg.BatchSimulator(tg.make_cluster("triangle"), 2, **{option: np.float64("nan")})
+
+
+def test_range_checks_refuse_nan_wherever_it_sits() -> None:
+    with pytest.raises(ValueError, match="x must lie in"):
+        check_range("x", np.array([0.5, math.nan, 0.2]), 0.0, 1.0, "")
+    with pytest.raises(ValueError, match="x must lie in"):
+        check_real("x", math.nan, 0.0, math.inf, "s")
+    check_range("x", np.array([0.0, 1.0]), 0.0, 1.0, "")  # the bounds themselves pass
+
+
+# ---------------------------------------------------------------------- safety factor range
+def test_the_stable_range_needs_no_opt_in_and_beyond_it_one_that_warns() -> None:
+    cluster = tg.make_cluster("triangle")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert tg.Simulator(cluster, safety_factor=MAX_STABLE_SAFETY_FACTOR).batch.safety_factor == 0.4
+    with pytest.raises(ValueError, match="allow_unstable_safety_factor=True") as refused:
+        tg.Simulator(cluster, safety_factor=0.41)
+    assert "safety_factor 0.41 is above 0.4" in str(refused.value)
+    with pytest.warns(UnstableSafetyFactorWarning, match="safety_factor 1 is above 0.4"):
+        sim = tg.BatchSimulator(cluster, 2, safety_factor=1.0, allow_unstable_safety_factor=True)
+    assert sim.safety_factor == 1.0
+    with pytest.raises(ValueError, match="allow_unstable_safety_factor must be True or False"):
+        tg.BatchSimulator(cluster, safety_factor=0.1, allow_unstable_safety_factor="yes")
+    with pytest.raises(ValueError, match=r"must lie in \(0, 1\]"):
+        tg.BatchSimulator(cluster, safety_factor=1.5, allow_unstable_safety_factor=True)
+
+
+def test_the_env_config_applies_the_same_range_and_opt_in() -> None:
+    with pytest.raises(EnvArgumentError, match="allow_unstable_safety_factor"):
+        TaskConfig(safety_factor=0.9)
+    with pytest.raises(EnvArgumentError, match="allow_unstable_safety_factor must be"):
+        TaskConfig(allow_unstable_safety_factor=1)
+    with pytest.warns(UnstableSafetyFactorWarning) as caught:
+        env = tg.envs.TetherClusterVectorEnv(4, "chain", safety_factor=0.9, allow_unstable_safety_factor=True)
+    assert len(caught) == 1  # once, from the config, not again from each simulator the task builds
+    assert env.task.sim.safety_factor == 0.9
+
+
+# ---------------------------------------------------------------------- the runaway guard
+def snapping_pairs(count: int) -> tuple[Cluster, np.ndarray, np.ndarray]:
+    """A strongly pretensioned pair, perturbed so that its cable goes slack and snaps taut."""
+    pair = Cluster(positions=[[0, 0, 0], [10, 0, 0]], masses=1.0, cables=[(0, 1)], EA=1e4, N0=1000.0)
+    rng = np.random.default_rng(0)
+    x0 = pair.positions + rng.normal(0, 0.05, (count, 2, 3))
+    return pair, x0, rng.normal(0, 0.1, (count, 2, 3))
+
+
+def run(safety_factor: float, count: int = 32, seconds: float = 10.0) -> tg.BatchSimulator:
+    pair, x0, v0 = snapping_pairs(count)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnstableSafetyFactorWarning)
+        batch = tg.BatchSimulator(pair, count, safety_factor=safety_factor, allow_unstable_safety_factor=True)
+    batch.reset(x0, v0)
+    for _ in range(round(seconds / 0.1)):
+        batch.advance(0.1)
+    return batch
+
+
+def test_an_energy_runaway_is_flagged_and_frozen() -> None:
+    batch = run(1.0)
+    flagged = batch.status == STATUS_ENERGY_RUNAWAY
+    assert flagged.all()  # at 1.0 every one of these pairs gains energy it was never given
+    report = batch.energy()
+    scale = np.maximum(np.abs(report.initial), report.kinetic + report.strain)
+    assert (np.abs(report.residual) > ENERGY_RUNAWAY_TOLERANCE * scale).all()
+    frozen = batch.node_table.copy()
+    stats = batch.advance(0.1)
+    assert (stats.substeps == 0).all() and np.array_equal(batch.node_table, frozen) and stats.diverged.all()
+
+
+def test_healthy_clusters_are_never_flagged_at_the_default_factor() -> None:
+    batch = run(tg.simulator.DEFAULT_SAFETY_FACTOR)
+    assert (batch.status == 0).all()
+    report = batch.energy()
+    assert (np.abs(report.residual) < 0.1 * report.initial).all()
+
+
+def test_a_single_simulator_raises_on_a_runaway() -> None:
+    pair, x0, v0 = snapping_pairs(1)
+    with pytest.warns(UnstableSafetyFactorWarning):
+        sim = tg.Simulator(pair, safety_factor=1.0, allow_unstable_safety_factor=True)
+    sim.reset(x0[0], v0[0])
+    with pytest.raises(SimulationDiverged, match="energy left its books"):
+        for _ in range(100):
+            sim.advance(0.1)
+
+
+def test_the_unstable_chain_env_ends_its_episodes_as_numerics_diverged() -> None:
+    with pytest.warns(UnstableSafetyFactorWarning):
+        env = tg.envs.TetherClusterVectorEnv(16, "chain", safety_factor=1.0, allow_unstable_safety_factor=True)
+    env.reset(seed=1)
+    rng = np.random.default_rng(2)
+    flagged = 0
+    for _ in range(300):
+        env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+        flagged += int((env.task.sim.status == STATUS_ENERGY_RUNAWAY).sum())
+    assert flagged > 0
+
+
+# ---------------------------------------------------------------------- refused intervals
+def state_bits(batch: tg.BatchSimulator, index: int) -> list[bytes]:
+    return [getattr(batch, attribute)[index].tobytes() for attribute in STATE_FIELDS.values() if attribute != "status"]
+
+
+def collapsing_pair() -> Cluster:
+    """A pair whose pretension far exceeds its stiffness: it pulls itself together, and its
+    step-limiting frequency N/L grows as it does, so an interval that fits the sub-step budget at
+    its start runs out of it halfway."""
+    return Cluster(positions=[[0, 0, 0], [1, 0, 0]], masses=1.0, cables=[(0, 1)], EA=1.0, N0=100.0)
+
+
+def test_a_refusal_halfway_through_an_interval_puts_the_cluster_back() -> None:
+    pair = collapsing_pair()
+    sim = tg.Simulator(pair, max_substeps=5)
+    for _ in range(6):
+        sim.advance(0.01)
+    before = state_bits(sim.batch, 0)
+    with pytest.raises(SimulationDiverged, match="back where it was before this call") as refused:
+        sim.advance(0.04)
+    assert "advance over shorter intervals" in str(refused.value)
+    assert state_bits(sim.batch, 0) == before
+    stats = sim.batch.last_advance
+    assert stats.substeps[0] == 0 and stats.status[0] == 2
+    # The advice works: the same 0.04 s in shorter intervals, bit-identical to a run that never
+    # tried the long one.
+    fresh = tg.Simulator(pair, max_substeps=5)
+    for _ in range(6):
+        fresh.advance(0.01)
+    for _ in range(4):
+        sim.advance(0.01)
+        fresh.advance(0.01)
+    assert state_bits(sim.batch, 0) == state_bits(fresh.batch, 0)
+    assert sim.time == pytest.approx(0.1)
+
+
+def test_the_refused_steps_were_taken_then_undone() -> None:
+    """The test above must exercise a refusal after sub-steps were taken (not before the first)."""
+    batch = tg.BatchSimulator(collapsing_pair(), 1, max_substeps=5)
+    for _ in range(6):
+        batch.advance(0.01)
+    stats = batch.advance(0.04, record_steps=20)
+    assert stats.status[0] == 2 and np.isfinite(stats.step_sizes[0]).sum() == 4
+
+
+def test_a_refused_cluster_in_a_batch_takes_the_advice_while_the_others_go_on() -> None:
+    cluster = tg.make_cluster("tetrahedron")
+    batch = tg.BatchSimulator(cluster, 3, max_substeps=60)
+    rng = np.random.default_rng(4)
+    batch.reset(cluster.positions + rng.normal(0, 0.01, (3, 4, 3)))
+    batch.advance(0.5)
+    before = [state_bits(batch, b) for b in range(3)]
+    stats = batch.advance(2.0)  # needs more than 60 sub-steps per cluster: each is refused and put back
+    assert (stats.status == 2).all() and all(state_bits(batch, b) == before[b] for b in range(3))
+    active = np.array([True, False, True])
+    for _ in range(4):
+        stats = batch.advance(0.5, active=active)
+        assert (stats.status[active] == 0).all()
+    assert batch.time.tolist() == pytest.approx([2.5, 0.5, 2.5])
+    assert state_bits(batch, 1) == before[1]
