@@ -362,3 +362,104 @@ def test_simulator_options_are_named(options: dict[str, Any], count: Any) -> Non
         return
     stats = batch.advance(0.05)
     assert np.all(np.isfinite(batch.positions)) or np.all(stats.status != 0)
+
+
+# ---------------------------------------------------------------------- settings, select, restore
+@FUZZ
+@given(
+    safety_factor=st.one_of(anything_float, junk, st.floats(0.0, 1.2)),
+    allow=st.one_of(st.booleans(), junk),
+    max_step=st.one_of(anything_float, junk),
+)
+def test_settings_are_named_nan_included_and_the_unstable_range_needs_its_opt_in(
+    safety_factor: Any, allow: Any, max_step: Any
+) -> None:
+    import warnings
+
+    from tether_gym.simulator import MAX_STABLE_SAFETY_FACTOR, UnstableSafetyFactorWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            batch = tg.BatchSimulator(
+                tg.make_cluster("triangle"),
+                safety_factor=safety_factor,
+                max_step=max_step,
+                allow_unstable_safety_factor=allow,
+            )
+        except (ValueError, TypeError) as error:
+            assert_names(error, "safety_factor", "max_step", "allow_unstable_safety_factor")
+            return
+    assert 0.0 < batch.safety_factor <= (1.0 if allow is True else MAX_STABLE_SAFETY_FACTOR)
+    assert batch.max_step > 0.0 and not math.isnan(batch.max_step)
+    unstable = [w for w in caught if issubclass(w.category, UnstableSafetyFactorWarning)]
+    assert len(unstable) == (1 if batch.safety_factor > MAX_STABLE_SAFETY_FACTOR else 0)
+
+
+@FUZZ
+@given(
+    rows=st.one_of(
+        st.lists(st.integers(-3, 5), max_size=5),
+        st.lists(st.booleans(), min_size=0, max_size=5),
+        st.lists(st.one_of(st.integers(0, 2), anything_float, junk), max_size=4),
+        anything_float,
+        junk,
+    )
+)
+def test_select_takes_indices_or_a_mask_or_names_rows(rows: Any) -> None:
+    batch = tg.BatchSimulator(tg.make_cluster("triangle"), 3)
+    state = batch.snapshot()
+    try:
+        picked = state.select(rows)
+    except ValueError as error:
+        assert_names(error, "rows")
+        return
+    expected = np.flatnonzero(rows) if np.asarray(rows).dtype == np.bool_ else np.asarray(rows, dtype=np.int64)
+    assert [id(c) for c in picked.clusters] == [id(state.clusters[int(r)]) for r in expected]
+    assert np.array_equal(picked.positions, state.positions[expected])
+
+
+@FUZZ
+@given(
+    name=st.sampled_from(sorted(tg.simulator.STATE_FIELDS)),
+    value=st.one_of(
+        anything_float,
+        st.integers(-5, 5),
+        st.booleans(),
+        junk,
+        st.lists(anything_float, min_size=1, max_size=4),
+    ),
+    whole=st.booleans(),
+    row=st.integers(0, 1),
+)
+def test_restore_checks_every_array_and_changes_nothing_when_it_refuses(
+    name: str, value: Any, whole: bool, row: int
+) -> None:
+    import dataclasses
+
+    source = tg.BatchSimulator(tg.make_cluster("triangle"), 2)
+    source.advance(0.1, np.full((2, 3, 3), 0.1))
+    state = source.snapshot()
+    arrays = dict(state.arrays)
+    if whole:  # any value in place of the whole array
+        arrays[name] = value
+    else:  # one entry of the right array poisoned (when the value fits its dtype)
+        poisoned = arrays[name].copy()
+        try:
+            poisoned[row].flat[0] = value
+        except (TypeError, ValueError, OverflowError, IndexError):
+            return
+        arrays[name] = poisoned
+    target = tg.BatchSimulator(tg.make_cluster("triangle", EA=2e3), 3)
+    before = [t.tobytes() for t in (target.node_table, target.cable_table, target.cluster_table, target.counter_table)]
+    try:
+        target.restore(dataclasses.replace(state, arrays=arrays), indices=[2, 0])
+    except (ValueError, TypeError) as error:
+        assert_names(error, f"state.arrays[{name!r}]")
+        after = [
+            t.tobytes() for t in (target.node_table, target.cable_table, target.cluster_table, target.counter_table)
+        ]
+        assert after == before and all(c is target.template for c in target.clusters)
+        return
+    stats = target.advance(0.1)
+    assert np.all(np.isfinite(target.positions[[0, 2]])) or np.all(stats.status[[0, 2]] != 0)
