@@ -41,6 +41,7 @@ __all__ = [
     "MAX_JSON_BYTES",
     "MAX_JSON_DEPTH",
     "OPTIMIZERS",
+    "check_action_bounds",
     "decode_float",
     "decode_policy_kwargs",
     "decode_space",
@@ -258,6 +259,17 @@ def decode_space(data: Any, where: str) -> gymnasium.spaces.Box:
     if np.isnan(bounds[0]).any() or np.isnan(bounds[1]).any() or np.any(bounds[0] > bounds[1]):
         raise PolicyFormatError(f"{where}: every low bound must be <= its high bound, without NaN")
     return gymnasium.spaces.Box(low=bounds[0], high=bounds[1], shape=tuple(shape), dtype=np.dtype(dtype))
+
+
+def check_action_bounds(space: gymnasium.spaces.Box, where: str) -> None:
+    """Refuse an action space with an infinite bound, naming ``where``: a policy's actions are
+    clipped or rescaled into its bounds, so unbounded ones would reach the env as they are."""
+    if not (np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high))):
+        raise PolicyFormatError(
+            f"{where} is unbounded (low {np.ravel(space.low)[:3].tolist()}..., high "
+            f"{np.ravel(space.high)[:3].tolist()}...): a policy's actions need finite bounds, those of the env it was "
+            "trained on (the tether-gym envs' are [-1, 1]); restore or re-create the file"
+        )
 
 
 def _constructor_parameters(policy_class: type) -> dict[str, inspect.Parameter]:

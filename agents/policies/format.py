@@ -84,6 +84,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -95,6 +96,8 @@ from ..common.commands import program
 from ..common.files import atomic_write_bytes, atomic_write_text
 from ..common.versions import POLICY_PACKAGES, package_versions
 from .codecs import (
+    MAX_JSON_BYTES,
+    check_action_bounds,
     decode_policy_kwargs,
     decode_space,
     dump_json,
@@ -117,7 +120,8 @@ from .layout import (
     PolicyFormatError,
 )
 from .normalization import NormalizationStatistics
-from .sb3_state import TRAINING_STATE_FORMAT, capture_training_state, restore_training_state
+from .sb3_state import TRAINING_STATE_FORMAT, capture_training_state, check_training_state
+from .size import MAX_TENSOR_FILE_BYTES, parameter_count
 from .spec import PolicySpec
 
 with needs_extra("train", "the policy files"):
@@ -275,6 +279,14 @@ class _VerifiedReader:
         path = self.directory / name
         if not path.is_file():
             raise PolicyFormatError(f"{path} is missing: restore it, or re-create the policy directory")
+        # Checked before reading: a file's cost is bounded by its kind, not by what it claims.
+        limit = MAX_JSON_BYTES if name.endswith(".json") else MAX_TENSOR_FILE_BYTES
+        size = path.stat().st_size
+        if size > limit:
+            raise PolicyFormatError(
+                f"{path} is {size:,} bytes, more than a policy file can be ({limit:,} for a "
+                f"{'JSON' if name.endswith('.json') else 'safetensors'} file): restore or re-create it"
+            )
         data = path.read_bytes()
         if self.manifest is not None:
             if name not in self.manifest:
@@ -496,13 +508,29 @@ def load_policy(directory: str | Path, require_manifest: bool = False, device: s
     observation_space = decode_space(metadata.get("observation_space"), f"{where}: observation_space")
     action_space = decode_space(metadata.get("action_space"), f"{where}: action_space")
     kwargs = decode_policy_kwargs(metadata["policy_kwargs"], policy_class, f"{where}: policy_kwargs")
+    check_action_bounds(action_space, f"{where}: action_space")
+    # What the network costs, and that the weights hold exactly that many values, before anything
+    # is built: building allocates and initialises every weight the file asks for.
+    size = parameter_count(
+        metadata["algo"],
+        metadata["policy_kwargs"],
+        math.prod(observation_space.shape),
+        math.prod(action_space.shape),
+        f"{where}: policy_kwargs",
+    )
+    weights = load_tensors(reader.read(WEIGHTS_FILE), directory / WEIGHTS_FILE)
+    stored = sum(tensor.numel() for tensor in weights.values())
+    if stored != size:
+        raise PolicyFormatError(
+            f"{directory / WEIGHTS_FILE} holds {stored:,} values, but the network that {where} describes has "
+            f"{size:,} parameters: the two files do not belong together; restore or re-create the policy directory"
+        )
     try:
         # Building the policy draws its random initial weights: keep the caller's torch RNG as it was.
         with torch.random.fork_rng(devices=[]):
             policy = policy_class(observation_space, action_space, _constant_schedule, **kwargs)
     except Exception as error:  # noqa: BLE001 - only allow-listed classes run here; any failure is bad kwargs
         raise PolicyFormatError(f"{where}: policy_kwargs do not build a {policy_class.__name__}: {error}") from error
-    weights = load_tensors(reader.read(WEIGHTS_FILE), directory / WEIGHTS_FILE)
     _load_state_dict(policy, weights, directory / WEIGHTS_FILE)
     policy.to(device)
     policy.set_training_mode(False)
@@ -520,6 +548,12 @@ def load_policy(directory: str | Path, require_manifest: bool = False, device: s
 def _load_state_dict(module: torch.nn.Module, weights: Mapping[str, torch.Tensor], where: Path) -> None:
     """``module.load_state_dict(weights, strict=True)`` after checking names, shapes and dtypes,
     with errors that name the file and the tensors."""
+    _check_state_dict(module, weights, where)
+    module.load_state_dict(weights, strict=True)
+
+
+def _check_state_dict(module: torch.nn.Module, weights: Mapping[str, torch.Tensor], where: Path) -> None:
+    """Refuse ``weights`` unless they have exactly ``module``'s tensor names, shapes and dtypes."""
     expected = module.state_dict()
     missing, unexpected = sorted(set(expected) - set(weights)), sorted(set(weights) - set(expected))
     if missing or unexpected:
@@ -534,14 +568,25 @@ def _load_state_dict(module: torch.nn.Module, weights: Mapping[str, torch.Tensor
                 f"{where}: tensor {key!r} has shape {tuple(weights[key].shape)} ({weights[key].dtype}); the policy "
                 f"needs {tuple(tensor.shape)} ({tensor.dtype})"
             )
-    module.load_state_dict(weights, strict=True)
 
 
-def check_resumable(metadata: Mapping[str, Any], algo: str, label: str, env_id: str | None = None) -> None:
-    """Refuse to resume training ``algo`` (on ``env_id``, when given) from the policy directory
-    whose ``policy.json`` is ``metadata``: a :class:`PolicyFormatError` when it holds another
-    algorithm's model, was trained on another id, or keeps no optimizer state. ``label`` names the
-    directory at the start of the message (``--resume DIR``, or the file that was read)."""
+def check_resumable(
+    metadata: Mapping[str, Any],
+    algo: str,
+    label: str,
+    env_id: str | None = None,
+    spec: PolicySpec | None = None,
+    normalize: bool | None = None,
+) -> None:
+    """Refuse to resume training ``algo`` from the policy directory whose ``policy.json`` is
+    ``metadata`` when a recorded setting that changes what its weights mean differs from the run
+    being resumed: a :class:`PolicyFormatError` when it holds another algorithm's model, was
+    trained on another id (``env_id``, when given), keeps no optimizer state, was trained as
+    another kind of policy (``spec``, when given: ``residual_on``, whose outputs are corrections
+    to a baseline's actions, and ``multiagent``), or with normalisation on where ``normalize`` is
+    off or the other way round (when given). ``label`` names the directory at the start of the
+    message (``--resume DIR``, or the file that was read); every message names the entry of
+    ``policy.json`` and the hyperparameter to set."""
     if metadata["algo"] != algo:
         raise PolicyFormatError(
             f"{label} is a {metadata['algo']} checkpoint; resume it with --algo {metadata['algo']} (not {algo})"
@@ -555,15 +600,53 @@ def check_resumable(metadata: Mapping[str, Any], algo: str, label: str, env_id: 
             f"{label} holds a policy for inference only (no optimizer state): resume from a checkpoint that "
             f"{program('train')} wrote (<run>/checkpoints/<algo>_<steps>_steps, <run>/best or the run directory)"
         )
+    settings = "resume with the run's hyperparameters (its config.yml: --hyperparams, or --set)"
+    if spec is not None:
+        recorded = PolicySpec.from_metadata(metadata)
+        if recorded.residual_on != spec.residual_on:
+            raise PolicyFormatError(
+                f"{label}: {METADATA_FILE} records residual_on: {recorded.residual_on}, the run's hyperparameters "
+                f"{spec.residual_on}: "
+                + (
+                    f"the checkpoint's outputs are corrections to {recorded.residual_on}'s actions, not actions"
+                    if recorded.residual_on is not None
+                    else "the checkpoint's outputs are actions, not corrections to a baseline's"
+                )
+                + f"; {settings}"
+            )
+        ours = None if spec.multiagent is None else json_value(dict(spec.multiagent), "multiagent")
+        if recorded.multiagent != ours:
+            raise PolicyFormatError(
+                f"{label}: {METADATA_FILE} records multiagent: {recorded.multiagent}, the run's hyperparameters "
+                f"{ours}: a decentralised policy acts on local observations, a centralised one on the whole "
+                f"cluster's; {settings}"
+            )
+    if normalize is not None and metadata["normalization"] != normalize:
+        raise PolicyFormatError(
+            f"{label}: {METADATA_FILE} records normalization: {str(metadata['normalization']).lower()}, but the run's "
+            f"hyperparameters' 'normalize' is {'on' if normalize else 'off'}: the weights expect "
+            f"{'normalised' if metadata['normalization'] else 'raw'} observations; {settings}"
+        )
 
 
-def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer: VecNormalize | None) -> dict[str, Any]:
+def load_training_state(
+    model: BaseAlgorithm,
+    directory: str | Path,
+    normalizer: VecNormalize | None,
+    spec: PolicySpec | None = None,
+) -> dict[str, Any]:
     """Resume ``model`` (freshly built with the run's hyperparameters) from the policy directory
     ``directory``: its weights, optimizer states, extra variables and counters, and the
     normalisation statistics into ``normalizer``. Returns the checkpoint's metadata.
 
-    Raises :class:`PolicyFormatError` when the directory has no training state, or when it does
-    not fit ``model`` (another algorithm, architecture or normalisation)."""
+    Every file is read and checked before anything is written into ``model`` or ``normalizer``:
+    the recorded settings (:func:`check_resumable`, with ``spec``, the run's residual and
+    multi-agent settings, when given), the policy's class, arguments and spaces, the weights, every
+    optimizer tensor against its parameter, and the statistics' shape.
+
+    Raises :class:`PolicyFormatError` naming the file and the entry when the directory has no
+    training state, or when it does not fit ``model`` (another algorithm, kind of policy,
+    architecture, space or normalisation)."""
     directory = Path(directory)
     if not is_policy_dir(directory):
         raise PolicyFormatError(f"{directory} is not a policy directory (it has no {METADATA_FILE})")
@@ -571,7 +654,7 @@ def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer:
     metadata = read_metadata(directory, reader)
     where = directory / METADATA_FILE
     algo = _algo_name(model)
-    check_resumable(metadata, algo, str(directory))
+    check_resumable(metadata, algo, str(directory), spec=spec, normalize=normalizer is not None)
     ours = encode_policy_kwargs(policy_constructor_kwargs(model), model.policy_class)
     differing = sorted(
         key for key in set(ours) | set(metadata["policy_kwargs"]) if ours.get(key) != metadata["policy_kwargs"].get(key)
@@ -585,24 +668,37 @@ def load_training_state(model: BaseAlgorithm, directory: str | Path, normalizer:
             f"resume with the run's hyperparameters (its config.yml)"
         )
     for key in ("observation_space", "action_space"):
-        if decode_space(metadata.get(key), f"{where}: {key}") != getattr(model, key):
-            raise PolicyFormatError(f"{where}: the checkpoint's {key} differs from the env's")
-    _load_state_dict(
-        model.policy, load_tensors(reader.read(WEIGHTS_FILE), directory / WEIGHTS_FILE), directory / WEIGHTS_FILE
-    )
+        recorded = decode_space(metadata.get(key), f"{where}: {key}")
+        if recorded != getattr(model, key):
+            raise PolicyFormatError(
+                f"{where}: {key} (shape {list(recorded.shape)}) differs from the env's (shape "
+                f"{list(getattr(model, key).shape)}) or its bounds: resume on the id and env settings it was "
+                "trained with"
+            )
+    weights = load_tensors(reader.read(WEIGHTS_FILE), directory / WEIGHTS_FILE)
+    _check_state_dict(model.policy, weights, directory / WEIGHTS_FILE)
     meta_where = directory / TRAINING_META_FILE
     meta = parse_json(reader.read(TRAINING_META_FILE), meta_where)
     if require_entry(meta, "format", str, meta_where) != TRAINING_STATE_FORMAT:
         raise PolicyFormatError(f"{meta_where} is not a tether-gym training state")
-    tensors = load_tensors(reader.read(TRAINING_STATE_FILE), directory / TRAINING_STATE_FILE)
-    restore_training_state(model, meta, tensors, algo, meta_where, directory / TRAINING_STATE_FILE)
-    if metadata["normalization"] != (normalizer is not None):
+    if require_entry(meta, "format_version", int, meta_where) != FORMAT_VERSION:
         raise PolicyFormatError(
-            f"{where}: the checkpoint was trained {'with' if metadata['normalization'] else 'without'} VecNormalize, "
-            f"but the hyperparameters' 'normalize' is {'off' if normalizer is None else 'on'}: use the run's settings"
+            f"{meta_where}: format_version {meta['format_version']} is not {FORMAT_VERSION}: use the tether-gym "
+            "version that wrote it"
         )
+    tensors = load_tensors(reader.read(TRAINING_STATE_FILE), directory / TRAINING_STATE_FILE)
+    restore = check_training_state(model, meta, tensors, algo, meta_where, directory / TRAINING_STATE_FILE)
+    statistics = None
     if normalizer is not None:
-        NormalizationStatistics.from_json(reader.read(NORMALIZATION_FILE), directory / NORMALIZATION_FILE).apply_to(
-            normalizer
-        )
+        statistics_where = directory / NORMALIZATION_FILE
+        statistics = NormalizationStatistics.from_json(reader.read(NORMALIZATION_FILE), statistics_where)
+        if statistics.obs_mean.shape != normalizer.obs_rms.mean.shape:
+            raise PolicyFormatError(
+                f"{statistics_where}: obs_rms.mean has shape {list(statistics.obs_mean.shape)}; the env's "
+                f"observations have {list(normalizer.obs_rms.mean.shape)}: restore or re-create the checkpoint"
+            )
+    model.policy.load_state_dict(weights, strict=True)
+    restore()
+    if statistics is not None and normalizer is not None:
+        statistics.apply_to(normalizer)
     return metadata

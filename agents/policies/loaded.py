@@ -18,6 +18,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+import gymnasium
 import numpy as np
 
 from ..common.commands import program
@@ -33,6 +34,7 @@ __all__ = [
     "OtherIdError",
     "OtherIdWarning",
     "TrainedPolicy",
+    "env_action_space",
     "env_id_of",
     "is_shipped",
     "make_controller",
@@ -77,6 +79,16 @@ def env_id_of(env: Any) -> str | None:
             return spec_id
     own = getattr(env, "env_id", None)
     return own if isinstance(own, str) else None
+
+
+def env_action_space(env: Any) -> gymnasium.spaces.Box | None:
+    """The action space of one of ``env``'s clusters (a Gymnasium env or vector env, possibly
+    wrapped, or an SB3 vector env), or None when it has no ``Box`` action space."""
+    for name in ("single_action_space", "action_space"):
+        space = getattr(env, name, None)
+        if isinstance(space, gymnasium.spaces.Box):
+            return space
+    return None
 
 
 class TrainedPolicy:
@@ -200,6 +212,7 @@ class TrainedPolicy:
             OtherIdError: ``env`` is of another id, without ``allow_other_id``.
         """
         self.check_env_id(env, self.allow_other_id if allow_other_id is None else allow_other_id)
+        self.check_env_actions(env)
         if self.multiagent is not None:
             from ..controllers.decentralised import LocalObserver
 
@@ -213,6 +226,37 @@ class TrainedPolicy:
             from ..controllers.registry import make_baseline
 
             self.baseline = make_baseline(self.residual_on, env)
+
+    def check_env_actions(self, env: Any) -> None:
+        """Refuse ``env`` when the policy's actions do not fit it: another number of actions, or
+        other bounds (a policy's actions are clipped or rescaled into its own bounds, so other
+        bounds would be clipped again by the env, unseen by the saturation count). A decentralised
+        policy acts per satellite (3 actions), repeated over the env's satellites. An env whose
+        action space is not a ``Box`` (nothing tether-gym makes) is not checked."""
+        space = env_action_space(env)
+        if space is None:
+            return
+        ours = self.policy.action_space
+        low, high = np.ravel(ours.low).astype(np.float64), np.ravel(ours.high).astype(np.float64)
+        env_low, env_high = np.ravel(space.low).astype(np.float64), np.ravel(space.high).astype(np.float64)
+        repeats = 1
+        if self.multiagent is not None and low.size and env_low.size % low.size == 0:
+            repeats = env_low.size // low.size  # one agent per satellite, each with the policy's actions
+        name = env_id_of(env) or "the env"
+        if low.size * repeats != env_low.size:
+            per = " per satellite" if self.multiagent is not None else ""
+            raise ValueError(
+                f"{self.path} acts with {low.size} actions{per} (policy.json: action_space.shape {list(ours.shape)}), "
+                f"but {name} takes {env_low.size}: pass a model trained on this id"
+                + (f" (it was trained on {self.env_id})" if self.env_id else "")
+            )
+        if not (np.array_equal(np.tile(low, repeats), env_low) and np.array_equal(np.tile(high, repeats), env_high)):
+            raise ValueError(
+                f"{self.path} acts within bounds [{low.min():g}, {high.max():g}] (policy.json: action_space.low/high), "
+                f"but {name} takes actions in [{env_low.min():g}, {env_high.max():g}]: its actions would be clipped "
+                "again, unseen; pass a model trained on this id, or re-create its policy.json with the env's action "
+                "space"
+            )
 
     def check_env_id(self, env: Any, allow_other_id: bool = False) -> None:
         """Refuse ``env`` when its id is not the one the policy was trained on, unless

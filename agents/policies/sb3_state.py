@@ -14,7 +14,7 @@ The reading and checking of the files around it is :func:`agents.policies.format
 from __future__ import annotations
 
 import operator
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,7 @@ with needs_extra("train", "the policy files"):
     import torch
     from stable_baselines3.common.base_class import BaseAlgorithm
 
-__all__ = ["TRAINING_STATE_FORMAT", "capture_training_state", "restore_training_state"]
+__all__ = ["TRAINING_STATE_FORMAT", "capture_training_state", "check_training_state", "restore_training_state"]
 
 #: The ``format`` entry of ``training.json``.
 TRAINING_STATE_FORMAT = "tether-gym-training-state"
@@ -71,6 +71,20 @@ def capture_training_state(model: BaseAlgorithm) -> tuple[dict[str, torch.Tensor
     return tensors, meta
 
 
+#: The per-parameter state every step of each optimizer reads (more is allowed: Adam's
+#: ``max_exp_avg_sq`` with amsgrad, momentum buffers); a state without them would fail inside the
+#: optimizer's first step, far from the file.
+_REQUIRED_STATE: dict[str, frozenset[str]] = {
+    "Adam": frozenset({"step", "exp_avg", "exp_avg_sq"}),
+    "AdamW": frozenset({"step", "exp_avg", "exp_avg_sq"}),
+    "RMSprop": frozenset({"step", "square_avg"}),
+    "SGD": frozenset(),
+}
+#: Entries an optimizer's per-parameter state may hold besides those: scalars (``step``) or
+#: tensors of the parameter's shape.
+_OPTIONAL_STATE = frozenset({"max_exp_avg_sq", "momentum_buffer", "grad_avg"})
+
+
 def restore_training_state(
     model: BaseAlgorithm,
     meta: Any,
@@ -81,7 +95,8 @@ def restore_training_state(
 ) -> None:
     """Put the training state that :func:`capture_training_state` read back into ``model`` (freshly built
     with the run's hyperparameters, its policy's weights already loaded): the optimizer states, the
-    extra variables and the counters.
+    extra variables and the counters. Everything is checked before anything is written, so a
+    refused state leaves ``model`` as it was.
 
     Args:
         model: the model to resume.
@@ -91,7 +106,24 @@ def restore_training_state(
         meta_where, tensors_where: the two files, for the errors.
 
     Raises :class:`PolicyFormatError` when the state does not fit ``model`` (other optimizers or
-    variables, misshapen tensors, missing counters)."""
+    variables, misshapen or mistyped tensors, text where numbers belong, missing counters)."""
+    apply = check_training_state(model, meta, tensors, algo, meta_where, tensors_where)
+    apply()
+
+
+def check_training_state(
+    model: BaseAlgorithm,
+    meta: Any,
+    tensors: Mapping[str, torch.Tensor],
+    algo: str,
+    meta_where: Path,
+    tensors_where: Path,
+) -> Callable[[], None]:
+    """Check the training state that :func:`capture_training_state` read against ``model``
+    (arguments as :func:`restore_training_state`'s) and return the function that writes it into
+    ``model``: every optimizer tensor has its parameter's shape and dtype (or is a scalar step),
+    every optimizer setting has the type the optimizer's own has, every counter is a count, and
+    ``training.safetensors`` holds no tensor that nothing reads."""
     state_dict_names, variable_names = model._get_torch_save_params()
     optimizers = require_entry(meta, "optimizers", dict, meta_where)
     expected = sorted(name for name in state_dict_names if name != "policy")
@@ -100,56 +132,178 @@ def restore_training_state(
             f"{meta_where}: the checkpoint has optimizers {sorted(optimizers)} and variables {meta['variables']}; "
             f"this {algo} model has {expected} and {list(variable_names)} (were the hyperparameters changed?)"
         )
-    for name in expected:
-        _restore_optimizer(operator.attrgetter(name)(model), optimizers[name], tensors, name, meta_where)
+    known = {f"variables/{name}" for name in variable_names}
+    unknown = sorted(
+        key for key in tensors if key not in known and not any(key.startswith(f"{name}/state/") for name in expected)
+    )
+    if unknown:
+        raise PolicyFormatError(
+            f"{tensors_where}: tensors {unknown[:5]} belong to no optimizer or variable of this {algo} model: restore "
+            "or re-create the checkpoint"
+        )
+    states = {
+        name: _optimizer_state(
+            operator.attrgetter(name)(model), optimizers[name], tensors, name, meta_where, tensors_where
+        )
+        for name in expected
+    }
+    variables = {}
     for name in variable_names:
         key = f"variables/{name}"
         target = operator.attrgetter(name)(model)
-        if key not in tensors or tensors[key].shape != target.shape:
-            raise PolicyFormatError(f"{tensors_where}: variable {name!r} is missing or misshapen")
-        with torch.no_grad():
-            target.copy_(tensors[key])
+        if key not in tensors or tensors[key].shape != target.shape or tensors[key].dtype != target.dtype:
+            found = f"{tuple(tensors[key].shape)} {tensors[key].dtype}" if key in tensors else "nothing"
+            raise PolicyFormatError(
+                f"{tensors_where}: variable {name!r} must be {tuple(target.shape)} {target.dtype}; found {found}"
+            )
+        variables[name] = (target, tensors[key])
     counters = require_entry(meta, "counters", dict, meta_where)
-    model.num_timesteps = int(require_entry(counters, "num_timesteps", int, meta_where))
-    model._n_updates = int(require_entry(counters, "n_updates", int, meta_where))
-    model._episode_num = int(require_entry(counters, "episode_num", int, meta_where))
+    counts = {}
+    for key in ("num_timesteps", "n_updates", "episode_num"):
+        value = require_entry(counters, key, int, meta_where)
+        if value < 0:
+            raise PolicyFormatError(f"{meta_where}: counters.{key} must be a count >= 0; got {value}")
+        counts[key] = value
+
+    def apply() -> None:
+        for name, state in states.items():
+            optimizer = operator.attrgetter(name)(model)
+            try:
+                optimizer.load_state_dict(state)
+            except (ValueError, KeyError, TypeError) as error:
+                raise PolicyFormatError(f"{meta_where}: optimizer {name!r} does not fit this model: {error}") from error
+        for target, value in variables.values():
+            with torch.no_grad():
+                target.copy_(value)
+        model.num_timesteps = counts["num_timesteps"]
+        model._n_updates = counts["n_updates"]
+        model._episode_num = counts["episode_num"]
+
+    return apply
 
 
-def _restore_optimizer(
-    optimizer: torch.optim.Optimizer, saved: Any, tensors: Mapping[str, torch.Tensor], name: str, where: Path
-) -> None:
-    """Rebuild an optimizer's state dict from the flat tensors and the JSON entries, and load it."""
+def _same_kind(value: Any, current: Any) -> bool:
+    """Whether a JSON ``value`` can stand where an optimizer setting is ``current``: numbers for
+    numbers (bools are not), bools (or None) for flags, sequences of numbers of the same length."""
+    if isinstance(current, bool) or current is None:
+        return value is None or isinstance(value, bool)
+    if isinstance(current, (int, float)):
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if isinstance(current, (tuple, list)):
+        return (
+            isinstance(value, list)
+            and len(value) == len(current)
+            and all(_same_kind(item, entry) for item, entry in zip(value, current, strict=True))
+        )
+    return type(value) is type(current)
+
+
+def _optimizer_state(
+    optimizer: torch.optim.Optimizer,
+    saved: Any,
+    tensors: Mapping[str, torch.Tensor],
+    name: str,
+    where: Path,
+    tensors_where: Path,
+) -> dict[str, Any]:
+    """The checked state dict of ``optimizer``, rebuilt from the flat tensors and the JSON entries."""
     if not isinstance(saved, dict) or not isinstance(saved.get("param_groups"), list):
         raise PolicyFormatError(f"{where}: optimizer {name!r} must have param_groups")
+    groups = _param_groups(optimizer, saved["param_groups"], name, where)
+    state = _parameter_state(optimizer, saved, tensors, name, where, tensors_where)
+    # In parameter order, as the optimizer built it: load_state_dict keeps the order it is given,
+    # and the next save writes it.
+    return {"state": dict(sorted(state.items())), "param_groups": groups}
+
+
+def _param_groups(optimizer: torch.optim.Optimizer, saved: list[Any], name: str, where: Path) -> list[dict[str, Any]]:
+    """The saved param groups of ``optimizer``, each entry checked to be of the kind the
+    optimizer's own is (numbers, flags, tuples), with its parameters' indices."""
     current_groups = optimizer.state_dict()["param_groups"]
-    if len(saved["param_groups"]) != len(current_groups):
+    if len(saved) != len(current_groups):
         raise PolicyFormatError(
-            f"{where}: optimizer {name!r} has {len(saved['param_groups'])} param groups; "
+            f"{where}: optimizer {name!r} has {len(saved)} param groups; "
             f"this model's optimizer has {len(current_groups)}"
         )
     groups = []
-    for group, current in zip(saved["param_groups"], current_groups, strict=True):
-        if not isinstance(group, dict):
-            raise PolicyFormatError(f"{where}: optimizer {name!r} has a malformed param group")
+    for number, (group, current) in enumerate(zip(saved, current_groups, strict=True)):
+        label = f"{where}: optimizers.{name}.param_groups[{number}]"
+        if not isinstance(group, dict) or "params" not in group or set(group) - set(current):
+            keys = sorted(group) if isinstance(group, dict) else group
+            raise PolicyFormatError(f"{label} must have params and entries of {sorted(current)}; got {keys!r}")
+        # A setting the writer's torch did not have yet takes this torch's value, as torch does.
+        group = {**current, **group}
+        if group["params"] != current["params"]:
+            raise PolicyFormatError(f"{label}.params must be {current['params']}; got {group['params']!r}")
+        for key, value in group.items():
+            if not _same_kind(value, current[key]):
+                raise PolicyFormatError(
+                    f"{label}.{key} must be {type(current[key]).__name__} like {current[key]!r}; got {value!r}"
+                )
         # JSON has no tuples; give back tuples where the optimizer uses them (Adam's betas).
-        groups.append(
-            {
-                key: tuple(value) if isinstance(current.get(key), tuple) and isinstance(value, list) else value
-                for key, value in group.items()
-            }
-        )
+        groups.append({key: tuple(value) if isinstance(current[key], tuple) else value for key, value in group.items()})
+    return groups
+
+
+def _parameter_state(
+    optimizer: torch.optim.Optimizer,
+    saved: dict[str, Any],
+    tensors: Mapping[str, torch.Tensor],
+    name: str,
+    where: Path,
+    tensors_where: Path,
+) -> dict[int, dict[str, Any]]:
+    """The per-parameter state of ``optimizer`` by parameter index: every tensor of its
+    parameter's shape and dtype (a scalar ``step``), every scalar a number, the entries its class
+    needs, for every parameter or none."""
+    parameters = [parameter for group in optimizer.param_groups for parameter in group["params"]]
+
+    def index_of(text: str, label: str) -> int:
+        if not (text.isdigit() and int(text) < len(parameters)):
+            raise PolicyFormatError(
+                f"{label}: parameter index {text!r} is not one of this optimizer's 0..{len(parameters) - 1}"
+            )
+        return int(text)
+
     state: dict[int, dict[str, Any]] = {}
     prefix = f"{name}/state/"
     for key, tensor in tensors.items():
         if key.startswith(prefix):
-            index, _, entry = key[len(prefix) :].partition("/")
-            state.setdefault(int(index), {})[entry] = tensor
-    for index, entries in (saved.get("scalars") or {}).items():
-        state.setdefault(int(index), {}).update(entries)
-    # In parameter order, as the optimizer built it: load_state_dict keeps the order it is given,
-    # and the next save writes it.
-    state = dict(sorted(state.items()))
-    try:
-        optimizer.load_state_dict({"state": state, "param_groups": groups})
-    except (ValueError, KeyError, TypeError) as error:
-        raise PolicyFormatError(f"{where}: optimizer {name!r} does not fit this model: {error}") from error
+            text, _, entry = key[len(prefix) :].partition("/")
+            index = index_of(text, f"{tensors_where}: tensor {key!r}")
+            parameter = parameters[index]
+            shape = () if entry == "step" else tuple(parameter.shape)
+            if tuple(tensor.shape) != shape or tensor.dtype != parameter.dtype:
+                raise PolicyFormatError(
+                    f"{tensors_where}: tensor {key!r} is {tuple(tensor.shape)} {tensor.dtype}; the parameter it "
+                    f"belongs to needs {shape} {parameter.dtype}: restore or re-create the checkpoint"
+                )
+            state.setdefault(index, {})[entry] = tensor
+    scalars = saved.get("scalars") or {}
+    if not isinstance(scalars, dict):
+        raise PolicyFormatError(f"{where}: optimizers.{name}.scalars must be an object; got {scalars!r}")
+    for text, entries in scalars.items():
+        label = f"{where}: optimizers.{name}.scalars.{text}"
+        index = index_of(text, label)
+        if not isinstance(entries, dict):
+            raise PolicyFormatError(f"{label} must be an object; got {entries!r}")
+        for key, value in entries.items():
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise PolicyFormatError(f"{label}.{key} must be a number or null; got {value!r}")
+            state.setdefault(index, {})[key] = value
+    required = _REQUIRED_STATE.get(type(optimizer).__name__, frozenset())
+    for index, entries in state.items():
+        missing, extra = sorted(required - set(entries)), sorted(set(entries) - required - _OPTIONAL_STATE)
+        if missing or extra:
+            raise PolicyFormatError(
+                f"{tensors_where}: optimizer {name!r}, parameter {index}: "
+                + (f"missing {missing} " if missing else "")
+                + (f"unknown {extra} " if extra else "")
+                + f"(a {type(optimizer).__name__} state has {sorted(required)}): restore or re-create the checkpoint"
+            )
+    if state and sorted(state) != list(range(len(parameters))):
+        raise PolicyFormatError(
+            f"{tensors_where}: optimizer {name!r} has state for parameters {sorted(state)[:8]}, not for each of its "
+            f"{len(parameters)}: restore or re-create the checkpoint"
+        )
+    return state

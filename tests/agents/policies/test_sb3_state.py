@@ -154,13 +154,14 @@ def test_sac_round_trip_and_resume_state(tmp_path: Path) -> None:
 def test_a_saved_optimizer_with_another_number_of_param_groups_is_refused(tmp_path: Path) -> None:
     """Extra saved param groups must not be dropped quietly: the optimizer would resume with
     settings that are not the ones it was saved with."""
-    from agents.policies.sb3_state import _restore_optimizer
+    from agents.policies.sb3_state import _optimizer_state
 
     optimizer = torch.optim.Adam(torch.nn.Linear(2, 1).parameters())
     group = {
         key: list(v) if isinstance(v, tuple) else v for key, v in optimizer.state_dict()["param_groups"][0].items()
     }
-    _restore_optimizer(optimizer, {"param_groups": [group]}, {}, "actor.optimizer", tmp_path)  # the fitting case loads
+    # The fitting case is accepted.
+    _optimizer_state(optimizer, {"param_groups": [group]}, {}, "actor.optimizer", tmp_path, tmp_path)
     for groups in ([group, dict(group)], []):
         with pytest.raises(PolicyFormatError, match=f"has {len(groups)} param groups; this model's optimizer has 1"):
-            _restore_optimizer(optimizer, {"param_groups": groups}, {}, "actor.optimizer", tmp_path)
+            _optimizer_state(optimizer, {"param_groups": groups}, {}, "actor.optimizer", tmp_path, tmp_path)
