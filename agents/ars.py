@@ -31,7 +31,10 @@ from .common.files import OutputError
 from .policies.layout import PolicyFormatError
 from .training.ars import load_ars_settings, train_ars
 
-__all__ = ["build_parser", "main"]
+__all__ = ["ERRORS", "build_parser", "main"]
+
+#: The refusals that end the command with ``<program>: error: <message>`` (see :func:`exit_on_error`).
+ERRORS = (OutputError, PolicyFormatError, ValueError, OSError)
 
 
 #: The command line of ``ars``, from :mod:`agents.common.cli` (where the console script parses it
@@ -56,4 +59,4 @@ def main(argv: list[str] | None = None) -> Path:
 
 
 if __name__ == "__main__":
-    exit_on_error("ars", main, (OutputError, PolicyFormatError, ValueError, OSError))
+    exit_on_error("ars", main, ERRORS)

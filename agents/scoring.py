@@ -19,10 +19,14 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from .common import cli
 from .common.commands import exit_on_error, program
 from .evaluation.scoring import REFERENCE_FILE, ReferenceDataError, score_policy, write_reference
 
-__all__ = ["build_parser", "main", "score_policy"]
+__all__ = ["ERRORS", "build_parser", "main", "score_policy"]
+
+#: The refusals that end the command with ``<program>: error: <message>`` (see :func:`exit_on_error`).
+ERRORS = (ReferenceDataError, OSError, ValueError)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -33,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
         "benchmark.json of a run of python -m agents.benchmark (on the ids' own settings). Every statistic is "
         "checked against the per-episode returns on the way.",
     )
-    parser.add_argument("benchmark_json", help="the benchmark.json of the run")
+    parser.add_argument("benchmark_json", type=cli.existing_file, help="the benchmark.json of the run")
     parser.add_argument("--commit", required=True, help="the git commit the benchmark ran at")
     parser.add_argument("--out", default=str(REFERENCE_FILE), help=f"where to write (default {REFERENCE_FILE})")
     parser.add_argument("--date", help="when the benchmark ran, ISO 8601 (default: benchmark.json's time, UTC)")
@@ -56,4 +60,4 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    exit_on_error("scoring", main, (ReferenceDataError, OSError, ValueError))
+    exit_on_error("scoring", main, ERRORS)

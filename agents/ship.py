@@ -35,7 +35,10 @@ from .common.files import OutputError
 from .policies.layout import PolicyFormatError
 from .training.shipping import ship
 
-__all__ = ["build_parser", "main"]
+__all__ = ["ERRORS", "build_parser", "main"]
+
+#: The refusals that end the command with ``<program>: error: <message>`` (see :func:`exit_on_error`).
+ERRORS = (OutputError, PolicyFormatError, FileNotFoundError, ValueError)
 
 
 #: The command line of ``ship``, from :mod:`agents.common.cli` (where the console script parses it
@@ -58,4 +61,4 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
 
 
 if __name__ == "__main__":
-    exit_on_error("ship", main, (OutputError, PolicyFormatError, FileNotFoundError, ValueError))
+    exit_on_error("ship", main, ERRORS)

@@ -61,7 +61,10 @@ from .training.config import TrainConfig
 from .training.hyperparams import HyperparameterError, load_hyperparameters
 from .training.sb3 import train
 
-__all__ = ["build_parser", "config_from_args", "main"]
+__all__ = ["ERRORS", "build_parser", "config_from_args", "main"]
+
+#: The refusals that end the command with ``<program>: error: <message>`` (see :func:`exit_on_error`).
+ERRORS = (PickleNotTrustedError, OutputError, PolicyFormatError, HyperparameterError, ValueError, OSError)
 
 
 #: The command line of ``train``, from :mod:`agents.common.cli` (where the console script parses it
@@ -104,8 +107,4 @@ def main(argv: list[str] | None = None) -> Path:
 
 
 if __name__ == "__main__":
-    exit_on_error(
-        "train",
-        main,
-        (PickleNotTrustedError, OutputError, PolicyFormatError, HyperparameterError, ValueError, OSError),
-    )
+    exit_on_error("train", main, ERRORS)

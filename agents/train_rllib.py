@@ -61,7 +61,10 @@ from .policies.layout import PolicyFormatError
 from .policies.pickled import PickleNotTrustedError
 from .training.rllib import ALGO, RayUnavailableError, RLlibConfig, train_rllib
 
-__all__ = ["build_parser", "main"]
+__all__ = ["ERRORS", "build_parser", "main"]
+
+#: The refusals that end the command with ``<program>: error: <message>`` (see :func:`exit_on_error`).
+ERRORS = (RayUnavailableError, PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError)
 
 
 #: The command line of ``train_rllib``, from :mod:`agents.common.cli` (where the console script parses it
@@ -84,8 +87,4 @@ def main(argv: list[str] | None = None) -> Path:
 
 
 if __name__ == "__main__":
-    exit_on_error(
-        "train_rllib",
-        main,
-        (RayUnavailableError, PickleNotTrustedError, OutputError, PolicyFormatError, ValueError, OSError),
-    )
+    exit_on_error("train_rllib", main, ERRORS)

@@ -34,6 +34,7 @@ __all__ = [
     "add_env_argument",
     "build_parser",
     "did_you_mean",
+    "existing_file",
     "float_between",
     "int_at_least",
     "parse_before_imports",
@@ -84,6 +85,17 @@ def float_between(low: float, high: float) -> Callable[[str], float]:
         return value
 
     return parse
+
+
+def existing_file(text: str) -> str:
+    """An argparse ``type`` for a file that must exist (a YAML or JSON file the command reads):
+    a missing one is reported by argparse under the option's name, before any work."""
+    import os.path
+
+    if not os.path.isfile(text):
+        what = "is a directory, not a file" if os.path.isdir(text) else "does not exist"
+        raise argparse.ArgumentTypeError(f"{text!r} {what}: pass an existing file")
+    return text
 
 
 def did_you_mean(name: str, known: Iterable[str]) -> str:
@@ -175,6 +187,7 @@ def train_parser() -> argparse.ArgumentParser:
     parser.add_argument("--n-envs", type=int_at_least(1), help="parallel envs, instead of the file's n_envs")
     parser.add_argument(
         "--hyperparams",
+        type=existing_file,
         help=f"YAML file instead of {_hyperparams('<algo>.yml')}, or a run's "
         "config.yml (reproduces that run's hyperparameters)",
     )
@@ -244,7 +257,9 @@ def train_rllib_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--num-cpus", type=int_at_least(1), help="CPUs of the local Ray instance (default: all)")
     parser.add_argument(
-        "--hyperparams", help=f"YAML file instead of {_hyperparams(f'{RLLIB_ALGO}.yml')}, or a run's config.yml"
+        "--hyperparams",
+        type=existing_file,
+        help=f"YAML file instead of {_hyperparams(f'{RLLIB_ALGO}.yml')}, or a run's config.yml",
     )
     parser.add_argument("--resume", help="RLlib checkpoint (<run>/checkpoints/iter_<n>) or run directory (its latest)")
     parser.add_argument(
@@ -286,6 +301,7 @@ def ars_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--hyperparams",
+        type=existing_file,
         help=f"YAML file instead of {_hyperparams('ars.yml')}, or a run's config.yml (reproduces it)",
     )
     parser.add_argument("--iterations", type=int_at_least(1), help="ARS iterations, instead of the file's")

@@ -92,6 +92,7 @@ from ..common.files import holds_output_claims, prepare_table_outputs
 from ..common.versions import BENCHMARK_PACKAGES, package_versions
 from ..controllers.registry import BASELINES
 from ..policies import OtherIdError, make_controller, shipped_models
+from ..policies.format import is_policy_dir
 from ..policies.layout import PolicyFormatError
 from ..policies.pickled import PickleNotTrustedError
 from .plots import plot_aggregate, plot_normalised_scores, plot_paired_differences
@@ -167,7 +168,7 @@ class BenchmarkConfig:
     """The command line recorded in the outputs (None: the Python call)."""
 
     def __post_init__(self) -> None:
-        env_ids = _check_names("env_ids", self.env_ids, allowed=list(ENV_IDS))
+        env_ids = _check_names("env_ids (--envs)", self.env_ids, allowed=list(ENV_IDS))
         controllers = _check_names("controllers", self.controllers)
         object.__setattr__(self, "env_ids", None if env_ids is None else tuple(env_ids))
         object.__setattr__(self, "controllers", None if controllers is None else tuple(controllers))
@@ -317,12 +318,12 @@ def _check_reference(config: BenchmarkConfig, shipped: dict[str, dict[str, Path]
     misspelt one would run nothing and leave every score "not available"), with the closest name."""
     known = [*BASELINES, REFERENCE, *(m for models in shipped.values() for m in models)]
     reference = config.reference
-    if reference in known or reference in (config.controllers or ()) or Path(reference).exists():
+    if reference in known or reference in (config.controllers or ()) or is_policy_dir(reference):
         return
     raise ValueError(
         f"--reference {reference!r} is no controller of the selected ids{did_you_mean(reference, known)}: "
-        f"pass a baseline ({', '.join(BASELINES)}), {REFERENCE}, a model shipped for the selected ids, or an "
-        "existing policy directory"
+        f"pass a baseline ({', '.join(BASELINES)}), {REFERENCE}, a model shipped for the selected ids, or a "
+        "policy directory"
     )
 
 

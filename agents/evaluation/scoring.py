@@ -580,12 +580,15 @@ def write_reference(
     scores to ``out`` (atomically); returns them. ``date`` defaults to the time
     ``benchmark_json`` was last written (the end of the benchmark run), in UTC. An existing
     ``out`` is replaced only with ``force``."""
-    from ..common.files import OutputExistsError, atomic_write_text
+    from ..common.files import OutputError, atomic_write_text, check_output_files
 
     source = Path(benchmark_json)
     target = Path(out)
-    if target.exists() and not force:
-        raise OutputExistsError(f"{target} exists: pass --force (force=True) to replace it")
+    if not target.parent.is_dir():
+        raise OutputError(f"--out {target}: {target.parent} is not a directory: pass a path in an existing directory")
+    # Checked before the benchmark is read: a symlink or a directory at --out is refused, an
+    # existing file is replaced only with force.
+    check_output_files(target.parent, [target.name], force, argument="--out", what="an earlier scoring")
     results = json.loads(source.read_text(encoding="utf-8"))
     if date is None:
         written = datetime.datetime.fromtimestamp(source.stat().st_mtime, tz=datetime.timezone.utc)

@@ -1,31 +1,52 @@
-"""Property-based fuzzing of the commands' arguments (compare, train, benchmark, convert).
+"""Property-based fuzzing of the commands' arguments: every command of
+:mod:`agents.common.commands`, found there, so that a new command is fuzzed from the day it lands.
 
-Every argument list either parses into valid settings, or argparse exits with status 2 and a
-message that names the offending option (or the missing or unrecognised one). A parsed
-integer option is never out of its range: the custom argument types refuse it first.
+* Every argument list either parses into valid settings, or argparse exits with status 2 and a
+  message that names the offending option (or the missing or unrecognised one). A parsed
+  integer option is never out of its range: the custom argument types refuse it first.
+* Every argument list run through the command's ``main`` either reaches the command's work (a
+  stand-in here) with settings that were all checked, or is refused by argparse (status 2) or with
+  one of the command's own errors (``ERRORS``, which its ``__main__`` block turns into
+  ``<program>: error: <message>``): never a traceback of another kind.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import io
+import os
+import tempfile
+from types import ModuleType
 from typing import Any
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agents import benchmark, compare, convert, train
+from agents.common import commands
 
 #: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
 pytestmark = pytest.mark.slow
 
-PARSERS = {
-    "compare": compare.build_parser,
-    "train": train.build_parser,
-    "benchmark": benchmark.build_parser,
-    "convert": convert.build_parser,
+#: Every command: the console scripts' and the module-only ones.
+COMMANDS = sorted({*commands.SCRIPTS, *commands.MODULE_ONLY_COMMANDS})
+MODULES: dict[str, ModuleType] = {name: importlib.import_module(f"agents.{name}") for name in COMMANDS}
+PARSERS = {name: module.build_parser for name, module in MODULES.items()}
+
+#: The function each command's ``main`` hands its checked settings to, in the command's module: the
+#: work (training, rollouts, files), which the fuzzing replaces by a stand-in. A new command needs an
+#: entry here (a test fails until it has one).
+WORK = {
+    "ars": "train_ars",
+    "benchmark": "benchmark",
+    "compare": "compare",
+    "convert": "convert",
+    "scoring": "write_reference",
+    "ship": "ship",
+    "train": "train",
+    "train_rllib": "train_rllib",
 }
 
 
@@ -98,24 +119,143 @@ def check_parsed(arguments: dict[str, Any]) -> None:
         "timesteps": 1,
         "n_envs": 1,
         "eval_freq": 1,
-        "eval_episodes": 1,
+        "eval_episodes": 2,
         "checkpoint_freq": 1,
         "verbose": 0,
         "check_observations": 16,
+        "bootstrap_reps": 100,
+        "num_env_runners": 0,
+        "envs_per_runner": 1,
+        "num_cpus": 1,
+        "iterations": 1,
     }
     for key, low in minimum.items():
         value = arguments.get(key)
         if isinstance(value, int):
             assert value >= low, (key, value)
+    for fraction in arguments.get("curriculum") or ():
+        assert 0.0 <= fraction <= 1.0, arguments["curriculum"]
 
 
-@pytest.mark.parametrize("command", sorted(PARSERS))
+#: The commands without a count option (the others' first count is checked below).
+NO_COUNT = {"scoring"}
+
+
+@pytest.mark.parametrize("command", sorted(set(PARSERS) - NO_COUNT))
 def test_a_bad_count_names_its_option(command: str) -> None:
     parser = PARSERS[command]()
-    counts = [o for o in ("--episodes", "--timesteps", "--check-observations") if o in options_of(parser)]
+    counts = [
+        o for o in ("--episodes", "--timesteps", "--check-observations", "--iterations") if o in options_of(parser)
+    ]
     assert counts, f"{command} has no count option"
     option = counts[0]
     stderr = io.StringIO()
     with contextlib.redirect_stderr(stderr), pytest.raises(SystemExit):
         parser.parse_args([option, "-5"])
     assert option in stderr.getvalue()
+
+
+def test_every_command_is_fuzzed() -> None:
+    """A command added to agents.common.commands is fuzzed from the day it lands: it needs a
+    parser, an ``ERRORS`` tuple and an entry in :data:`WORK` naming its work function."""
+    for name in COMMANDS:
+        module = MODULES[name]
+        assert name in WORK, f"agents.{name} has no entry in WORK: name the function its main() hands the work to"
+        assert callable(getattr(module, WORK[name], None)), f"agents.{name} has no {WORK[name]}"
+        errors = getattr(module, "ERRORS", None)
+        assert isinstance(errors, tuple) and errors, f"agents.{name} has no ERRORS tuple of its refusals"
+        assert isinstance(module.build_parser(), argparse.ArgumentParser)
+
+
+#: Values an option may plausibly get: boundaries of the counts, non-finite numbers, near-miss names.
+plausible_values = st.one_of(
+    st.integers(-2, 3).map(str),
+    st.integers(0, 10**7).map(str),
+    st.sampled_from(["nan", "inf", "-inf", "0.5", "1.5", "1e6", "mcp", "lqr", "mpc", "passive", "TetherChain-v0"]),
+    st.sampled_from(["out", "out/sub", "/dev/null", "policy_dir", "benchmark.json", "."]),
+)
+
+
+@st.composite
+def plausible_command_lines(draw: st.DrawFn, parser: argparse.ArgumentParser) -> list[str]:
+    """A command line made from ``parser``'s own actions: each option with as many values as it
+    takes (a choice, a near-miss of one, or a plausible value), the positionals filled in."""
+    tokens: list[str] = []
+
+    def values_for(action: argparse.Action) -> list[str]:
+        count = {None: 1, "?": draw(st.integers(0, 1)), "+": draw(st.integers(1, 3)), "*": draw(st.integers(0, 2))}.get(
+            action.nargs, action.nargs
+        )
+        strategy = plausible_values
+        if action.choices:
+            choices = [str(choice) for choice in action.choices]
+            strategy = st.one_of(st.sampled_from(choices), st.sampled_from(choices).map(lambda c: c[:-1] or "x"))
+        return [draw(strategy) for _ in range(int(count))]
+
+    optionals = [a for a in parser._actions if a.option_strings and "--help" not in a.option_strings]
+    for action in draw(st.lists(st.sampled_from(optionals), max_size=5, unique_by=id)):
+        tokens.append(next(o for o in action.option_strings if o.startswith("--")))
+        if action.nargs != 0:
+            tokens.extend(values_for(action))
+    for action in (a for a in parser._actions if not a.option_strings):
+        tokens.extend(values_for(action))
+    return tokens
+
+
+def argument_names(parser: argparse.ArgumentParser) -> set[str]:
+    """How a message may name one of ``parser``'s arguments: an option (``--eval-episodes``), its
+    setting's name (``eval_episodes``, as the configs' errors do) or a positional's metavar (``SRC``)."""
+    names: set[str] = set()
+    for action in parser._actions:
+        names.update(action.option_strings)
+        names.update({action.dest, action.dest.replace("_", "-")})
+        metavars = action.metavar if isinstance(action.metavar, tuple) else (action.metavar,)
+        names.update(m for m in metavars if m)
+    names.discard("help")
+    return names
+
+
+class ReachedTheWork(Exception):
+    """The stand-in for a command's work: everything before it (the checks) passed."""
+
+
+def _reach_the_work(*args: Any, **kwargs: Any) -> None:
+    raise ReachedTheWork
+
+
+@settings(
+    max_examples=400,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+)
+@given(command=st.sampled_from(COMMANDS), data=st.data())
+def test_any_command_line_reaches_the_work_or_is_refused_by_name(command: str, data: st.DataObject) -> None:
+    module = MODULES[command]
+    parser = PARSERS[command]()
+    tokens = data.draw(plausible_command_lines(parser), label="command line")
+    stderr, stdout = io.StringIO(), io.StringIO()
+    with (
+        tempfile.TemporaryDirectory() as scratch,
+        pytest.MonkeyPatch.context() as patch,
+        contextlib.redirect_stderr(stderr),
+        contextlib.redirect_stdout(stdout),
+    ):
+        patch.setattr(module, WORK[command], _reach_the_work)
+        patch.chdir(scratch)  # relative paths among the values land in a scratch directory
+        try:
+            module.main(tokens)
+        except ReachedTheWork:
+            assert sorted(os.listdir(scratch)) == [], "the checks wrote into the working directory"
+            return
+        except SystemExit as exit_:
+            assert exit_.code == 2, stderr.getvalue()
+            assert "Traceback" not in stderr.getvalue()
+            return
+        except module.ERRORS as error:
+            message = str(error)
+            assert any(name in message for name in argument_names(parser)), (
+                f"agents.{command} {tokens}: {type(error).__name__} names no argument: {message}"
+            )
+            return
+    pytest.fail(f"agents.{command} {tokens} returned without reaching its work")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import subprocess
 import sys
 import time
@@ -161,3 +162,25 @@ def test_a_command_parses_before_its_slow_imports(command: str, form: str) -> No
     assert "exit 0" in lines and "exit 2" in lines, result.stdout[-500:]
     assert lines[-1] == "[]", f"{command} --help imported {lines[-1]}"
     assert "error:" in result.stderr
+
+
+@pytest.mark.parametrize(
+    ("command", "arguments", "message"),
+    [
+        # One evaluation episode has no interval of its paired difference: it failed at the first evaluation.
+        ("train", ["--eval-episodes", "1"], "argument --eval-episodes: must be at least 2; got 1"),
+        ("train_rllib", ["--eval-episodes", "1"], "argument --eval-episodes: must be at least 2; got 1"),
+        ("train", ["--curriculum", "nan", "0.5"], r"argument --curriculum: must be a finite number in \[0, 1\]"),
+        ("train", ["--curriculum", "0.5", "2"], r"argument --curriculum: must be a finite number in \[0, 1\]"),
+        ("train", ["--hyperparams", "no-such.yml"], "argument --hyperparams: 'no-such.yml' does not exist"),
+        ("ars", ["--hyperparams", "."], "argument --hyperparams: '.' is a directory, not a file"),
+        ("train_rllib", ["--hyperparams", "no-such.yml"], "argument --hyperparams: 'no-such.yml' does not exist"),
+    ],
+)
+def test_the_parser_refuses_what_would_fail_later_by_name(
+    command: str, arguments: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        cli.build_parser(command).parse_args(arguments)
+    assert exit_.value.code == 2
+    assert re.search(message, capsys.readouterr().err)

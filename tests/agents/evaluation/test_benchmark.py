@@ -156,7 +156,7 @@ def test_the_config_keeps_checked_values_and_is_frozen() -> None:
     with pytest.raises(dataclasses.FrozenInstanceError):
         config.seed = 0  # type: ignore[misc]
     for settings, message in [
-        ({"env_ids": ["Nope-v0"]}, r"env_ids: unknown \['Nope-v0'\]"),
+        ({"env_ids": ["Nope-v0"]}, r"env_ids \(--envs\): unknown \['Nope-v0'\]"),
         ({"controllers": ["lqr", "lqr"]}, r"controllers lists \['lqr'\] more than once"),
         ({"episodes": 1}, "episodes must be an integer >= 2; got 1"),
         ({"bootstrap_reps": 99}, "bootstrap_reps must be an integer >= 100; got 99"),
@@ -191,8 +191,13 @@ def test_bad_output_or_controller_is_refused_before_any_rollout(
     with pytest.raises(OutputError, match="symlink"):
         main(["--envs", SMOKE_IDS[0], "--out", str(earlier), "--force"])
     assert (earlier / "benchmark.md").read_text() == "an earlier benchmark"
-    with pytest.raises(ValueError, match="unknown controllers \\['pasive'\\]"):
+    with pytest.raises(ValueError, match="unknown controllers \\['pasive'\\] \\(did you mean 'passive'\\?\\)"):
         main(["--envs", SMOKE_IDS[0], "--controllers", "pasive", "--out", str(tmp_path / "new")])
+    # A misspelt reference would run nothing and leave every score "not available": refused, with the closest name.
+    with pytest.raises(ValueError, match="--reference 'mcp' is no controller .*\\(did you mean 'mpc'\\?\\)"):
+        main(["--envs", SMOKE_IDS[0], "--reference", "mcp", "--out", str(tmp_path / "new")])
+    with pytest.raises(ValueError, match="--reference '.' is no controller"):  # a directory, but no policy
+        main(["--envs", SMOKE_IDS[0], "--reference", ".", "--out", str(tmp_path / "new")])
     with pytest.raises(ValueError, match="reference"):
         BenchmarkConfig(env_ids=[SMOKE_IDS[0]], reference="passive", out=tmp_path / "new")
     with pytest.raises(SystemExit):  # argparse: --episodes must be at least 2

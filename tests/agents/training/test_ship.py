@@ -4,11 +4,13 @@ candidate on the evaluation seeds, every run is recorded."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import gymnasium as gym
 import pytest
 
+import agents.training.shipping
 from agents.common.files import OutputError
 from agents.evaluation.rollout import rollout
 from agents.policies import TrainedPolicy, make_controller, shipped_models
@@ -18,7 +20,7 @@ from agents.training.config import TrainConfig
 from agents.training.hyperparams import HyperparameterError, load_hyperparameters
 from agents.training.sb3 import train
 from agents.training.selection import evaluation_seeds
-from agents.training.shipping import ship
+from agents.training.shipping import RunFileError, ship
 from tether_gym import ENV_IDS
 
 ENV = "TetherTetrahedron-v0"
@@ -139,3 +141,108 @@ def test_every_id_ships_a_learned_model_that_beats_passive(env_id: str) -> None:
         verify_manifest(models[name])  # every file listed, each as shipped
         returns = rollout(make_controller(name, env), env_id, seeds).rewards.sum(axis=1)
         assert returns.mean() > passive.mean(), (name, returns.mean(), passive.mean())
+
+
+@pytest.fixture
+def no_rollouts(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make any rollout of ship fail the test: what ship refuses, it refuses before any work."""
+    monkeypatch.setattr(
+        agents.training.shipping, "evaluate_candidates", lambda *a, **k: pytest.fail("rolled out before the refusal")
+    )
+
+
+@pytest.mark.slow
+def test_ship_never_deletes_files_it_did_not_write(runs: list[Path], tmp_path: Path) -> None:
+    out = tmp_path / "models"
+    ship(runs[:1], out, episodes=2)
+    target = out / ENV / "ppo"
+    before = {p.name: p.read_bytes() for p in target.iterdir()}
+    (target / "notes.txt").write_text("mine")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(
+            agents.training.shipping, "evaluate_candidates", lambda *a, **k: pytest.fail("rolled out before refusing")
+        )
+        for force in (False, True):
+            with pytest.raises(OutputError, match=r"notes\.txt, which ship does not write"):
+                ship(runs[1:2], out, episodes=2, force=force)
+    assert (target / "notes.txt").read_text() == "mine"
+    assert {p.name: p.read_bytes() for p in target.iterdir() if p.name != "notes.txt"} == before
+
+
+@pytest.mark.slow
+def test_ship_refuses_a_symlink_below_out_before_any_rollout(
+    runs: list[Path], tmp_path: Path, no_rollouts: None
+) -> None:
+    out, elsewhere = tmp_path / "models", tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    out.mkdir()
+    (out / ENV).symlink_to(elsewhere)
+    with pytest.raises(OutputError, match=rf"{ENV} is a symlink"):
+        ship(runs[:1], out, episodes=2)
+    (out / ENV).unlink()
+    (out / "training_runs.md").symlink_to(elsewhere / "table.md")
+    with pytest.raises(OutputError, match=r"training_runs\.md is a symlink"):
+        ship(runs[:1], out, episodes=2)
+    assert list(elsewhere.iterdir()) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ("{", r"training_runs\.json is not valid JSON"),
+        ('{"runs": {}}', r"training_runs\.json: runs must be a list"),
+        ('{"runs": [{"env_id": 1}]}', r"training_runs\.json: runs\[0\]\.env_id must be a string"),
+        ("[" * 5000 + "]" * 5000, r"training_runs\.json nests"),
+    ],
+)
+def test_ship_refuses_a_malformed_runs_table_before_any_rollout(
+    runs: list[Path], tmp_path: Path, table: str, message: str, no_rollouts: None
+) -> None:
+    out = tmp_path / "models"
+    out.mkdir()
+    (out / "training_runs.json").write_text(table)
+    with pytest.raises(RunFileError, match=message):
+        ship(runs[:1], out, episodes=2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "text", "message"),
+    [
+        ("config.yml", "seed: [", r"config\.yml is not valid YAML"),
+        ("config.yml", "seed: one\n", r"config\.yml: seed must be an integer"),
+        ("config.yml", "- a list\n", r"config\.yml: the file must be a mapping"),
+        ("best/evaluations.json", '{"first_beat": {"lqr": {"timesteps": "x"}}}', r"first_beat\.lqr\.wall_time_s"),
+        ("best/evaluations.json", '{"training": []}', r"evaluations\.json: training must be an object"),
+    ],
+)
+def test_ship_refuses_a_malformed_run_file_before_any_rollout(
+    runs: list[Path], tmp_path: Path, name: str, text: str, message: str, no_rollouts: None
+) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(runs[0], run)
+    (run / name).write_text(text)
+    with pytest.raises(RunFileError, match=message):
+        ship([run], tmp_path / "models", episodes=2)
+    assert not (tmp_path / "models" / ENV).exists()
+
+
+@pytest.mark.slow
+def test_an_interrupted_install_leaves_the_shipped_model_whole(
+    runs: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "models"
+    ship(runs[:1], out, episodes=2)
+    target = out / ENV / "ppo"
+    before = {p.name: p.read_bytes() for p in target.iterdir()}
+
+    def interrupted(*args: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(agents.training.shipping, "_write_reference_actions", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        ship(runs[1:], out, episodes=2, force=True)
+    verify_manifest(target)
+    assert {p.name: p.read_bytes() for p in target.iterdir()} == before
+    assert sorted(p.name for p in (out / ENV).iterdir()) == ["ppo"]  # no staging directory left
