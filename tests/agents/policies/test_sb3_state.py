@@ -8,6 +8,7 @@ import json
 import operator
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -165,3 +166,136 @@ def test_a_saved_optimizer_with_another_number_of_param_groups_is_refused(tmp_pa
     for groups in ([group, dict(group)], []):
         with pytest.raises(PolicyFormatError, match=f"has {len(groups)} param groups; this model's optimizer has 1"):
             _optimizer_state(optimizer, {"param_groups": groups}, {}, "actor.optimizer", tmp_path, tmp_path)
+
+
+def trained_state() -> tuple[dict[str, torch.Tensor], dict]:
+    model = tiny_ppo(seed=0)
+    model.learn(32)
+    tensors, meta = capture_training_state(model)
+    return tensors, json.loads(json.dumps(meta, allow_nan=False))
+
+
+def corrupted(meta: dict, path: tuple[str | int, ...], value: object) -> dict:
+    """A deep copy of ``meta`` with the entry at ``path`` set to ``value``."""
+    copy = json.loads(json.dumps(meta))
+    target = copy
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value
+    return copy
+
+
+MOMENT = "policy.optimizer/state/0/exp_avg"
+GROUP = ("optimizers", "policy.optimizer", "param_groups", 0)
+Tensors = dict[str, torch.Tensor]
+
+
+def renamed(tensors: Tensors, old: str, new: str) -> Tensors:
+    return {new if key == old else key: value for key, value in tensors.items()}
+
+
+#: name -> (what it does to (tensors, training.json), the error it must raise)
+BAD_STATES: dict[str, tuple[Any, str]] = {
+    "misshapen": (
+        lambda t, m: ({**t, MOMENT: torch.zeros(3)}, m),
+        r"tensor 'policy.optimizer/state/0/exp_avg' is \(3,\) torch.float32; the parameter it belongs to",
+    ),
+    "float64": (
+        lambda t, m: ({**t, MOMENT: t[MOMENT].double()}, m),
+        r"is \(9,\) torch.float64; the parameter it belongs to needs \(9,\) torch.float32",
+    ),
+    "step_shape": (
+        lambda t, m: ({**t, "policy.optimizer/state/0/step": torch.zeros(2)}, m),
+        r"tensor 'policy.optimizer/state/0/step' is \(2,\)",
+    ),
+    "missing_moment": (
+        lambda t, m: ({k: v for k, v in t.items() if not k.endswith("exp_avg_sq")}, m),
+        r"parameter 0: missing \['exp_avg_sq'\]",
+    ),
+    "bad_index": (
+        lambda t, m: (renamed(t, MOMENT, "policy.optimizer/state/x/exp_avg"), m),
+        r"parameter index 'x' is not one of this optimizer's",
+    ),
+    "far_index": (
+        lambda t, m: (renamed(t, MOMENT, "policy.optimizer/state/99/exp_avg"), m),
+        r"parameter index '99' is not one of this optimizer's",
+    ),
+    "unknown_tensor": (
+        lambda t, m: ({**t, "stray": torch.zeros(1)}, m),
+        r"tensors \['stray'\] belong to no optimizer or variable",
+    ),
+    "partial": (
+        lambda t, m: ({k: v for k, v in t.items() if "/state/0/" not in k}, m),
+        r"has state for parameters \[1, 2",
+    ),
+    "lr_text": (
+        lambda t, m: (t, corrupted(m, (*GROUP, "lr"), "0.001")),
+        r"param_groups\[0\].lr must be float like .*; got '0.001'",
+    ),
+    "betas_text": (
+        lambda t, m: (t, corrupted(m, (*GROUP, "betas"), "0.9, 0.999")),
+        r"param_groups\[0\].betas must be tuple",
+    ),
+    "flag_number": (lambda t, m: (t, corrupted(m, (*GROUP, "amsgrad"), 1)), r"param_groups\[0\].amsgrad must be bool"),
+    "params": (lambda t, m: (t, corrupted(m, (*GROUP, "params"), [0, 1])), r"param_groups\[0\].params must be \[0, 1"),
+    "unknown_group_entry": (
+        lambda t, m: (t, corrupted(m, (*GROUP, "momentum_of_doom"), 1.0)),
+        r"param_groups\[0\] must have params and entries of",
+    ),
+    "scalar_text": (
+        lambda t, m: (t, corrupted(m, ("optimizers", "policy.optimizer", "scalars"), {"0": {"step": "three"}})),
+        r"scalars.0.step must be a number or null; got 'three'",
+    ),
+    "negative_counter": (
+        lambda t, m: (t, corrupted(m, ("counters", "num_timesteps"), -1)),
+        r"counters.num_timesteps must be a count >= 0; got -1",
+    ),
+    "text_counter": (
+        lambda t, m: (t, corrupted(m, ("counters", "n_updates"), "2")),
+        r"'n_updates' must be int; got '2'",
+    ),
+}
+
+
+@pytest.mark.parametrize("change", sorted(BAD_STATES))
+def test_a_resume_state_with_bad_content_is_refused_by_name_and_leaves_the_model_as_it_was(
+    tmp_path: Path, change: str
+) -> None:
+    """Misshapen or mistyped optimizer moments and text where numbers belong were accepted and
+    failed later inside torch, or not at all; each is refused naming the file and the entry, and
+    nothing of the refused state is written."""
+    mutate, message = BAD_STATES[change]
+    tensors, meta = mutate(*trained_state())
+    fresh = tiny_ppo(seed=1)
+    before = json.dumps(fresh.policy.optimizer.state_dict()["param_groups"])
+    with pytest.raises(PolicyFormatError, match=message) as raised:
+        restore_training_state(
+            fresh, meta, tensors, "ppo", tmp_path / "training.json", tmp_path / "training.safetensors"
+        )
+    assert "training.json" in str(raised.value) or "training.safetensors" in str(raised.value)
+    assert fresh.num_timesteps == 0 and not fresh.policy.optimizer.state_dict()["state"]
+    assert json.dumps(fresh.policy.optimizer.state_dict()["param_groups"]) == before
+
+
+def test_a_refused_checkpoint_directory_leaves_the_model_and_statistics_as_they_were(tmp_path: Path) -> None:
+    """load_training_state read, checked and wrote file by file: a bad training.safetensors left
+    the weights already overwritten. Now nothing is written until every file is checked."""
+    venv = make_training_env(ENV, 2, seed=0, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
+    model = PPO("MlpPolicy", venv, n_steps=16, batch_size=32, device="cpu", seed=0, policy_kwargs={"net_arch": [8]})
+    model.learn(32)
+    directory = save_policy(tmp_path / "checkpoint", model, venv, ENV, training_state=True)
+    (directory / "MANIFEST.sha256").unlink()
+    tensors = load_tensors((directory / "training.safetensors").read_bytes(), directory / "training.safetensors")
+    tensors[MOMENT] = torch.zeros(2)
+    (directory / "training.safetensors").write_bytes(tensor_bytes(tensors))
+    fresh_venv = make_training_env(ENV, 2, seed=5, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
+    fresh = PPO(
+        "MlpPolicy", fresh_venv, n_steps=16, batch_size=32, device="cpu", seed=1, policy_kwargs={"net_arch": [8]}
+    )
+    weights = {key: value.clone() for key, value in fresh.policy.state_dict().items()}
+    mean = fresh_venv.obs_rms.mean.copy()
+    with pytest.raises(PolicyFormatError, match="training.safetensors: tensor 'policy.optimizer/state/0/exp_avg'"):
+        load_training_state(fresh, directory, fresh_venv)
+    assert all(torch.equal(weights[key], value) for key, value in fresh.policy.state_dict().items())
+    np.testing.assert_array_equal(fresh_venv.obs_rms.mean, mean)
+    assert fresh.num_timesteps == 0

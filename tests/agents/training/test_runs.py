@@ -20,8 +20,7 @@ import agents.training.callbacks
 import agents.training.sb3
 from agents.common.files import OutputError, OutputExistsError
 from agents.policies import TrainedPolicy, shipped_models
-from agents.policies.format import verify_manifest
-from agents.policies.format import save_policy
+from agents.policies.format import save_policy, verify_manifest
 from agents.policies.layout import PolicyFormatError
 from agents.policies.spec import PolicySpec
 from agents.training.config import TrainConfig
