@@ -62,10 +62,13 @@ How the two APIs are matched (N = ``num_envs``):
 
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from copy import deepcopy
+from types import MappingProxyType
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -77,7 +80,17 @@ with needs_extra("train", "the Stable-Baselines3 adapter (tether_gym.sb3)"):
     from stable_baselines3.common.vec_env import VecEnv
     from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
-__all__ = ["SB3VecEnv", "make_sb3_vec_env", "ppo_env_share"]
+from tether_gym.envs.arguments import (
+    EnvArgumentError,
+    check_actions,
+    check_difficulty,
+    check_indices,
+    check_max_episode_steps,
+    check_seed,
+)
+from tether_gym.limits import short_repr
+
+__all__ = ["BatchVecEnv", "SB3VecEnv", "float32_rewards", "make_sb3_vec_env", "ppo_env_share"]
 
 #: numpy dtype kinds copied into the info dicts as Python scalars: bool, int, uint, float,
 #: complex, str, bytes; and object ("O"), element by element, for the elements that are scalars
@@ -165,11 +178,378 @@ def _same_options(options: Sequence[Mapping[str, Any]]) -> bool:
     return True
 
 
-class SB3VecEnv(VecEnv):
+def float32_rewards(rewards: Any) -> np.ndarray:
+    """(N,) rewards as float32, or a ``ValueError`` naming the rows whose reward is not finite in
+    float32 (SB3 would silently train on NaN or inf)."""
+    with np.errstate(over="ignore"):  # a float64 reward beyond float32's range: reported below
+        rewards32 = np.asarray(rewards, dtype=np.float32)
+    if not np.isfinite(rewards32).all():
+        bad = np.flatnonzero(~np.isfinite(rewards32))
+        raise ValueError(
+            f"the env returned rewards that are not finite in float32 for rows {bad.tolist()} "
+            f"({np.asarray(rewards)[bad].tolist()}); SB3 would train on NaN or inf. tether-gym envs end such a "
+            "step as numerics_diverged with a finite reward; for other envs, fix the reward or wrap the env in "
+            "SB3's VecCheckNan to find where it comes from"
+        )
+    return rewards32
+
+
+def _set_difficulty_arguments(difficulty: float) -> None:
+    """The arguments ``env_method("set_difficulty", ...)`` passes on, checked: one difficulty in [0, 1]."""
+    check_difficulty(difficulty)
+
+
+#: Where :meth:`BatchVecEnv.get_attr` found no attribute.
+_MISSING = object()
+
+
+class BatchVecEnv(VecEnv):
+    """The SB3 ``VecEnv`` contract of tether-gym's adapters, implemented once.
+
+    :class:`SB3VecEnv` (a single-agent vector env) and
+    :class:`~tether_gym.multiagent.sb3.AgentVecEnv` (agents x clusters) are both this class: every
+    argument either of them takes is checked here, by the same code, so that both refuse the same
+    inputs with the same errors. A subclass provides only how its batch resets and steps and which
+    objects its attributes and methods live on.
+
+    The contract, for N rows:
+
+    * ``seed(s)``: s is None (a random base seed, as SB3 draws it) or a whole number >= 0;
+      scheduled for the next :meth:`reset` only.
+    * ``set_options(o)``: None, one dict for the whole batch, or a list of N dicts; the options
+      themselves are checked by the env at :meth:`reset` (for tether-gym, ``positions`` and
+      ``velocities`` as (n_clusters, n, 3) arrays), before anything changes.
+    * ``step_async(actions)``: an (N, *action_shape) array of real, finite numbers, checked at
+      once; values outside the action space's bounds are clipped by the env, as in the
+      single-agent env. A second ``step_async`` before ``step_wait`` is refused, and so is a
+      ``step_wait`` with no pending ``step_async``.
+    * ``get_attr(name)``: a public attribute (no leading underscore) of the batch;
+      ``AttributeError`` for a private or missing one (so ``has_attr`` is False for them).
+    * ``set_attr(name, value)``: only the names of :attr:`SETTABLE`, each value checked by the
+      same function the env's own setter runs, for the whole batch (``indices`` None or all N).
+    * ``env_method(name, *args)``: only the methods of :attr:`CALLABLE`, called once for the
+      batch, with the arguments checked against the method's signature and values first.
+    * ``indices``: None, an int, or a list/tuple/range/1-D int array of distinct rows in
+      0..N-1; not a boolean mask, not floats (:func:`~tether_gym.envs.arguments.check_indices`).
+    * After :meth:`close` (which may be called again), every other call raises ``RuntimeError``.
+
+    Bad values raise :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``) naming the
+    argument; a name that is not a string raises ``TypeError``, and one that is not readable,
+    settable or callable ``AttributeError``. A refused call changes nothing.
+
+    Args:
+        num_envs: N, the rows.
+        observation_space, action_space: one row's spaces.
+        action_axes: what the axes of the (N, *action_shape) action array are, for its errors.
+    """
+
+    #: The attributes ``set_attr`` may set, each with the check of its value (the one the env's
+    #: setter runs too). Every other setting is fixed when the env is made.
+    SETTABLE: ClassVar[Mapping[str, Callable[[Any], Any]]] = MappingProxyType(
+        {"max_episode_steps": check_max_episode_steps}
+    )
+    #: The methods ``env_method`` may call on the whole batch, each with a function of the same
+    #: signature that checks its arguments. Other public methods (``reset``, ``step``, ...) would
+    #: change the batch behind the adapter's back.
+    CALLABLE: ClassVar[Mapping[str, Callable[..., None]]] = MappingProxyType(
+        {"set_difficulty": _set_difficulty_arguments}
+    )
+
+    def __init__(self, num_envs: int, observation_space: gym.Space, action_space: gym.Space, action_axes: str) -> None:
+        # Set first: SB3's __init__ calls get_attr("render_mode").
+        self._closed = False
+        self._actions: np.ndarray | None = None
+        self._action_axes = action_axes
+        super().__init__(num_envs, observation_space, action_space)
+
+    # ------------------------------------------------------------------ what a subclass provides
+    def _reset_batch(self, seeds: list[int | None], options: dict[str, Any] | None) -> VecEnvObs:
+        """Reset every row with the checked per-row ``seeds`` and batch ``options``; fill
+        ``reset_infos``; return the (N, *obs_shape) observations."""
+        raise NotImplementedError
+
+    def _step_batch(self, actions: np.ndarray) -> VecEnvStepReturn:
+        """Step the batch with checked (N, *action_shape) float64 actions."""
+        raise NotImplementedError
+
+    def _row_seeds(self, seed: int) -> list[int | None]:
+        """The N row seeds that the base seed ``seed`` schedules."""
+        return [seed + row for row in range(self.num_envs)]
+
+    def _attribute_owners(self) -> tuple[object, ...]:
+        """The objects ``get_attr`` reads, in order (the first that has the attribute wins)."""
+        raise NotImplementedError
+
+    def _setting_owner(self) -> object:
+        """The object ``set_attr`` sets."""
+        raise NotImplementedError
+
+    def _method_owner(self) -> object:
+        """The object whose method ``env_method`` calls."""
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        """Release what the batch holds (called once, by the first :meth:`close`)."""
+
+    # ------------------------------------------------------------------ checks
+    def _check_open(self, call: str) -> None:
+        if self._closed:
+            raise RuntimeError(f"{type(self).__name__} is closed, so {call}() cannot run; make a new env")
+
+    def _get_indices(self, indices: VecEnvIndices) -> list[int]:
+        """The rows ``indices`` addresses, checked (see :func:`~tether_gym.envs.arguments.check_indices`)."""
+        return check_indices("indices", indices, self.num_envs)
+
+    @staticmethod
+    def _public_name(call: str, argument: str, name: Any) -> str:
+        """``name`` if it is a public attribute name; ``TypeError`` or ``AttributeError`` naming it."""
+        if not isinstance(name, str):
+            raise TypeError(f"{call}: {argument} must be a str naming an attribute; got {short_repr(name)}")
+        if not name.isidentifier() or name.startswith("_"):
+            raise AttributeError(
+                f"{call}: {argument} {name!r} is not a public attribute name; the adapter reaches public "
+                "attributes only (no leading underscore)"
+            )
+        return name
+
+    # ------------------------------------------------------------------ reset / step
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Schedule the row seeds of ``seed`` (see :meth:`_row_seeds`) for the next :meth:`reset`
+        (None: a random base seed, as SB3 draws it); returns them.
+
+        Raises:
+            EnvArgumentError: ``seed`` is not None or a whole number >= 0 (nothing is scheduled).
+        """
+        self._check_open("seed")
+        base = check_seed("seed", seed)
+        if base is None:
+            base = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        self._seeds = self._row_seeds(base)
+        return self._seeds
+
+    def set_options(self, options: list[dict] | dict | None = None) -> None:
+        """Schedule reset options for the next :meth:`reset`: None (none), one dict for the whole
+        batch, or a list of N dicts, which must then be the same (a Gymnasium vector env takes
+        one options dict). Their keys and values are checked by the env at :meth:`reset`.
+
+        Raises:
+            EnvArgumentError: ``options`` is none of these (nothing is scheduled).
+        """
+        self._check_open("set_options")
+        if options is None:
+            rows: list[dict[str, Any]] = [{}] * self.num_envs
+        elif isinstance(options, Mapping):
+            rows = [dict(options)] * self.num_envs
+        elif (
+            isinstance(options, (list, tuple))
+            and len(options) == self.num_envs
+            and all(isinstance(row, Mapping) for row in options)
+        ):
+            rows = [dict(row) for row in options]
+        else:
+            raise EnvArgumentError(
+                f"options must be None, one dict for the whole batch, or a list of {self.num_envs} dicts (one per "
+                f"row, all the same); got {short_repr(options)}"
+            )
+        # Copied, as SB3 does, so that later changes to the caller's arrays do not leak in.
+        self._options = deepcopy(rows)
+
+    def _batch_options(self) -> dict[str, Any] | None:
+        """The scheduled per-row options as the one options dict of the whole batch's reset."""
+        options = list(self._options)
+        if not any(options):
+            return None
+        if len(options) != self.num_envs or not _same_options(options):
+            raise EnvArgumentError(
+                f"a Gymnasium vector env takes one options dict for the whole batch, so {type(self).__name__} needs "
+                "the same options for every row: call set_options(dict) with batch-level values (for "
+                "tether-gym, 'positions'/'velocities' as (clusters, n, 3) arrays), not a list of different "
+                "per-row dicts"
+            )
+        return dict(options[0])
+
+    def reset(self) -> VecEnvObs:
+        """Reset every row; returns the (N, *obs_shape) observation batch.
+
+        Uses the seeds scheduled by :meth:`seed` (none scheduled: the generators continue) and the
+        options scheduled by :meth:`set_options`, then forgets both, and drops a pending
+        ``step_async``. Fills ``reset_infos`` with N dicts of scalar info entries.
+
+        Raises:
+            EnvArgumentError: the scheduled options differ between rows, or the env refuses them
+                (the batch is left as it was, and the seeds and options stay scheduled).
+        """
+        self._check_open("reset")
+        options = self._batch_options()
+        observations = self._reset_batch(list(self._seeds), options)
+        self._reset_seeds()
+        self._reset_options()
+        self._actions = None
+        return observations
+
+    def step_async(self, actions: np.ndarray) -> None:
+        """Check and store the (N, *action_shape) action batch for :meth:`step_wait` (the step is
+        synchronous).
+
+        Raises:
+            EnvArgumentError: not an array of real numbers, the wrong shape, or NaN or inf.
+            RuntimeError: a step is already pending (call :meth:`step_wait` first).
+        """
+        self._check_open("step_async")
+        if self._actions is not None:
+            raise RuntimeError("step_async() called twice: call step_wait() for the pending step first")
+        if isinstance(self.action_space, gym.spaces.Box):
+            shape = (self.num_envs, *self.action_space.shape)
+            self._actions = check_actions("actions", actions, shape, self._action_axes)
+        else:  # another vector env's discrete or composite actions: its own step checks them
+            self._actions = actions
+
+    def step_wait(self) -> VecEnvStepReturn:
+        """Step the batch with the actions of the pending :meth:`step_async`.
+
+        Returns:
+            obs: (N, *obs_shape) observations; an ended row's is its new episode's first one.
+            rewards: (N,) float32.
+            dones: (N,) bool, ``terminated | truncated``.
+            infos: N dicts: empty for rows that did not end; for those that ended,
+                ``terminal_observation``, ``TimeLimit.truncated`` and the scalar entries of the
+                final info.
+
+        Raises:
+            RuntimeError: no ``step_async`` is pending.
+        """
+        self._check_open("step_wait")
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without a pending step_async(actions)")
+        actions, self._actions = self._actions, None
+        return self._step_batch(actions)
+
+    # ------------------------------------------------------------------ the batch as one object
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """The batch's public attribute ``attr_name``, once per requested row (the same object:
+        the batch is one object, so e.g. ``get_attr("task")`` gives the shared batched task).
+
+        Raises:
+            TypeError: ``attr_name`` is not a str.
+            AttributeError: it is private or missing (``has_attr`` relies on it).
+            EnvArgumentError: bad ``indices``.
+        """
+        self._check_open("get_attr")
+        name = self._public_name("get_attr", "attr_name", attr_name)
+        rows = self._get_indices(indices)
+        for owner in self._attribute_owners():
+            value = getattr(owner, name, _MISSING)
+            if value is not _MISSING:
+                return [value for _ in rows]
+        raise AttributeError(f"get_attr: {type(self).__name__} has no attribute {name!r}")
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set ``attr_name``, one of :attr:`SETTABLE`, once for the whole batch: the value is
+        **shared** by every row (e.g. ``set_attr("max_episode_steps", 100)``), so ``indices``
+        must be None or cover all N. The value is checked first.
+
+        Raises:
+            TypeError: ``attr_name`` is not a str.
+            AttributeError: it is not one of :attr:`SETTABLE`, or the env has no such attribute.
+            EnvArgumentError: a bad value, or ``indices`` naming only some rows.
+        """
+        self._check_open("set_attr")
+        name = self._public_name("set_attr", "attr_name", attr_name)
+        check = self.SETTABLE.get(name)
+        if check is None:
+            raise AttributeError(
+                f"set_attr cannot set {name!r}: it sets only {sorted(self.SETTABLE)}; every other setting is "
+                "fixed when the env is made (make a new env), and the difficulty is env_method('set_difficulty', d)"
+            )
+        rows = self._get_indices(indices)
+        if len(rows) != self.num_envs:
+            raise EnvArgumentError(
+                f"set_attr({name!r}) acts on the whole batch (one object shared by all {self.num_envs} rows); "
+                f"indices cannot name only the rows {rows}: pass indices=None"
+            )
+        checked = check(value)
+        owner = self._setting_owner()
+        if not hasattr(owner, name):
+            raise AttributeError(f"set_attr: {type(owner).__name__} has no attribute {name!r} to set")
+        setattr(owner, name, checked)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
+        """Call ``method_name``, one of :attr:`CALLABLE`, **once** for the batch (it acts on the
+        whole batch, so calling it once per row would repeat its effect N times) and return its
+        result once per requested row (the same object). The arguments are checked first; no
+        call is made if no row is requested.
+
+        Raises:
+            TypeError: ``method_name`` is not a str.
+            AttributeError: it is not one of :attr:`CALLABLE`, or the env has no such method.
+            EnvArgumentError: arguments that do not fit the method or are out of range, or bad
+                ``indices``.
+        """
+        self._check_open("env_method")
+        name = self._public_name("env_method", "method_name", method_name)
+        check = self.CALLABLE.get(name)
+        if check is None:
+            raise AttributeError(
+                f"env_method cannot call {name!r}: it calls only {sorted(self.CALLABLE)} on the whole batch "
+                "(reset and step go through the adapter itself)"
+            )
+        signature = inspect.signature(check)
+        try:
+            signature.bind(*method_args, **method_kwargs)
+        except TypeError as error:
+            raise EnvArgumentError(
+                f"env_method({name!r}) takes {name}({', '.join(signature.parameters)}): {error}; got arguments "
+                f"{short_repr(method_args)} and keywords {short_repr(method_kwargs)}"
+            ) from None
+        check(*method_args, **method_kwargs)
+        rows = self._get_indices(indices)
+        method = getattr(self._method_owner(), name, None)
+        if not callable(method):
+            raise AttributeError(f"env_method: {type(self._method_owner()).__name__} has no method {name!r}")
+        if not rows:
+            return []
+        result = method(*method_args, **method_kwargs)
+        return [result for _ in rows]
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        """False for each requested row: the rows of a batch are not ``gym.Wrapper`` chains (a
+        Monitor cannot wrap them; use SB3's VecMonitor on top of the adapter)."""
+        self._check_open("env_is_wrapped")
+        return [False for _ in self._get_indices(indices)]
+
+    # ------------------------------------------------------------------ rendering / closing
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """Not supported: warns and returns None (no image)."""
+        warnings.warn(
+            f"{type(self).__name__} does not render (asked for mode={mode!r}); render a single env instead, e.g. "
+            "gym.make('TetherTetrahedron-v0', render_mode='rgb_array').",
+            stacklevel=2,
+        )
+        return None
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        """Not supported: warns and returns N Nones."""
+        warnings.warn(f"{type(self).__name__} does not render; get_images() returns no images", stacklevel=2)
+        return [None] * self.num_envs
+
+    def close(self) -> None:
+        """Release the batch; later calls (but ``close``) raise ``RuntimeError``."""
+        if self._closed:
+            return
+        self._closed = True
+        self._actions = None
+        self._release()
+
+
+class SB3VecEnv(BatchVecEnv):
     """A Gymnasium same-step-autoreset :class:`~gymnasium.vector.VectorEnv` as an SB3 ``VecEnv``.
 
-    See the module docstring for the mapping between the two APIs. Works with VecNormalize,
-    VecMonitor and the other SB3 ``VecEnvWrapper`` classes on top.
+    See the module docstring for the mapping between the two APIs, and :class:`BatchVecEnv` for
+    the checks of every argument. Works with VecNormalize, VecMonitor and the other SB3
+    ``VecEnvWrapper`` classes on top. ``get_attr``, ``set_attr`` and ``env_method`` act on the
+    vector env itself.
 
     Args:
         venv: the vector env, e.g. ``gym.make_vec("tether_gym:TetherTetrahedron-v0", num_envs=N,
@@ -208,94 +588,27 @@ class SB3VecEnv(VecEnv):
             )
         self.venv = venv
         self.vector_infos: dict[str, Any] = {}
-        self._actions: np.ndarray | None = None
-        super().__init__(int(venv.num_envs), venv.single_observation_space, venv.single_action_space)
+        super().__init__(
+            int(venv.num_envs), venv.single_observation_space, venv.single_action_space, "num_envs, action entries"
+        )
         self._all = np.arange(self.num_envs)
         # SB3's base class replaces metadata by its render modes; keep the vector env's entries too.
         self.metadata = {**dict(getattr(venv, "metadata", {}) or {}), **self.metadata}
 
-    # ------------------------------------------------------------------ reset / step
-    def reset(self) -> VecEnvObs:
-        """Reset every sub-env; returns the (N, *obs_shape) observation batch.
-
-        Uses the seeds scheduled by :meth:`seed` (passed as a list of N; none scheduled: the
-        generators continue) and the options scheduled by ``set_options`` (one dict for the
-        batch), then forgets both. Fills ``reset_infos`` with N dicts of scalar info entries.
-
-        Raises:
-            ValueError: the scheduled options differ between sub-envs.
-        """
-        seeds = None if all(s is None for s in self._seeds) else list(self._seeds)
-        options = self._batch_options()
+    # ------------------------------------------------------------------ the batch
+    def _reset_batch(self, seeds: list[int | None], options: dict[str, Any] | None) -> VecEnvObs:
         # Gymnasium declares one seed for a whole VectorEnv; the native and the sync vector envs
         # take one per sub-env.
-        obs, infos = self.venv.reset(seed=seeds, options=options)  # type: ignore[arg-type]
-        self._reset_seeds()
-        self._reset_options()
-        self._actions = None
+        scheduled = None if all(s is None for s in seeds) else seeds
+        obs, infos = self.venv.reset(seed=scheduled, options=options)  # type: ignore[arg-type]
         self.vector_infos = infos
         self.reset_infos = _scalar_rows(infos, self._all, self.num_envs, skip=_FINAL_KEYS)
         return obs
 
-    def seed(self, seed: int | None = None) -> Sequence[int | None]:
-        """Schedule the seeds ``seed, seed + 1, ..., seed + N - 1`` for the next :meth:`reset`
-        (None: a random base seed, as SB3 does); returns them.
-
-        Raises:
-            ValueError: ``seed`` is not None or a whole number >= 0 (nothing is scheduled).
-        """
-        if seed is not None and (
-            isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0
-        ):
-            raise ValueError(
-                f"seed must be a whole number >= 0 (an int; sub-env i gets seed + i) or None; got {seed!r}"
-            )
-        return super().seed(None if seed is None else int(seed))
-
-    def _batch_options(self) -> dict[str, Any] | None:
-        """SB3's per-env options as the one options dict of a Gymnasium vector env's reset."""
-        options = list(self._options) if self._options is not None else []
-        if not any(options):
-            return None
-        if len(options) != self.num_envs or not _same_options(options):
-            raise ValueError(
-                "a Gymnasium vector env takes one options dict for the whole batch, so SB3VecEnv needs "
-                "the same options for every sub-env: call set_options(dict) with batch-level values (for "
-                "tether-gym, 'positions'/'velocities' as (num_envs, n, 3) arrays), not a list of different "
-                "per-env dicts"
-            )
-        return dict(options[0])
-
-    def step_async(self, actions: np.ndarray) -> None:
-        """Store the (N, *action_shape) action batch for :meth:`step_wait` (the step is synchronous)."""
-        self._actions = actions
-
-    def step_wait(self) -> VecEnvStepReturn:
-        """Step the batch with the stored actions.
-
-        Returns:
-            obs: (N, *obs_shape) observations; an ended sub-env's is its new episode's first one.
-            rewards: (N,) float32.
-            dones: (N,) bool, ``terminated | truncated``.
-            infos: N dicts: empty for sub-envs that did not end; for those that ended,
-                ``terminal_observation``, ``TimeLimit.truncated`` and the scalar ``final_info``
-                entries (see the module docstring).
-        """
-        if self._actions is None:
-            raise RuntimeError("step_wait() called without a pending step_async(actions)")
-        actions, self._actions = self._actions, None
+    def _step_batch(self, actions: np.ndarray) -> VecEnvStepReturn:
         obs, rewards, terminated, truncated, infos = self.venv.step(actions)
         self.vector_infos = infos
-        with np.errstate(over="ignore"):  # a float64 reward beyond float32's range: reported below
-            rewards32 = np.asarray(rewards, dtype=np.float32)
-        if not np.isfinite(rewards32).all():
-            bad = np.flatnonzero(~np.isfinite(rewards32))
-            raise ValueError(
-                f"the vector env returned rewards that are not finite in float32 for sub-envs {bad.tolist()} "
-                f"({np.asarray(rewards)[bad].tolist()}); SB3 would train on NaN or inf. tether-gym envs end such a "
-                "step as numerics_diverged with a finite reward; for other envs, fix the reward or wrap the env in "
-                "SB3's VecCheckNan to find where it comes from"
-            )
+        rewards32 = float32_rewards(rewards)
         terminated = np.asarray(terminated, dtype=bool)
         truncated = np.asarray(truncated, dtype=bool)
         dones = terminated | truncated
@@ -329,73 +642,16 @@ class SB3VecEnv(VecEnv):
             step_infos[i] = final
             self.reset_infos[i] = new
 
-    # ------------------------------------------------------------------ the batch as one object
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        """The vector env's attribute ``attr_name``, once per requested index (the same object:
-        the batch is one object, so e.g. ``get_attr("task")`` gives the shared batched task).
+    def _attribute_owners(self) -> tuple[object, ...]:
+        return (self.venv,)
 
-        Raises:
-            AttributeError: the vector env has no such attribute (``has_attr`` relies on it).
-        """
-        value = getattr(self.venv, attr_name)
-        return [value for _ in self._get_indices(indices)]
+    def _setting_owner(self) -> object:
+        return self.venv
 
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        """Set ``attr_name`` once on the vector env: the value is **shared** by every sub-env
-        (e.g. ``set_attr("max_episode_steps", 100)``). Setting it for only some sub-envs is
-        impossible, so ``indices`` must be None or cover all N.
+    def _method_owner(self) -> object:
+        return self.venv
 
-        Raises:
-            ValueError: ``indices`` names only some of the sub-envs.
-        """
-        self._require_all(indices, f"set_attr({attr_name!r})")
-        setattr(self.venv, attr_name, value)
-
-    def env_method(
-        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
-    ) -> list[Any]:
-        """Call the vector env's method ``method_name`` **once** (it acts on the whole batch, so
-        calling it once per sub-env would repeat its effect N times) and return its result once
-        per requested index (the same object). No call is made if no index is requested.
-        """
-        targets = list(self._get_indices(indices))
-        if not targets:
-            return []
-        result = getattr(self.venv, method_name)(*method_args, **method_kwargs)
-        return [result for _ in targets]
-
-    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
-        """False for each requested index: the sub-envs of a vector env are not ``gym.Wrapper``
-        chains (a Monitor cannot wrap them; use SB3's VecMonitor on top of this adapter)."""
-        return [False for _ in self._get_indices(indices)]
-
-    def _require_all(self, indices: VecEnvIndices, what: str) -> None:
-        if indices is None:
-            return
-        requested = {int(i) for i in self._get_indices(indices)}
-        if requested != set(range(self.num_envs)):
-            raise ValueError(
-                f"{what} acts on the whole batch (one vector env object shared by all {self.num_envs} "
-                f"sub-envs); it cannot target only the sub-envs {sorted(requested)}. Pass indices=None."
-            )
-
-    # ------------------------------------------------------------------ rendering / closing
-    def render(self, mode: str | None = None) -> np.ndarray | None:
-        """Not supported: warns and returns None (no image)."""
-        warnings.warn(
-            f"SB3VecEnv does not render (asked for mode={mode!r}); render a single env instead, e.g. "
-            "gym.make('TetherTetrahedron-v0', render_mode='rgb_array').",
-            stacklevel=2,
-        )
-        return None
-
-    def get_images(self) -> Sequence[np.ndarray | None]:
-        """Not supported: warns and returns N Nones."""
-        warnings.warn("SB3VecEnv does not render; get_images() returns no images", stacklevel=2)
-        return [None] * self.num_envs
-
-    def close(self) -> None:
-        """Close the vector env."""
+    def _release(self) -> None:
         self.venv.close()
 
 

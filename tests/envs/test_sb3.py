@@ -198,7 +198,7 @@ def test_reset_options_batch_level() -> None:
     assert env._options == [{}, {}]  # used once
     assert np.abs(env.reset()[:, :24]).max() > 1e-3
     env.set_options([{"positions": positions}, {}])
-    with pytest.raises(ValueError, match="same options for every sub-env"):
+    with pytest.raises(ValueError, match="same options for every row"):
         env.reset()
 
 
@@ -309,11 +309,13 @@ def test_get_attr_set_attr_env_method_env_is_wrapped() -> None:
     assert venv.max_episode_steps == 4
 
     calls = []
-    venv.probe = lambda x, scale=1: calls.append(x) or x * scale
-    assert env.env_method("probe", 3, scale=2, indices=[0, 1]) == [6, 6]
-    assert calls == [3]  # called once for the batch, not once per index
-    assert env.env_method("probe", 1) == [1, 1, 1, 1] and calls == [3, 1]
-    assert env.env_method("probe", 5, indices=[]) == [] and calls == [3, 1]
+    venv.set_difficulty = lambda difficulty: calls.append(difficulty) or difficulty * 2  # counts the calls
+    assert env.env_method("set_difficulty", 0.25, indices=[0, 1]) == [0.5, 0.5]
+    assert calls == [0.25]  # called once for the batch, not once per index
+    assert env.env_method("set_difficulty", difficulty=0.5) == [1.0] * 4 and calls == [0.25, 0.5]
+    assert env.env_method("set_difficulty", 1.0, indices=[]) == [] and calls == [0.25, 0.5]
+    with pytest.raises(AttributeError, match="env_method cannot call 'probe'"):
+        env.env_method("probe", 1)  # only the batch methods of BatchVecEnv.CALLABLE
 
     assert env.env_is_wrapped(Monitor) == [False] * 4
     assert env.env_is_wrapped(gym.wrappers.TimeLimit, indices=2) == [False]

@@ -22,6 +22,7 @@ __all__ = [
     "CONTROL_INTERVAL_RANGE",
     "MAX_DELAY_LINE",
     "MAX_DISPLACEMENT_FRACTION",
+    "MAX_EPISODE_STEPS",
     "MAX_IMPULSE",
     "MAX_IMPULSE_RATE",
     "MAX_NUM_ENVS",
@@ -47,6 +48,8 @@ __all__ = [
     "check_bool",
     "check_choice",
     "check_difficulty",
+    "check_indices",
+    "check_max_episode_steps",
     "check_number",
     "check_satellites",
     "check_seed",
@@ -244,6 +247,48 @@ def check_seed(name: str, value: Any) -> int | None:
     if is_whole_number(value) and value >= 0:
         return int(value)
     raise EnvArgumentError(f"{name} must be a whole number >= 0 (an int) or None; got {short_repr(value)}")
+
+
+#: Longest episode limit, steps: beyond any run, and far inside an int64 step counter.
+MAX_EPISODE_STEPS = 2**62
+
+
+def check_max_episode_steps(value: Any) -> int | None:
+    """``max_episode_steps``, the truncation limit of an episode, checked wherever it is set (a
+    vector env, the multi-agent engine, an SB3 adapter's ``set_attr``): None (never truncate) or
+    a whole number of steps >= 1, else an :class:`EnvArgumentError` naming it."""
+    if value is None:
+        return None
+    return check_whole("max_episode_steps", value, 1, MAX_EPISODE_STEPS, "steps (or None for no limit)")
+
+
+def check_indices(name: str, value: Any, count: int) -> list[int]:
+    """``value``, the rows a batch call addresses, as a list of ints in ``0..count - 1``: None
+    (every row), one whole number, or a list, tuple, range or 1-D integer array of distinct ones
+    (in the order given). Bools and boolean masks, floats, negative, out-of-range or repeated
+    indices, strings and anything else raise an :class:`EnvArgumentError` naming ``name``."""
+    if value is None:
+        return list(range(count))
+    allowed = f"None (every row), an int or a list of ints in 0..{count - 1}"
+    if is_whole_number(value):
+        items = [value]
+    elif isinstance(value, (list, tuple, range)) or (
+        isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iu"
+    ):
+        # Distinct rows are at most count: a longer list is refused before it is copied.
+        if len(value) > count:
+            raise EnvArgumentError(f"{name} must list each of the {count} rows at most once; got {len(value)} indices")
+        items = value.tolist() if isinstance(value, np.ndarray) else list(value)
+    else:
+        kind = " (a boolean mask)" if isinstance(value, np.ndarray) and value.dtype.kind == "b" else ""
+        raise EnvArgumentError(f"{name} must be {allowed}; got {short_repr(value)}{kind}")
+    bad = [item for item in items if not (is_whole_number(item) and 0 <= item < count)]
+    if bad:
+        raise EnvArgumentError(f"{name} must be {allowed}; got {short_repr(value)}, with {short_repr(bad[0])}")
+    rows = [int(item) for item in items]
+    if len(set(rows)) != len(rows):
+        raise EnvArgumentError(f"{name} must list each row at most once; got {short_repr(value)}")
+    return rows
 
 
 def as_real_array(name: str, value: Any, what: str) -> np.ndarray:

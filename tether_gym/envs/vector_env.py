@@ -17,8 +17,8 @@ from tether_gym.envs.arguments import (
     OBSERVATION_LIMIT,
     EnvArgumentError,
     check_actions,
+    check_max_episode_steps,
     check_seed,
-    check_whole,
 )
 from tether_gym.envs.contract import END_REASONS, REWARD_TERM_KEYS
 from tether_gym.envs.task import task_from_arguments
@@ -153,7 +153,7 @@ class TetherClusterVectorEnv(VectorEnv):
     @max_episode_steps.setter
     def max_episode_steps(self, steps: int | None) -> None:
         # Checked on every assignment (SB3's set_attr too), so a bad value never reaches step().
-        self._max_episode_steps = None if steps is None else check_whole("max_episode_steps", steps, 1, 2**62)
+        self._max_episode_steps = check_max_episode_steps(steps)
 
     # ------------------------------------------------------------------ API
     def reset(

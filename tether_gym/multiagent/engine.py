@@ -46,6 +46,7 @@ from tether_gym.envs.arguments import (
     OBSERVATION_LIMIT,
     EnvArgumentError,
     check_choice,
+    check_max_episode_steps,
     check_number,
     check_seed,
     check_whole,
@@ -412,9 +413,7 @@ class AgentBatch:
         noise = check_number(
             "local_observation_noise", local_observation_noise, 0.0, MAX_OBSERVATION_NOISE, "(observation units)"
         )
-        self.max_episode_steps = (
-            None if max_episode_steps is None else check_whole("max_episode_steps", max_episode_steps, 1, 2**62)
-        )
+        self.max_episode_steps = max_episode_steps  # checked by the property
         B = check_whole("num_envs", num_clusters, 1, MAX_NUM_ENVS)
         self.task = task = task_from_arguments(B, **dict(env_kwargs))
         self.num_clusters = B
@@ -432,6 +431,16 @@ class AgentBatch:
     @property
     def communication(self) -> Communication:
         return self.sensors.communication
+
+    @property
+    def max_episode_steps(self) -> int | None:
+        """Truncation after this many steps of a cluster's episode (None: never)."""
+        return self._max_episode_steps
+
+    @max_episode_steps.setter
+    def max_episode_steps(self, steps: int | None) -> None:
+        # The vector env's check, on every assignment (an SB3 adapter's set_attr too).
+        self._max_episode_steps = check_max_episode_steps(steps)
 
     # ------------------------------------------------------------------ reset / step
     def check_seeds(self, seeds: Sequence[Any]) -> list[int | None]:

@@ -14,7 +14,7 @@ from tether_gym._optional import needs_extra
 with needs_extra("multiagent", "the PettingZoo multi-agent env (tether_gym.multiagent.parallel_env)"):
     from pettingzoo import ParallelEnv
 
-from tether_gym.envs.arguments import OBSERVATION_LIMIT, EnvArgumentError, as_real_array, check_seed
+from tether_gym.envs.arguments import OBSERVATION_LIMIT, EnvArgumentError, check_actions, check_seed
 from tether_gym.envs.task import RESET_OPTION_KEYS
 from tether_gym.limits import short_repr
 from tether_gym.multiagent.engine import AgentBatch
@@ -182,7 +182,9 @@ class TetherParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     def _joint_action(self, actions: Any) -> np.ndarray:
         """(1, 3 A) joint action from the agents' dict, checked."""
         if not self.agents:
-            raise EnvArgumentError("the episode has ended (no live agents): call reset() before step()")
+            raise EnvArgumentError(
+                "no live agents (the episode has ended, or the env was never reset): call reset() before step()"
+            )
         if not isinstance(actions, Mapping):
             raise EnvArgumentError(
                 f"actions must be a dict from agent name to a (3,) thrust command, e.g. "
@@ -199,14 +201,8 @@ class TetherParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             )
         joint = np.empty((1, 3 * len(self.possible_agents)))
         for name, k in self._index.items():
-            command = as_real_array(f"action of {name}", actions[name], "a (3,) thrust command in [-1, 1]")
-            if command.shape != (3,):
-                raise EnvArgumentError(f"action of {name} must have shape (3,) (x, y, z); got shape {command.shape}")
-            if not np.isfinite(command).all():
-                raise EnvArgumentError(
-                    f"action of {name} contains NaN or inf; thrust commands must be finite numbers in [-1, 1]"
-                )
-            joint[0, 3 * k : 3 * k + 3] = command
+            # The single-agent env's check of its action, per agent.
+            joint[0, 3 * k : 3 * k + 3] = check_actions(f"action of {name}", actions[name], (3,), "x, y, z")
         return joint
 
     def _observations(self) -> dict[str, np.ndarray]:

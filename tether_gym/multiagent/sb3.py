@@ -25,7 +25,12 @@ How it matches SB3's conventions (as :mod:`tether_gym.sb3` does):
   or the shares (``reward="shares"``).
 * **Seeds**: ``seed(s)`` gives cluster b the seed ``s + b`` at the next ``reset()`` (its rows
   share it), so cluster b starts as a single-agent env reset with ``s + b``.
-* **The batch is one object**: ``get_attr``/``env_method`` act on the engine once.
+* **Reset options** are the vector env's: ``set_options({"positions": X, "velocities": V})``
+  with (N, n, 3) arrays (m, m/s) gives every cluster an exact initial state.
+* **The batch is one object**: ``get_attr``/``set_attr``/``env_method`` act on the engine once.
+* **One contract**: every argument is checked by the code that checks
+  :class:`~tether_gym.sb3.SB3VecEnv`'s (:class:`~tether_gym.sb3.BatchVecEnv`), so the two
+  adapters refuse the same inputs with the same errors.
 
 An RLlib ``MultiAgentEnv`` can be the same kind of thin layer over :class:`AgentBatch`: the dicts
 of :class:`~tether_gym.multiagent.TetherParallelEnv` (``"__all__"`` set from the cluster's flags).
@@ -33,30 +38,33 @@ of :class:`~tether_gym.multiagent.TetherParallelEnv` (``"__all__"`` set from the
 
 from __future__ import annotations
 
-import warnings
-from collections.abc import Sequence
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from tether_gym._optional import needs_extra
 
 with needs_extra("train", "the shared-policy SB3 VecEnv of the multi-agent env (AgentVecEnv)"):
-    from stable_baselines3.common.vec_env import VecEnv
-    from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
+    from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
-from tether_gym.envs.arguments import OBSERVATION_LIMIT, EnvArgumentError, as_real_array
+from tether_gym.envs.arguments import OBSERVATION_LIMIT
 from tether_gym.multiagent.engine import AgentBatch
+from tether_gym.sb3 import BatchVecEnv, float32_rewards
 
 __all__ = ["AgentVecEnv", "make_agent_vec_env"]
 
 _SCALARS = (bool, int, float, str)
 
 
-class AgentVecEnv(VecEnv):
+class AgentVecEnv(BatchVecEnv):
     """N clusters x A agents as one SB3 ``VecEnv`` of ``N * A`` rows (see the module docstring).
+
+    Every argument is checked as :class:`~tether_gym.sb3.SB3VecEnv` checks it, by the same code
+    (:class:`~tether_gym.sb3.BatchVecEnv`): seeds, reset options, actions, indices, and the
+    names and values of ``get_attr``, ``set_attr`` and ``env_method``. ``get_attr`` reads the
+    adapter's attributes, then the engine's; ``set_attr`` sets the engine's
+    (``max_episode_steps``); ``env_method`` calls the task's (``set_difficulty``).
 
     Args:
         env_id: a tether-gym id.
@@ -67,7 +75,8 @@ class AgentVecEnv(VecEnv):
         **kwargs: the id's ``gym.make`` keyword arguments.
 
     Attributes:
-        batch: the engine; ``task``: its batched task; ``num_clusters``: N; ``num_agents``: A.
+        batch: the engine; ``task``: its batched task; ``cluster``: the nominal cluster;
+        ``num_clusters``: N; ``num_agents``: A.
     """
 
     def __init__(
@@ -86,59 +95,52 @@ class AgentVecEnv(VecEnv):
         self.env_id = env_id
         self.batch = AgentBatch(num_envs, env_kwargs, steps, communication, reward, local_observation_noise)
         self.task = self.batch.task
+        self.cluster = self.task.cluster
         self.num_clusters = self.batch.num_clusters
         self.num_agents = A = self.batch.num_agents
         self.render_mode = None
         observation_space = spaces.Box(-OBSERVATION_LIMIT, OBSERVATION_LIMIT, (self.batch.layout.size,), np.float32)
-        super().__init__(self.num_clusters * A, observation_space, spaces.Box(-1.0, 1.0, (3,), np.float32))
-        self._actions: np.ndarray | None = None
+        super().__init__(
+            self.num_clusters * A,
+            observation_space,
+            spaces.Box(-1.0, 1.0, (3,), np.float32),
+            "rows: num_envs clusters x agents; x, y, z",
+        )
         self._clusters = np.arange(self.num_clusters)
-        self._action_shape = (self.num_envs, 3)
+        self._state_shape = (self.num_clusters, self.cluster.num_nodes, 3)
 
     @property
     def max_episode_steps(self) -> int | None:
+        """The engine's episode limit (set it with ``set_attr("max_episode_steps", n)``)."""
         return self.batch.max_episode_steps
 
-    def seed(self, seed: int | None = None) -> Sequence[int | None]:
-        """Schedule the seeds ``seed + b`` of the clusters for the next :meth:`reset` (None: a
-        random base seed); returns one per row (the rows of a cluster share its seed)."""
-        if seed is None:
-            seed = int(np.random.randint(0, 2**31 - 1))
-        clusters = self.batch.check_seeds([seed + b for b in range(self.num_clusters)])
-        self._seeds = [s for s in clusters for _ in range(self.num_agents)]
-        return self._seeds
+    def _row_seeds(self, seed: int) -> list[int | None]:
+        """Cluster b gets ``seed + b``; its rows share it."""
+        return [seed + b for b in range(self.num_clusters) for _ in range(self.num_agents)]
 
-    def reset(self) -> VecEnvObs:
-        """Reset every cluster (with the scheduled seeds, used once); returns (N A, size) rows."""
-        scheduled = any(s is not None for s in self._seeds)
-        seeds = self._seeds[:: self.num_agents] if scheduled else [None] * self.num_clusters
-        if self._options and any(self._options):
-            raise EnvArgumentError("AgentVecEnv takes no reset options (exact initial states): use parallel_env")
-        self.batch.reset(self._clusters, seeds)
-        self._reset_seeds()
-        self._reset_options()
-        self._actions = None
+    def _reset_batch(self, seeds: list[int | None], options: dict[str, Any] | None) -> VecEnvObs:
+        """Reset every cluster with its rows' seed and the options' exact states, if any."""
+        positions, velocities = self.task.check_reset_state(options, self._state_shape)
+        self.batch.reset(self._clusters, seeds[:: self.num_agents], positions, velocities)
+        self.reset_infos = self._scalar_infos(self._clusters, stepped=False)
         return self._rows(self.batch.observations())
 
     def _rows(self, observations: np.ndarray) -> np.ndarray:
         return observations.reshape(self.num_envs, -1)
 
-    def step_async(self, actions: np.ndarray) -> None:
-        self._actions = actions
+    def _scalar_infos(self, clusters: np.ndarray, stepped: bool) -> list[dict[str, Any]]:
+        """One dict per row of ``clusters``: its cluster's scalar info entries."""
+        rows: list[dict[str, Any]] = []
+        for b in clusters.tolist():
+            scalars = {k: v for k, v in self.task.info(b, stepped=stepped).items() if isinstance(v, _SCALARS)}
+            rows.extend(dict(scalars) for _ in range(self.num_agents))
+        return rows
 
-    def step_wait(self) -> VecEnvStepReturn:
-        """Step every cluster with the (N A, 3) row actions; see the module docstring."""
-        if self._actions is None:
-            raise RuntimeError("step_wait() called without a pending step_async(actions)")
-        actions, self._actions = self._actions, None
-        a = as_real_array("actions", actions, f"a {self._action_shape} array of thrust commands in [-1, 1]")
-        if a.shape != self._action_shape:
-            raise EnvArgumentError(f"actions must have shape {self._action_shape} (one row per agent); got {a.shape}")
-        if not np.isfinite(a).all():
-            raise EnvArgumentError("actions contain NaN or inf; thrust commands must be finite numbers in [-1, 1]")
+    def _step_batch(self, actions: np.ndarray) -> VecEnvStepReturn:
+        """Step every cluster with the checked (N A, 3) row actions; see the module docstring."""
         batch = self.batch
-        batch.step(batch.joint_actions(a.reshape(self.num_clusters, self.num_agents, 3)))
-        rewards = batch.rewards().reshape(-1).astype(np.float32)
+        batch.step(batch.joint_actions(actions.reshape(self.num_clusters, self.num_agents, 3)))
+        rewards = float32_rewards(batch.rewards().reshape(-1))
         terminated, truncated = batch.terminated(), batch.truncated()
         ended = np.flatnonzero(terminated | truncated)
         observations = batch.observations()
@@ -155,44 +157,21 @@ class AgentVecEnv(VecEnv):
                     }
             batch.reset(ended, [None] * ended.size)
             observations[ended] = batch.observations(ended)
+            rows = (ended[:, None] * self.num_agents + np.arange(self.num_agents)).reshape(-1)
+            for row, info in zip(rows.tolist(), self._scalar_infos(ended, stepped=False), strict=True):
+                self.reset_infos[row] = info
         dones = np.repeat(terminated | truncated, self.num_agents)
         return self._rows(observations), rewards, dones, infos
 
-    # ------------------------------------------------------------------ the batch as one object
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        """The adapter's (or else the engine's) attribute, once per requested row."""
-        value = getattr(self, attr_name) if hasattr(self, attr_name) else getattr(self.batch, attr_name)
-        return [value for _ in self._get_indices(indices)]
+    # ------------------------------------------------------------------ where the batch's parts live
+    def _attribute_owners(self) -> tuple[object, ...]:
+        return (self, self.batch)
 
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        """Set an engine attribute for the whole batch (``indices`` must be None)."""
-        if indices is not None:
-            raise ValueError(f"set_attr({attr_name!r}) acts on the whole batch: pass indices=None")
-        setattr(self.batch, attr_name, value)
+    def _setting_owner(self) -> object:
+        return self.batch
 
-    def env_method(
-        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
-    ) -> list[Any]:
-        """Call the task's method once (e.g. ``set_difficulty``); its result once per requested row."""
-        targets = list(self._get_indices(indices))
-        if not targets:
-            return []
-        result = getattr(self.task, method_name)(*method_args, **method_kwargs)
-        return [result for _ in targets]
-
-    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
-        return [False for _ in self._get_indices(indices)]
-
-    def render(self, mode: str | None = None) -> np.ndarray | None:
-        warnings.warn("AgentVecEnv does not render; render a single-agent env instead", stacklevel=2)
-        return None
-
-    def get_images(self) -> Sequence[np.ndarray | None]:
-        warnings.warn("AgentVecEnv does not render; get_images() returns no images", stacklevel=2)
-        return [None] * self.num_envs
-
-    def close(self) -> None:
-        """Nothing to release: the batch lives in this process."""
+    def _method_owner(self) -> object:
+        return self.task
 
 
 def make_agent_vec_env(env_id: str, num_envs: int, seed: int | None = None, **kwargs: Any) -> AgentVecEnv:
