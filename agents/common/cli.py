@@ -55,9 +55,10 @@ TRAIN_ALGORITHMS = ("ppo", "sac", "td3")
 RLLIB_ALGO = "rllib_ppo"
 
 
-def int_at_least(minimum: int) -> Callable[[str], int]:
-    """An argparse ``type`` for whole numbers >= ``minimum``: a bad value is reported by argparse
-    under the option's name ("argument --episodes: must be at least 2; got 1")."""
+def int_at_least(minimum: int, maximum: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type`` for whole numbers >= ``minimum`` (and <= ``maximum``, if given): a bad
+    value is reported by argparse under the option's name ("argument --episodes: must be at least
+    2; got 1")."""
 
     def parse(text: str) -> int:
         try:
@@ -66,6 +67,8 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
             raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
         if value < minimum:
             raise argparse.ArgumentTypeError(f"must be at least {minimum}; got {value}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum}; got {value}")
         return value
 
     return parse
@@ -292,7 +295,7 @@ def ars_parser() -> argparse.ArgumentParser:
     add_env_argument(parser)
     parser.add_argument(
         "--seed",
-        type=int_at_least(0),
+        type=int_at_least(0, 999),
         default=1,
         help="the run's seed, 0..999: it draws the perturbations and picks the training episodes (default 1)",
     )

@@ -174,6 +174,7 @@ def test_a_command_parses_before_its_slow_imports(command: str, form: str) -> No
         ("train", ["--curriculum", "0.5", "2"], r"argument --curriculum: must be a finite number in \[0, 1\]"),
         ("train", ["--hyperparams", "no-such.yml"], "argument --hyperparams: 'no-such.yml' does not exist"),
         ("ars", ["--hyperparams", "."], "argument --hyperparams: '.' is a directory, not a file"),
+        ("ars", ["--seed", "1000"], "argument --seed: must be at most 999; got 1000"),
         ("train_rllib", ["--hyperparams", "no-such.yml"], "argument --hyperparams: 'no-such.yml' does not exist"),
     ],
 )
