@@ -116,7 +116,8 @@ SAFETY_FACTOR = 0  # the sub-step as a fraction of the estimated critical step
 MAX_STEP = 1  # s, an upper bound on the sub-step
 MAX_SUBSTEPS = 2  # sub-steps one advance may take per cluster (a whole number, exact in float64)
 LINEARISED = 3  # 1.0: the paper's linearised elongation (eq. 11), 0.0: the exact one
-SETTINGS = 4
+ENERGY_TOLERANCE_SETTING = 4  # the runaway guard's relative tolerance (inf: no guard); see _energy_runaway
+SETTINGS = 5
 
 #: Every column number above, in one tuple: the kernels of other modules that read these tables
 #: hold it in their closure, which numba's cache hashes, so that a change here recompiles them
@@ -129,7 +130,7 @@ LAYOUT = (
     (FRAME_RATE, FRAME_TIDAL, TIME, LAST_STEP, OMEGA2, WORK, DISSIPATED, INITIAL_ENERGY, STEP_MIN, STEP_MAX),
     (ENERGY_SCALE,),
     (CLUSTER_COLUMNS, STATUS, SUBSTEPS, COUNTER_COLUMNS),
-    (SAFETY_FACTOR, MAX_STEP, MAX_SUBSTEPS, LINEARISED, SETTINGS),
+    (SAFETY_FACTOR, MAX_STEP, MAX_SUBSTEPS, LINEARISED, ENERGY_TOLERANCE_SETTING, SETTINGS),
 )
 #: SHA-256 of this file: kernels of other modules that compile these into their own cached code
 #: key their cache on it (numba keys a cache only on the file of the kernel itself).
@@ -141,11 +142,12 @@ SOURCE_SHA256 = hashlib.sha256((Path(__file__).resolve().parent / "_kernels.py")
 STATUS_OK = 0
 STATUS_NON_FINITE = 1  # a non-finite state, or a cable of zero length
 STATUS_TOO_MANY_SUBSTEPS = 2  # the interval needed more than MAX_SUBSTEPS sub-steps: refused, rolled back
-STATUS_ENERGY_RUNAWAY = 3  # the energy left its books by more than ENERGY_TOLERANCE (see _energy_runaway)
+STATUS_ENERGY_RUNAWAY = 3  # the energy left its books (see _energy_runaway)
 #: Every status code, for checks of states from outside (a restored state).
 STATUS_CODES = (STATUS_OK, STATUS_NON_FINITE, STATUS_TOO_MANY_SUBSTEPS, STATUS_ENERGY_RUNAWAY)
 
-#: The energy balance's largest relative residual before a cluster is flagged STATUS_ENERGY_RUNAWAY:
+#: The energy balance's largest relative residual before a cluster is flagged STATUS_ENERGY_RUNAWAY,
+#: by default (the batch's ENERGY_TOLERANCE_SETTING):
 #: ``|kinetic + strain + frame potential - initial + dissipated - work|`` over the largest of
 #: ``|initial|``, ``kinetic + strain + |frame potential|``, ``|work|`` and ``dissipated`` at the end
 #: of any interval since the reset (the largest so far: a cluster pushed and brought back to rest
@@ -655,11 +657,17 @@ def _roll_back(
 
 @njit(error_model="numpy")  # called, not inlined: once per interval, next to its sub-steps
 def _energy_runaway(
-    nodes: np.ndarray, cables: np.ndarray, cluster: np.ndarray, topology: np.ndarray, linearised: bool, viscous: bool
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    cluster: np.ndarray,
+    topology: np.ndarray,
+    linearised: bool,
+    viscous: bool,
+    tolerance: float,
 ) -> bool:
     """Whether a cluster's energy has left its books: the balance ``kinetic + strain + frame
     potential - initial + dissipated - work`` (the residual of
-    :class:`~tether_gym.simulator.EnergyReport`, J) exceeds ``ENERGY_TOLERANCE`` times the
+    :class:`~tether_gym.simulator.EnergyReport`, J) exceeds ``tolerance`` times the
     largest of ``|initial|``, ``kinetic + strain + |frame potential|``, ``|work|`` and
     ``dissipated`` since the reset, which it keeps in ``ENERGY_SCALE``.  A NaN residual counts as
     a runaway.  Reads the velocities at the end of the interval; changes nothing else."""
@@ -688,7 +696,7 @@ def _energy_runaway(
     residual = kinetic + strain + frame_potential - initial + dissipated - work
     scale = max(cluster[ENERGY_SCALE], abs(initial), kinetic + strain + abs(frame_potential), abs(work), dissipated)
     cluster[ENERGY_SCALE] = scale
-    return not abs(residual) <= ENERGY_TOLERANCE * scale
+    return not abs(residual) <= tolerance * scale
 
 
 @njit(inline="always", error_model="numpy")
@@ -748,7 +756,10 @@ def _end_advance(
     _synchronise_velocity(nodes, cluster, h_last)
     if counters[STATUS] == STATUS_OK:
         cluster[TIME] += duration
-        if _energy_runaway(nodes, cables, cluster, topology, settings[LINEARISED] != 0.0, fixed[2]):
+        tolerance = settings[ENERGY_TOLERANCE_SETTING]
+        if tolerance < math.inf and _energy_runaway(
+            nodes, cables, cluster, topology, settings[LINEARISED] != 0.0, fixed[2], tolerance
+        ):
             counters[STATUS] = STATUS_ENERGY_RUNAWAY
 
 

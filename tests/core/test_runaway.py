@@ -45,11 +45,11 @@ def test_the_stable_range_needs_no_opt_in_and_beyond_it_one_that_warns() -> None
     cluster = tg.make_cluster("triangle")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert tg.Simulator(cluster, safety_factor=MAX_STABLE_SAFETY_FACTOR).batch.safety_factor == 0.4
+        assert tg.Simulator(cluster, safety_factor=MAX_STABLE_SAFETY_FACTOR).batch.safety_factor == 0.2
     with pytest.raises(ValueError, match="allow_unstable_safety_factor=True") as refused:
-        tg.Simulator(cluster, safety_factor=0.41)
-    assert "safety_factor 0.41 is above 0.4" in str(refused.value)
-    with pytest.warns(UnstableSafetyFactorWarning, match="safety_factor 1 is above 0.4"):
+        tg.Simulator(cluster, safety_factor=0.21)
+    assert "safety_factor 0.21 is above 0.2" in str(refused.value)
+    with pytest.warns(UnstableSafetyFactorWarning, match="safety_factor 1 is above 0.2"):
         sim = tg.BatchSimulator(cluster, 2, safety_factor=1.0, allow_unstable_safety_factor=True)
     assert sim.safety_factor == 1.0
     with pytest.raises(ValueError, match="allow_unstable_safety_factor must be True or False"):
@@ -78,11 +78,13 @@ def snapping_pairs(count: int) -> tuple[Cluster, np.ndarray, np.ndarray]:
     return pair, x0, rng.normal(0, 0.1, (count, 2, 3))
 
 
-def run(safety_factor: float, count: int = 32, seconds: float = 10.0) -> tg.BatchSimulator:
+def run(safety_factor: float, count: int = 32, seconds: float = 10.0, **options: float) -> tg.BatchSimulator:
     pair, x0, v0 = snapping_pairs(count)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UnstableSafetyFactorWarning)
-        batch = tg.BatchSimulator(pair, count, safety_factor=safety_factor, allow_unstable_safety_factor=True)
+        batch = tg.BatchSimulator(
+            pair, count, safety_factor=safety_factor, allow_unstable_safety_factor=True, **options
+        )
     batch.reset(x0, v0)
     for _ in range(round(seconds / 0.1)):
         batch.advance(0.1)
@@ -99,6 +101,18 @@ def test_an_energy_runaway_is_flagged_and_frozen() -> None:
     frozen = batch.node_table.copy()
     stats = batch.advance(0.1)
     assert (stats.substeps == 0).all() and np.array_equal(batch.node_table, frozen) and stats.diverged.all()
+
+
+def test_the_guard_can_be_turned_off_and_changes_no_bit_of_what_it_does_not_stop() -> None:
+    unguarded = run(1.0, energy_tolerance=math.inf)
+    assert (unguarded.status == 0).all()  # the same runaways as above, unflagged: the guard flags them
+    report = unguarded.energy()
+    assert (np.abs(report.residual) > ENERGY_RUNAWAY_TOLERANCE * report.initial).any()
+    guarded, loose = run(0.1), run(0.1, energy_tolerance=math.inf)
+    assert guarded.node_table.tobytes() == loose.node_table.tobytes()
+    for bad in (math.nan, 0.0, -1.0, "0.25"):
+        with pytest.raises(ValueError, match="energy_tolerance"):
+            tg.BatchSimulator(tg.make_cluster("triangle"), energy_tolerance=bad)
 
 
 def test_healthy_clusters_are_never_flagged_at_the_default_factor() -> None:

@@ -238,7 +238,7 @@ class TaskConfig:
         observation_noise: std of Gaussian noise added to the observation (its own units).
         observed_satellites: satellites whose displacements and velocities are observed (None:
             all).
-        safety_factor: the simulator's sub-step as a fraction of the critical step, in (0, 0.4]
+        safety_factor: the simulator's sub-step as a fraction of the critical step, in (0, 0.2]
             (:data:`~tether_gym.simulator.MAX_STABLE_SAFETY_FACTOR`).
         allow_unstable_safety_factor: accept a safety_factor up to 1, above the range where the
             energy stays bounded through slack and snap, with an

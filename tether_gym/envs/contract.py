@@ -80,7 +80,7 @@ class EndReason(enum.IntEnum):
     RUNNING = 0
     FORMATION_LOST = 1  # a satellite farther than max_deviation from its nominal place
     CABLE_BROKEN = 2  # a cable's tension passed its breaking load (with cable_failure="terminate")
-    NUMERICS_DIVERGED = 3  # a non-finite state, the sub-step budget ran out, or the reward ran away
+    NUMERICS_DIVERGED = 3  # non-finite state, energy runaway, sub-step budget exhausted, or the reward ran away
 
     @property
     def label(self) -> str:
