@@ -161,3 +161,56 @@ def test_a_state_built_by_hand_restores_and_continues_like_the_original() -> Non
     source.advance(0.3, force)
     target.advance(0.3, force)
     assert target.node_table.tobytes() == source.node_table.tobytes()
+
+
+# ---------------------------------------------------------------------- the task's states
+def busy_task() -> tuple[Any, Any]:
+    from tether_gym.envs.task import task_from_arguments
+
+    options = dict(impulse_magnitude=0.5, impulse_rate=0.5, thrust_delay=2, thruster_failure_probability=1.0)
+    task = task_from_arguments(3, "tetrahedron", **options)
+    rngs = [np.random.default_rng(20 + k) for k in range(3)]
+    task.reset(rngs, np.arange(3))
+    for a in np.random.default_rng(5).uniform(-1, 1, (6, 3, task.action_size)):
+        task.step(a, rngs=rngs)
+    return task, task.snapshot()
+
+
+def task_bits(task: Any) -> tuple[bytes, ...]:
+    from tether_gym.envs.task import TASK_STATE_FIELDS
+
+    return tables(task.sim) + tuple(task._state_array(name).tobytes() for name in TASK_STATE_FIELDS)
+
+
+def test_a_task_state_selects_like_a_simulator_state() -> None:
+    _, state = busy_task()
+    assert state.select(np.array([False, True, True])).num_clusters == 2
+    for rows in ([0.0], [True, 2], [3], np.array([1.5])):
+        with pytest.raises(ValueError, match="rows"):
+            state.select(rows)
+
+
+def test_a_refused_task_restore_changes_nothing_in_the_simulator_or_the_task() -> None:
+    task, state = busy_task()
+    assert not any(np.isnan(v).any() for v in state.arrays.values() if v.dtype.kind == "f")  # NaN is never state
+    for name, value in state.arrays.items():
+        bads = [value.tolist(), value[:1], value.astype(np.float32 if value.dtype != np.float32 else np.float64)]
+        if value.dtype.kind == "f":
+            nan = value.copy()
+            nan.flat[0] = math.nan
+            bads.append(nan)
+        for bad in bads:
+            before = task_bits(task)
+            with pytest.raises((ValueError, TypeError), match=rf"state\.arrays\['{name}'\]"):
+                task.restore(dataclasses.replace(state, arrays={**state.arrays, name: bad}))
+            assert task_bits(task) == before, name
+    missing = {k: v for k, v in state.arrays.items() if k != "observation"}
+    with pytest.raises(ValueError, match="task arrays"):
+        task.restore(dataclasses.replace(state, arrays=missing))
+    # The simulator part is checked before anything is written, too.
+    bad_simulator = with_array(state.simulator, "time", np.full(3, -1.0))
+    before = task_bits(task)
+    with pytest.raises(ValueError, match=r"state\.arrays\['time'\]"):
+        task.restore(dataclasses.replace(state, simulator=bad_simulator))
+    assert task_bits(task) == before
+    task.restore(state)

@@ -85,6 +85,7 @@ from tether_gym.simulator import (
     BatchSimulator,
     SimulatorState,
     TableColumns,
+    checked_indices,
     read_only_rows,
 )
 
@@ -252,9 +253,10 @@ class TaskState:
         return self.simulator.num_clusters
 
     def select(self, rows: Sequence[int] | np.ndarray) -> TaskState:
-        """The state of clusters ``rows`` of this state, in that order; rows may repeat (one
-        restore then fills a planning batch with n copies of each cluster)."""
-        rows = np.asarray(rows, dtype=np.int64)
+        """The state of clusters ``rows`` of this state, in that order: whole numbers, which may
+        repeat (one restore then fills a planning batch with n copies of each cluster), or a (k,)
+        boolean mask; anything else raises ``ValueError`` naming ``rows``."""
+        rows = checked_indices("rows", rows, self.num_clusters)
         return TaskState(
             self.simulator.select(rows), read_only_rows(self.arrays, rows), self.config, self.cluster, self.difficulty
         )
@@ -532,11 +534,33 @@ class DampingTask:
                 f"state was taken at difficulty {state.difficulty}, this task is at {self.difficulty}; call "
                 f"set_difficulty({state.difficulty}) first"
             )
+        if not isinstance(state.simulator, SimulatorState):
+            raise TypeError(f"state.simulator must be a SimulatorState; got {type(state.simulator).__name__}")
+        self._check_task_arrays(state)
         idx = np.arange(state.num_clusters) if indices is None else self.sim.cluster_indices(indices)
-        self.sim.restore(state.simulator, idx)  # validates the indices and the cluster count first
+        self.sim.restore(state.simulator, idx)  # checks the rest before it writes anything
         source = np.zeros(idx.size, dtype=np.int64) if state.num_clusters == 1 else np.arange(idx.size)
         for name in TASK_STATE_FIELDS:
             self._state_array(name)[idx] = state.arrays[name][source]
+
+    def _check_task_arrays(self, state: TaskState) -> None:
+        """Refuse, naming the array, task arrays of ``state`` that this task could not hold: not
+        exactly the names of :data:`TASK_STATE_FIELDS`, not numpy arrays of this task's dtypes,
+        not of shape (k, ...) with this task's trailing axes, or holding NaN."""
+        arrays = state.arrays
+        if not isinstance(arrays, dict) or set(arrays) != set(TASK_STATE_FIELDS):
+            given = sorted(arrays) if isinstance(arrays, dict) else type(arrays).__name__
+            raise ValueError(f"state.arrays must hold exactly the task arrays {list(TASK_STATE_FIELDS)}; got {given}")
+        k = len(state.simulator.clusters) if isinstance(state.simulator.clusters, tuple) else -1
+        for name in TASK_STATE_FIELDS:
+            value, own = arrays[name], self._state_array(name)
+            if not isinstance(value, np.ndarray) or value.dtype != own.dtype:
+                got = f"dtype {value.dtype}" if isinstance(value, np.ndarray) else type(value).__name__
+                raise TypeError(f"state.arrays[{name!r}] must be a numpy array of dtype {own.dtype}; got {got}")
+            if value.shape != (k, *own.shape[1:]):
+                raise ValueError(f"state.arrays[{name!r}] must have shape {(k, *own.shape[1:])}; got {value.shape}")
+            if value.dtype.kind == "f" and np.isnan(value).any():
+                raise ValueError(f"state.arrays[{name!r}] holds NaN")
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(
