@@ -40,6 +40,7 @@ __all__ = [
     "FEATURE_EXTRACTORS",
     "MAX_JSON_BYTES",
     "MAX_JSON_DEPTH",
+    "MAX_JSON_INTEGER",
     "OPTIMIZERS",
     "check_action_bounds",
     "decode_float",
@@ -99,6 +100,19 @@ def _finite_float(text: str) -> float:
     return value
 
 
+#: The largest integer magnitude a policy file may hold: 64-bit integers (counts, shapes), which a
+#: float also holds without overflowing (an integer beyond a float's range raised OverflowError
+#: wherever a number was read as a float).
+MAX_JSON_INTEGER = 2**63 - 1
+
+
+def _bounded_int(text: str) -> int:
+    value = int(text)
+    if abs(value) > MAX_JSON_INTEGER:
+        raise ValueError(f"integer {text[:20]}{'...' if len(text) > 20 else ''} does not fit in 64 bits")
+    return value
+
+
 #: The largest JSON file of a policy directory read, bytes: a policy.json or normalization.json of
 #: the largest network and observation the envs have is a few hundred KB.
 MAX_JSON_BYTES = 16 * 2**20
@@ -133,7 +147,8 @@ def json_depth(data: bytes, limit: int) -> int:
 
 
 def parse_json(data: bytes, where: Path) -> Any:
-    """Strict JSON (UTF-8, no NaN/Infinity literals, no numbers that overflow to inf, at most
+    """Strict JSON (UTF-8, no NaN/Infinity literals, no numbers that overflow to inf, no integers
+    beyond 64 bits, at most
     :data:`MAX_JSON_BYTES` long and :data:`MAX_JSON_DEPTH` deep) with errors that name the file."""
     if len(data) > MAX_JSON_BYTES:
         raise PolicyFormatError(
@@ -146,7 +161,9 @@ def parse_json(data: bytes, where: Path) -> Any:
             "restore or re-create the file"
         )
     try:
-        return json.loads(data.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float)
+        return json.loads(
+            data.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float, parse_int=_bounded_int
+        )
     except (UnicodeDecodeError, ValueError) as error:
         raise PolicyFormatError(f"{where} is not valid JSON ({error}): restore or re-create the file") from error
 

@@ -198,6 +198,13 @@ def _same_kind(value: Any, current: Any) -> bool:
     return type(value) is type(current)
 
 
+def _negative(value: Any) -> bool:
+    """Whether ``value`` (a number or a list of them) has a number below 0."""
+    if isinstance(value, list):
+        return any(_negative(item) for item in value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value < 0
+
+
 def _optimizer_state(
     optimizer: torch.optim.Optimizer,
     saved: Any,
@@ -240,6 +247,10 @@ def _param_groups(optimizer: torch.optim.Optimizer, saved: list[Any], name: str,
                 raise PolicyFormatError(
                     f"{label}.{key} must be {type(current[key]).__name__} like {current[key]!r}; got {value!r}"
                 )
+            if key != "params" and _negative(value):
+                # Rates, decays, epsilons and betas are >= 0 in every optimizer the format names:
+                # a negative one steps the wrong way or divides by zero.
+                raise PolicyFormatError(f"{label}.{key} must be >= 0; got {value!r}")
         # JSON has no tuples; give back tuples where the optimizer uses them (Adam's betas).
         groups.append({key: tuple(value) if isinstance(current[key], tuple) else value for key, value in group.items()})
     return groups
