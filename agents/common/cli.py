@@ -442,8 +442,13 @@ def convert_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--best", action="store_true", help="convert SRC/best/best_model.zip")
     parser.add_argument("--algo", choices=TRAIN_ALGORITHMS, help="algorithm, if SRC has no config.yml")
+    from tether_gym.registration import ENV_IDS
+
     parser.add_argument(
-        "--env", metavar="ID", help="env id the model was trained on, if SRC has no config.yml (recorded in DST)"
+        "--env",
+        metavar="ID",
+        choices=list(ENV_IDS),
+        help="env id the model was trained on, if SRC has no config.yml (recorded in DST)",
     )
     parser.add_argument("--training-state", action="store_true", help="keep the optimizer states (for --resume)")
     parser.add_argument(

@@ -175,6 +175,8 @@ def test_a_command_parses_before_its_slow_imports(command: str, form: str) -> No
         ("train", ["--hyperparams", "no-such.yml"], "argument --hyperparams: 'no-such.yml' does not exist"),
         ("ars", ["--hyperparams", "."], "argument --hyperparams: '.' is a directory, not a file"),
         ("ars", ["--seed", "1000"], "argument --seed: must be at most 999; got 1000"),
+        # An unknown id was refused only after SRC was unpickled.
+        ("convert", ["SRC", "DST", "--env", "TetherChian-v0"], "argument --env: invalid choice: 'TetherChian-v0'"),
         ("train_rllib", ["--hyperparams", "no-such.yml"], "argument --hyperparams: 'no-such.yml' does not exist"),
     ],
 )
