@@ -137,7 +137,7 @@ def test_vector_env_errors() -> None:
         envs.reset(seed=[1, 2, 3])
     with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['mask'\]"):
         envs.reset(options={"mask": 1})
-    with pytest.raises(ValueError, match="num_envs must be a positive integer"):
+    with pytest.raises(ValueError, match="num_envs must be a whole number"):
         TetherClusterVectorEnv(num_envs=0)
     with pytest.raises(tg.ClusterError, match="unknown preset"):
         TetherClusterVectorEnv(num_envs=2, preset="blob")

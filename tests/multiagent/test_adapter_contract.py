@@ -14,6 +14,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -377,3 +378,68 @@ def test_both_adapters_give_the_same_verdict(
             verdicts[adapter] = verdict(lambda env=env, actions=actions: env.step(actions))
         env.env_method("set_difficulty", 1.0)
     assert len(set(verdicts.values())) == 1, f"{call}({name!r}, {value!r}, indices={indices!r}): {verdicts}"
+
+
+# ------------------------------------------------------------------ every batch surface, made the same way
+def _parallel(num_envs: int = 1, **kwargs: Any) -> Any:
+    from tether_gym.multiagent import parallel_env
+
+    return parallel_env(ENV_ID, **kwargs)
+
+
+SURFACES: dict[str, Callable[..., Any]] = {
+    "gym.make_vec": lambda num_envs=2, **kwargs: gym.make_vec(ENV_ID, num_envs=num_envs, **kwargs),
+    "make_sb3_vec_env": lambda num_envs=2, **kwargs: make_sb3_vec_env(ENV_ID, num_envs, **kwargs),
+    "make_agent_vec_env": lambda num_envs=2, **kwargs: make_agent_vec_env(ENV_ID, num_envs, **kwargs),
+    "parallel_env": _parallel,
+}
+#: Arguments every batch surface refuses by name, with the same check.
+BAD_MAKE = [
+    {"max_episode_steps": 0},
+    {"max_episode_steps": -2},
+    {"max_episode_steps": 2.5},
+    {"max_episode_steps": True},
+    {"max_episode_steps": "5"},
+    {"max_episode_steps": 2**70},
+    {"num_envs": 0},
+    {"num_envs": 2.0},
+    {"num_envs": True},
+    {"num_envs": 10**9},
+    {"render_mode": "rgb_array"},
+]
+
+
+#: The PettingZoo env is one cluster: it has no num_envs.
+MAKE_CASES = [
+    (surface, kwargs)
+    for surface in SURFACES
+    for kwargs in BAD_MAKE
+    if surface != "parallel_env" or "num_envs" not in kwargs
+]
+
+
+@pytest.mark.parametrize(("surface", "kwargs"), MAKE_CASES, ids=[f"{s}-{k}" for s, k in MAKE_CASES])
+def test_every_batch_surface_refuses_the_same_arguments(surface: str, kwargs: dict[str, Any]) -> None:
+    with pytest.raises(EnvArgumentError) as caught:
+        SURFACES[surface](**kwargs)
+    (name,) = kwargs
+    assert f"{name} must be" in str(caught.value)
+
+
+@pytest.mark.parametrize("surface", list(SURFACES))
+def test_minus_one_is_no_episode_limit_everywhere(surface: str) -> None:
+    """``max_episode_steps=-1`` is ``gym.make``'s "no limit"; every batch surface reads it so."""
+    env = SURFACES[surface](max_episode_steps=-1)
+    limit = env.get_attr("max_episode_steps")[0] if isinstance(env, BatchVecEnv) else env.max_episode_steps
+    assert limit is None
+
+
+@pytest.mark.parametrize("kwargs", BAD_MAKE[:-1], ids=[str(k) for k in BAD_MAKE[:-1]])
+def test_one_check_gives_one_message(kwargs: dict[str, Any]) -> None:
+    """The surfaces do not only refuse alike: one check refuses, so the message is the same."""
+    messages = set()
+    for surface, _ in (case for case in MAKE_CASES if case[1] is kwargs):
+        with pytest.raises(EnvArgumentError) as caught:
+            SURFACES[surface](**kwargs)
+        messages.add(str(caught.value))
+    assert len(messages) == 1, messages

@@ -50,6 +50,8 @@ __all__ = [
     "check_difficulty",
     "check_indices",
     "check_max_episode_steps",
+    "check_no_render",
+    "check_num_envs",
     "check_number",
     "check_satellites",
     "check_seed",
@@ -255,11 +257,32 @@ MAX_EPISODE_STEPS = 2**62
 
 def check_max_episode_steps(value: Any) -> int | None:
     """``max_episode_steps``, the truncation limit of an episode, checked wherever it is set (a
-    vector env, the multi-agent engine, an SB3 adapter's ``set_attr``): None (never truncate) or
-    a whole number of steps >= 1, else an :class:`EnvArgumentError` naming it."""
-    if value is None:
+    vector env, the multi-agent engine, an SB3 adapter's ``set_attr``): a whole number of steps
+    >= 1, or None or -1 (``gym.make``'s spelling) for no limit, which gives None; anything else
+    raises an :class:`EnvArgumentError` naming it."""
+    if value is None or (is_whole_number(value) and value == -1):
         return None
-    return check_whole("max_episode_steps", value, 1, MAX_EPISODE_STEPS, "steps (or None for no limit)")
+    return check_whole("max_episode_steps", value, 1, MAX_EPISODE_STEPS, "steps (or None or -1 for no limit)")
+
+
+def check_num_envs(value: Any) -> int:
+    """``num_envs``, the clusters of one batch (a vector env, the multi-agent engine), as an int
+    in ``1..MAX_NUM_ENVS``, or an :class:`EnvArgumentError` naming it."""
+    if is_whole_number(value) and 1 <= value <= MAX_NUM_ENVS:
+        return int(value)
+    raise EnvArgumentError(
+        f"num_envs must be a whole number (an int) in 1..{MAX_NUM_ENVS} (run several processes for more); "
+        f"got {short_repr(value)} (a {type(value).__name__})"
+    )
+
+
+def check_no_render(render_mode: Any, surface: str, fix: str) -> None:
+    """Refuse a ``render_mode`` other than None on a ``surface`` that does not render (a vector
+    env, a multi-agent env), with an :class:`EnvArgumentError` naming it and the ``fix``."""
+    if render_mode is not None:
+        raise EnvArgumentError(
+            f"render_mode must be None: {surface} does not render (got {short_repr(render_mode)}); {fix}"
+        )
 
 
 def check_indices(name: str, value: Any, count: int) -> list[int]:

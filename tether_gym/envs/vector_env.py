@@ -13,11 +13,12 @@ from gymnasium.vector.utils import batch_space
 
 from tether_gym.cluster import Cluster
 from tether_gym.envs.arguments import (
-    MAX_NUM_ENVS,
     OBSERVATION_LIMIT,
     EnvArgumentError,
     check_actions,
     check_max_episode_steps,
+    check_no_render,
+    check_num_envs,
     check_seed,
 )
 from tether_gym.envs.contract import END_REASONS, REWARD_TERM_KEYS
@@ -112,19 +113,14 @@ class TetherClusterVectorEnv(VectorEnv):
         **task: Any,
     ) -> None:
         mode = parse_autoreset_mode(autoreset_mode)
-        if render_mode is not None:
-            raise EnvArgumentError(
-                f"render_mode must be None: the native vector env does not render (got {render_mode!r}); render "
-                "a single env, gym.make(id, render_mode='rgb_array'), or use gym.make_vec(..., "
-                "vectorization_mode='sync')"
-            )
-        if not (is_whole_number(num_envs) and 1 <= num_envs <= MAX_NUM_ENVS):
-            raise EnvArgumentError(
-                f"num_envs must be a positive integer, at most {MAX_NUM_ENVS} (run several processes for more); "
-                f"got {num_envs!r}"
-            )
+        check_no_render(
+            render_mode,
+            "the native vector env",
+            "render a single env, gym.make(id, render_mode='rgb_array'), or use gym.make_vec(..., "
+            "vectorization_mode='sync')",
+        )
+        self.num_envs = check_num_envs(num_envs)
         self.max_episode_steps = max_episode_steps  # checked by the property
-        self.num_envs = int(num_envs)
         self.task = task_from_arguments(self.num_envs, preset, preset_kwargs, cluster, **task)
         self.cluster = self.task.cluster
         self.render_mode = None

@@ -55,7 +55,8 @@ def env_arguments(
 ) -> tuple[dict[str, Any], int | None]:
     """The env's keyword arguments as ``gym.make(env_id, **kwargs)`` builds them (the id's
     registered ones, overridden by ``kwargs``) and its episode limit (``max_episode_steps``,
-    or the id's; -1 means none, as for ``gym.make``).
+    or the id's; None or -1 means none, as for ``gym.make``), checked by
+    :func:`~tether_gym.envs.arguments.check_max_episode_steps`.
 
     Raises:
         ValueError: ``env_id`` is not a tether-gym id (the message lists them).
@@ -67,8 +68,10 @@ def env_arguments(
     if not isinstance(env_id, str) or env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; tether-gym ids are {list(ENV_IDS)}")
     spec = gym.spec(env_id)
+    from tether_gym.envs.arguments import check_max_episode_steps
+
     steps = spec.max_episode_steps if max_episode_steps is None else max_episode_steps
-    return {**spec.kwargs, **kwargs}, (None if steps == -1 else steps)
+    return {**spec.kwargs, **kwargs}, check_max_episode_steps(steps)
 
 
 def parallel_env(env_id: str, max_episode_steps: int | None = None, **kwargs: Any) -> TetherParallelEnv:

@@ -40,13 +40,13 @@ import numpy as np
 from gymnasium.utils import seeding
 
 from tether_gym.envs.arguments import (
-    MAX_NUM_ENVS,
     MAX_OBSERVATION_NOISE,
     MAX_THRUST_DELAY,
     OBSERVATION_LIMIT,
     EnvArgumentError,
     check_choice,
     check_max_episode_steps,
+    check_num_envs,
     check_number,
     check_seed,
     check_whole,
@@ -414,7 +414,7 @@ class AgentBatch:
             "local_observation_noise", local_observation_noise, 0.0, MAX_OBSERVATION_NOISE, "(observation units)"
         )
         self.max_episode_steps = max_episode_steps  # checked by the property
-        B = check_whole("num_envs", num_clusters, 1, MAX_NUM_ENVS)
+        B = check_num_envs(num_clusters)
         self.task = task = task_from_arguments(B, **dict(env_kwargs))
         self.num_clusters = B
         self.sensors = sensors = LocalSensors(task, communication, noise)

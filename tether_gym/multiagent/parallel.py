@@ -14,7 +14,7 @@ from tether_gym._optional import needs_extra
 with needs_extra("multiagent", "the PettingZoo multi-agent env (tether_gym.multiagent.parallel_env)"):
     from pettingzoo import ParallelEnv
 
-from tether_gym.envs.arguments import OBSERVATION_LIMIT, EnvArgumentError, check_actions, check_seed
+from tether_gym.envs.arguments import OBSERVATION_LIMIT, EnvArgumentError, check_actions, check_no_render, check_seed
 from tether_gym.envs.task import RESET_OPTION_KEYS
 from tether_gym.limits import short_repr
 from tether_gym.multiagent.engine import AgentBatch
@@ -86,11 +86,11 @@ class TetherParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         render_mode: str | None = None,
         **env_kwargs: Any,
     ) -> None:
-        if render_mode is not None:
-            raise EnvArgumentError(
-                f"render_mode must be None: the multi-agent env does not render (got {render_mode!r}); render the "
-                f"single-agent env, gym.make({env_id!r}, render_mode='rgb_array')"
-            )
+        check_no_render(
+            render_mode,
+            "the multi-agent env",
+            f"render the single-agent env, gym.make({env_id!r}, render_mode='rgb_array')",
+        )
         self.env_id = env_id
         self.batch = AgentBatch(1, env_kwargs, max_episode_steps, communication, reward, local_observation_noise)
         self.render_mode = None

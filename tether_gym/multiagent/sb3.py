@@ -48,7 +48,7 @@ from tether_gym._optional import needs_extra
 with needs_extra("train", "the shared-policy SB3 VecEnv of the multi-agent env (AgentVecEnv)"):
     from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
-from tether_gym.envs.arguments import OBSERVATION_LIMIT
+from tether_gym.envs.arguments import OBSERVATION_LIMIT, check_no_render
 from tether_gym.multiagent.engine import AgentBatch
 from tether_gym.sb3 import BatchVecEnv, float32_rewards
 
@@ -87,10 +87,14 @@ class AgentVecEnv(BatchVecEnv):
         communication: Any = None,
         reward: str = "team",
         local_observation_noise: float = 0.0,
+        render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
         from tether_gym.multiagent import env_arguments
 
+        check_no_render(
+            render_mode, "AgentVecEnv", f"render the single-agent env, gym.make({env_id!r}, render_mode='rgb_array')"
+        )
         env_kwargs, steps = env_arguments(env_id, max_episode_steps, **kwargs)
         self.env_id = env_id
         self.batch = AgentBatch(num_envs, env_kwargs, steps, communication, reward, local_observation_noise)
