@@ -30,6 +30,7 @@ from ..common.files import (
 )
 from .format import save_policy, sha256_hex, tensor_bytes, write_manifest
 from .layout import MANIFEST_FILE, POLICY_FILES, PolicyFormatError
+from .loaded import check_actions_fit
 from .pickled import is_pickle_model, load_pickled_model, refuse_untrusted, sb3_model_file
 from .reference import reference_observations, safe_actions, sb3_actions, trajectory_observations
 
@@ -111,6 +112,8 @@ def convert(config: ConvertConfig) -> Path:
     }
     rng = np.random.default_rng(0)
     env_kwargs = (run_config.get("hyperparams") or {}).get("env_kwargs")
+    if env_id is not None:
+        _check_fits_env(model, env_id, env_kwargs, files[0])
     rollout = (
         trajectory_observations(lambda obs: sb3_actions(model, normalizer, obs), env_id, env_kwargs)
         if env_id is not None
@@ -139,6 +142,23 @@ def convert(config: ConvertConfig) -> Path:
         f"({len(observations)} observations checked: identical actions)"
     )
     return destination
+
+
+def _check_fits_env(model: Any, env_id: str, env_kwargs: Any, source: Path) -> None:
+    """Refuse a model whose observations or actions do not fit ``env_id``'s, before it runs there."""
+    import gymnasium as gym
+
+    env = gym.make(env_id, **dict(env_kwargs or {}))
+    try:
+        shape = tuple(env.observation_space.shape or ())
+        if tuple(model.observation_space.shape) != shape:
+            raise ValueError(
+                f"{source} takes observations of shape {tuple(model.observation_space.shape)}, but {env_id} gives "
+                f"{shape}: pass --env with the id it was trained on"
+            )
+        check_actions_fit(model.action_space, env, str(source), entry=f"{source.name}: action_space")
+    finally:
+        env.close()
 
 
 def _checked_env_id(given: str | None, recorded: str | None) -> str | None:

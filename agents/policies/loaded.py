@@ -34,6 +34,7 @@ __all__ = [
     "OtherIdError",
     "OtherIdWarning",
     "TrainedPolicy",
+    "check_actions_fit",
     "env_action_space",
     "env_id_of",
     "is_shipped",
@@ -89,6 +90,45 @@ def env_action_space(env: Any) -> gymnasium.spaces.Box | None:
         if isinstance(space, gymnasium.spaces.Box):
             return space
     return None
+
+
+def check_actions_fit(
+    action_space: gymnasium.spaces.Box,
+    env: Any,
+    label: str,
+    decentralised: bool = False,
+    trained_on: str | None = None,
+    entry: str = "policy.json: action_space",
+) -> None:
+    """Refuse ``env`` (a ValueError naming ``label``, the policy's file or directory) when a
+    policy with ``action_space`` does not fit it: another number of actions, or other bounds (a
+    policy's actions are clipped or rescaled into its own bounds, so other bounds would be
+    clipped again by the env, unseen by the saturation count). A ``decentralised`` policy acts
+    per satellite, its actions repeated over the env's satellites. An env whose action space is
+    not a ``Box`` (nothing tether-gym makes) is not checked; ``trained_on`` (the policy's id) and
+    ``entry`` (where its action space is recorded) are for the message."""
+    space = env_action_space(env)
+    if space is None:
+        return
+    low, high = np.ravel(action_space.low).astype(np.float64), np.ravel(action_space.high).astype(np.float64)
+    env_low, env_high = np.ravel(space.low).astype(np.float64), np.ravel(space.high).astype(np.float64)
+    repeats = 1
+    if decentralised and low.size and env_low.size % low.size == 0:
+        repeats = env_low.size // low.size  # one agent per satellite, each with the policy's actions
+    name = env_id_of(env) or "the env"
+    if low.size * repeats != env_low.size:
+        per = " per satellite" if decentralised else ""
+        raise ValueError(
+            f"{label} acts with {low.size} actions{per} ({entry}.shape {list(action_space.shape)}), "
+            f"but {name} takes {env_low.size}: pass a model trained on this id"
+            + (f" (it was trained on {trained_on})" if trained_on else "")
+        )
+    if not (np.array_equal(np.tile(low, repeats), env_low) and np.array_equal(np.tile(high, repeats), env_high)):
+        raise ValueError(
+            f"{label} acts within bounds [{low.min():g}, {high.max():g}] ({entry}.low/high), "
+            f"but {name} takes actions in [{env_low.min():g}, {env_high.max():g}]: its actions would be clipped "
+            "again, unseen; pass a model trained on this id, or one saved with the env's action space"
+        )
 
 
 class TrainedPolicy:
@@ -228,35 +268,8 @@ class TrainedPolicy:
             self.baseline = make_baseline(self.residual_on, env)
 
     def check_env_actions(self, env: Any) -> None:
-        """Refuse ``env`` when the policy's actions do not fit it: another number of actions, or
-        other bounds (a policy's actions are clipped or rescaled into its own bounds, so other
-        bounds would be clipped again by the env, unseen by the saturation count). A decentralised
-        policy acts per satellite (3 actions), repeated over the env's satellites. An env whose
-        action space is not a ``Box`` (nothing tether-gym makes) is not checked."""
-        space = env_action_space(env)
-        if space is None:
-            return
-        ours = self.policy.action_space
-        low, high = np.ravel(ours.low).astype(np.float64), np.ravel(ours.high).astype(np.float64)
-        env_low, env_high = np.ravel(space.low).astype(np.float64), np.ravel(space.high).astype(np.float64)
-        repeats = 1
-        if self.multiagent is not None and low.size and env_low.size % low.size == 0:
-            repeats = env_low.size // low.size  # one agent per satellite, each with the policy's actions
-        name = env_id_of(env) or "the env"
-        if low.size * repeats != env_low.size:
-            per = " per satellite" if self.multiagent is not None else ""
-            raise ValueError(
-                f"{self.path} acts with {low.size} actions{per} (policy.json: action_space.shape {list(ours.shape)}), "
-                f"but {name} takes {env_low.size}: pass a model trained on this id"
-                + (f" (it was trained on {self.env_id})" if self.env_id else "")
-            )
-        if not (np.array_equal(np.tile(low, repeats), env_low) and np.array_equal(np.tile(high, repeats), env_high)):
-            raise ValueError(
-                f"{self.path} acts within bounds [{low.min():g}, {high.max():g}] (policy.json: action_space.low/high), "
-                f"but {name} takes actions in [{env_low.min():g}, {env_high.max():g}]: its actions would be clipped "
-                "again, unseen; pass a model trained on this id, or re-create its policy.json with the env's action "
-                "space"
-            )
+        """Refuse ``env`` when the policy's actions do not fit it (:func:`check_actions_fit`)."""
+        check_actions_fit(self.policy.action_space, env, str(self.path), self.multiagent is not None, self.env_id)
 
     def check_env_id(self, env: Any, allow_other_id: bool = False) -> None:
         """Refuse ``env`` when its id is not the one the policy was trained on, unless

@@ -71,3 +71,23 @@ def test_converter_refuses_an_env_that_contradicts_the_run(sb3_run: Path, tmp_pa
     with pytest.warns(PickleTrustWarning), pytest.raises(ValueError, match=f"--env {other} differs .*{ENV}"):
         convert(ConvertConfig(sb3_run, tmp_path / "relabelled", trust_pickle=True, env_id=other))
     assert not (tmp_path / "relabelled" / "policy.json").exists()
+
+
+def test_converter_refuses_a_model_that_does_not_fit_the_id_before_it_runs_there(sb3_run: Path, tmp_path: Path) -> None:
+    """A run that records no id, converted with --env of another shape, failed inside SB3's
+    predict on the first trajectory step; it is refused naming the model file and the id."""
+    import shutil
+
+    import yaml
+
+    run = tmp_path / "run"
+    shutil.copytree(sb3_run, run)
+    (run / "config.yml").write_text(yaml.safe_dump({"algo": "ppo", "seed": 0}))
+    with (
+        pytest.warns(PickleTrustWarning),
+        pytest.raises(
+            ValueError, match=r"model.zip takes observations of shape \(30,\), but TetherTriangle-v0 gives \(21,\)"
+        ),
+    ):
+        convert(ConvertConfig(run, tmp_path / "converted", trust_pickle=True, env_id="TetherTriangle-v0"))
+    assert not (tmp_path / "converted" / "policy.json").exists()
