@@ -5,7 +5,8 @@ Each file format a policy directory holds (:data:`FORMATS`: ``policy.json``,
 mutated -- a JSON entry replaced by another value or removed, a safetensors header edited, bytes
 flipped, inserted or cut -- and read by each reader that reads it (:data:`READERS`). Every
 mutation ends in exactly one of two ways: the directory loads, or the reader raises the format's
-own :class:`~agents.policies.layout.PolicyFormatError` (a ChecksumError is one), within a second.
+own :class:`~agents.policies.layout.PolicyFormatError` (a ChecksumError is one), within a second
+and 100 MB of peak memory.
 Nothing else (a RecursionError, a KeyError or TypeError from inside, a torch or safetensors
 error, an OverflowError) is allowed.
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import ast
 import json
+import resource
 import shutil
 import struct
 import tempfile
@@ -212,12 +214,14 @@ def test_a_mutated_policy_file_loads_or_is_refused_by_name(
         else:
             mutated = MUTATORS[kind](data, raw)
         (directory / name).write_bytes(mutated)
-        start = time.perf_counter()
+        peak, start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, time.perf_counter()
         try:
             read(directory)
         except PolicyFormatError as error:
             assert str(error), "an error without a message"
         assert time.perf_counter() - start < 1.0
+        # The process's peak resident memory (KiB) rises by under 100 MB for any mutation.
+        assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - peak < 100 * 1024
 
 
 def parsing_functions() -> set[str]:
