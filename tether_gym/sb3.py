@@ -54,7 +54,9 @@ How the two APIs are matched (N = ``num_envs``):
   (N, n, 3) arrays), so the options must be the same for every sub-env, which is what
   ``set_options(dict)`` gives. Seeds and options are used once.
 * **The batch is one object.** There are no per-sub-env Python objects to address, so
-  ``get_attr``/``set_attr``/``env_method`` act on the vector env itself (see each method), and
+  ``get_attr`` reads the adapter's attributes (``observation_space`` is one sub-env's, as SB3
+  gives it), then the vector env's, ``set_attr``/``env_method`` act on the vector env itself
+  (see :class:`BatchVecEnv` for what they accept), and
   ``env_is_wrapped`` is False everywhere (no per-env ``gym.Wrapper``).
 * **Rendering** is not supported: ``render()`` warns and returns None. Render a single
   :class:`~tether_gym.envs.TetherClusterEnv` with ``render_mode="rgb_array"`` instead.
@@ -548,8 +550,8 @@ class SB3VecEnv(BatchVecEnv):
 
     See the module docstring for the mapping between the two APIs, and :class:`BatchVecEnv` for
     the checks of every argument. Works with VecNormalize, VecMonitor and the other SB3
-    ``VecEnvWrapper`` classes on top. ``get_attr``, ``set_attr`` and ``env_method`` act on the
-    vector env itself.
+    ``VecEnvWrapper`` classes on top. ``get_attr`` reads the adapter's attributes (its one-row
+    spaces), then the vector env's; ``set_attr`` and ``env_method`` act on the vector env itself.
 
     Args:
         venv: the vector env, e.g. ``gym.make_vec("tether_gym:TetherTetrahedron-v0", num_envs=N,
@@ -643,7 +645,8 @@ class SB3VecEnv(BatchVecEnv):
             self.reset_infos[i] = new
 
     def _attribute_owners(self) -> tuple[object, ...]:
-        return (self.venv,)
+        # The adapter first, as AgentVecEnv: its spaces are one row's, as SB3's get_attr gives them.
+        return (self, self.venv)
 
     def _setting_owner(self) -> object:
         return self.venv

@@ -230,6 +230,9 @@ def test_both_adapters_accept_the_same_input(adapter: str) -> None:
     assert env.env_method("set_difficulty", difficulty=0.5, indices=1) == [None]
     assert env.get_attr("task", indices=0)[0].difficulty == 0.5
     assert env.has_attr("task") and not env.has_attr("no_such_attribute") and not env.has_attr("_seeds")
+    # One row's spaces, as SB3's get_attr gives a sub-env's.
+    assert env.get_attr("observation_space", indices=0) == [env.observation_space]
+    assert env.get_attr("action_space", indices=[1]) == [env.action_space]
     # Out-of-bounds actions are clipped by the env, as the single-agent env clips them: accepted by both.
     _, rewards, dones, _ = env.step(np.full(action_shape(env), 50.0, dtype=np.float32))
     assert np.isfinite(rewards).all() and rewards.dtype == np.float32 and not dones.any()
