@@ -269,7 +269,10 @@ class TrainedPolicy:
 
     def check_env_actions(self, env: Any) -> None:
         """Refuse ``env`` when the policy's actions do not fit it (:func:`check_actions_fit`)."""
-        check_actions_fit(self.policy.action_space, env, str(self.path), self.multiagent is not None, self.env_id)
+        entry = f"{METADATA_FILE}: action_space" if is_policy_dir(self.path) else "its action_space"
+        check_actions_fit(
+            self.policy.action_space, env, str(self.path), self.multiagent is not None, self.env_id, entry=entry
+        )
 
     def check_env_id(self, env: Any, allow_other_id: bool = False) -> None:
         """Refuse ``env`` when its id is not the one the policy was trained on, unless
