@@ -234,7 +234,13 @@ def claim_output_dir(directory: str | Path, argument: str = "--out") -> Path:
         import fcntl
     except ImportError:  # no flock (Windows): the checks for an earlier result still apply
         return directory
-    descriptor = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        descriptor = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError as error:
+        raise OutputError(
+            f"{argument} {directory} cannot be opened to claim it for this command ({error.strerror}): "
+            f"pass a directory you can read and write"
+        ) from error
     try:
         fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as error:

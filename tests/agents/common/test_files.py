@@ -219,3 +219,12 @@ def test_removing_a_commands_files_keeps_everything_else(tmp_path: Path) -> None
     assert (tmp_path / "notes.txt").read_text() == "mine" and not (tmp_path / "policy.json").exists()
     (tmp_path / "notes.txt").unlink()
     assert remove_written_files(tmp_path, ["policy.json"]) == [] and not tmp_path.exists()
+
+
+def test_a_directory_that_cannot_be_opened_is_refused_by_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def unreadable(*args: Any, **kwargs: Any) -> int:
+        raise PermissionError(13, "Permission denied")  # a directory with write but no read permission
+
+    monkeypatch.setattr(os, "open", unreadable)
+    with pytest.raises(OutputError, match="--out .*cannot be opened to claim it .*Permission denied"):
+        claim_output_dir(tmp_path)
