@@ -446,3 +446,20 @@ def test_one_check_gives_one_message(kwargs: dict[str, Any]) -> None:
             SURFACES[surface](**kwargs)
         messages.add(str(caught.value))
     assert len(messages) == 1, messages
+
+
+def test_the_engine_checks_its_own_seeds() -> None:
+    """AgentBatch.reset, the public engine under both multi-agent surfaces, checks its seeds
+    before it changes a generator, as the envs above it do."""
+    from tether_gym.multiagent import AgentBatch, env_arguments
+
+    kwargs, steps = env_arguments(ENV_ID)
+    batch = AgentBatch(2, kwargs, steps)
+    batch.reset(np.arange(2), [0, 1])
+    states = [rng.bit_generator.state for rng in batch.rngs]
+    for seeds, message in (([0, -1], r"seed\[1\] must be"), ([0, 1.5], r"seed\[1\] must be"), ([0], "one seed")):
+        with pytest.raises(EnvArgumentError, match=message):
+            batch.reset(np.arange(2), seeds)
+        assert [rng.bit_generator.state for rng in batch.rngs] == states
+    with pytest.raises(EnvArgumentError, match="seed must be"):
+        batch.reset(np.arange(1), [True])

@@ -454,10 +454,16 @@ class AgentBatch:
         positions: np.ndarray | None = None,
         velocities: np.ndarray | None = None,
     ) -> None:
-        """Start new episodes for clusters ``indices`` (seeds checked by :meth:`check_seeds`, exact
-        states by the task's ``check_reset_state``). A seed s gives the cluster the task generator
+        """Start new episodes for clusters ``indices`` (seeds checked here by :meth:`check_seeds`,
+        before anything changes; exact states by the caller, with the task's
+        ``check_reset_state``). A seed s gives the cluster the task generator
         ``seeding.np_random(s)`` (the single-agent env's) and a noise generator of its own,
         derived from s. The delay line of a reset cluster is filled with its first measurement."""
+        seeds = self.check_seeds(seeds)
+        if len(seeds) != len(indices):
+            raise EnvArgumentError(
+                f"seeds must hold one seed (or None) per reset cluster: {len(indices)}; got {len(seeds)}"
+            )
         for b, seed in zip(indices.tolist(), seeds, strict=True):
             if seed is not None:
                 self.rngs[b] = seeding.np_random(seed)[0]
