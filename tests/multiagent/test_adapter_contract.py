@@ -463,3 +463,18 @@ def test_the_engine_checks_its_own_seeds() -> None:
         assert [rng.bit_generator.state for rng in batch.rngs] == states
     with pytest.raises(EnvArgumentError, match="seed must be"):
         batch.reset(np.arange(1), [True])
+
+
+def test_local_sensors_check_what_the_engine_checks() -> None:
+    """LocalSensors, made directly over a single-agent vector env's task (the decentralised
+    controllers do), refuses what AgentBatch refuses, with the same messages."""
+    from tether_gym.multiagent import LocalSensors, parallel_env
+
+    task = gym.make_vec(ENV_ID, num_envs=2).unwrapped.task
+    for kwargs in ({"communication": {"hops": 0}}, {"communication": 3}, {"local_observation_noise": -1.0}):
+        with pytest.raises(EnvArgumentError) as direct:
+            LocalSensors(task, **kwargs)
+        with pytest.raises(EnvArgumentError) as engine:
+            parallel_env(ENV_ID, **kwargs)
+        assert str(direct.value) == str(engine.value)
+    assert LocalSensors(task, {"hops": 1}).layout == parallel_env(ENV_ID, communication={"hops": 1}).layout

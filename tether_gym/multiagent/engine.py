@@ -97,6 +97,12 @@ def agent_name(node: int) -> str:
     return f"satellite_{node}"
 
 
+def check_local_observation_noise(value: Any) -> float:
+    """``local_observation_noise``, the std of the local observations' noise (observation
+    units), as a float in ``[0, MAX_OBSERVATION_NOISE]``, or an :class:`EnvArgumentError` naming it."""
+    return check_number("local_observation_noise", value, 0.0, MAX_OBSERVATION_NOISE, "(observation units)")
+
+
 @dataclasses.dataclass(frozen=True)
 class Communication:
     """Who hears whom, and how late.
@@ -273,14 +279,20 @@ class LocalSensors:
 
     Args:
         task: the batched task.
-        communication: who hears whom (:class:`Communication`).
-        local_observation_noise: std of the noise on measured entries (observation units).
+        communication: who hears whom: a :class:`Communication`, or what
+            :meth:`Communication.parse` takes.
+        local_observation_noise: std of the noise on measured entries (observation units), in
+            ``[0, MAX_OBSERVATION_NOISE]``.
 
     Attributes:
         graph: the :class:`AgentGraph`; ``layout``: the :class:`LocalLayout`; ``num_agents``: A.
     """
 
-    def __init__(self, task: DampingTask, communication: Communication, local_observation_noise: float = 0.0) -> None:
+    def __init__(self, task: DampingTask, communication: Any = None, local_observation_noise: float = 0.0) -> None:
+        # The engine's checks (AgentBatch runs them too, before it builds the task): LocalSensors
+        # is also made directly, over a single-agent vector env's task.
+        communication = Communication.parse(communication)
+        local_observation_noise = check_local_observation_noise(local_observation_noise)
         self.task = task
         self.communication = communication
         self.local_observation_noise = local_observation_noise
@@ -410,9 +422,7 @@ class AgentBatch:
     ) -> None:
         communication = Communication.parse(communication)
         self.reward_mode = check_choice("reward", reward, REWARD_MODES)
-        noise = check_number(
-            "local_observation_noise", local_observation_noise, 0.0, MAX_OBSERVATION_NOISE, "(observation units)"
-        )
+        noise = check_local_observation_noise(local_observation_noise)
         self.max_episode_steps = max_episode_steps  # checked by the property
         B = check_num_envs(num_clusters)
         self.task = task = task_from_arguments(B, **dict(env_kwargs))
