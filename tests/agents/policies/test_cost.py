@@ -20,6 +20,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from stable_baselines3 import PPO
 
 from agents.policies import TrainedPolicy, make_controller, shipped_models
@@ -237,3 +239,37 @@ def test_every_shipped_model_fits_the_actions_of_its_own_id(env_id: str) -> None
     for name in shipped_models(env_id):
         controller = make_controller(name, env)
         assert isinstance(controller, TrainedPolicy)
+
+
+layers = st.lists(st.integers(1, 12), max_size=3)
+
+
+@pytest.mark.slow
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(
+    algo=st.sampled_from(["ppo", "ars", "sac", "td3"]),
+    arch=st.one_of(st.none(), layers, st.fixed_dictionaries({"pi": layers, "critic": layers})),
+    sde=st.booleans(),
+    full_std=st.booleans(),
+    critics=st.integers(1, 4),
+    sizes=st.tuples(st.integers(1, 40), st.integers(1, 12)),
+)
+def test_the_counted_parameters_are_sb3s_for_any_settings(
+    algo: str, arch: Any, sde: bool, full_std: bool, critics: int, sizes: tuple[int, int]
+) -> None:
+    """The grid above, as a property over random layer sizes, spaces and settings."""
+    actor_critic = algo in ("ppo", "ars")
+    if isinstance(arch, dict):
+        arch = {"pi": arch["pi"], ("vf" if actor_critic else "qf"): arch["critic"]}
+    kwargs: dict[str, Any] = {"net_arch": arch}
+    if algo != "td3":
+        kwargs["use_sde"] = sde
+    if actor_critic and sde:
+        kwargs["full_std"] = full_std
+    if not actor_critic:
+        kwargs["n_critics"] = critics
+    observation = gym.spaces.Box(-1, 1, (sizes[0],), np.float32)
+    action = gym.spaces.Box(-1, 1, (sizes[1],), np.float32)
+    built = _policy_class(algo, "MlpPolicy", "test")(observation, action, lambda _: 0.0, **kwargs)
+    expected = sum(tensor.numel() for tensor in built.state_dict().values())
+    assert parameter_count(algo, kwargs, *sizes, "test") == expected
