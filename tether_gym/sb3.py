@@ -67,6 +67,7 @@ from __future__ import annotations
 import inspect
 import time
 import warnings
+from abc import abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from copy import deepcopy
 from types import MappingProxyType
@@ -225,7 +226,8 @@ class BatchVecEnv(VecEnv):
       once; values outside the action space's bounds are clipped by the env, as in the
       single-agent env. A second ``step_async`` before ``step_wait`` is refused, and so is a
       ``step_wait`` with no pending ``step_async``.
-    * ``get_attr(name)``: a public attribute (no leading underscore) of the batch;
+    * ``get_attr(name)``: a public attribute (no leading underscore) of the adapter, or else of
+      the batch;
       ``AttributeError`` for a private or missing one (so ``has_attr`` is False for them).
     * ``set_attr(name, value)``: only the names of :attr:`SETTABLE`, each value checked by the
       same function the env's own setter runs, for the whole batch (``indices`` None or all N).
@@ -265,11 +267,13 @@ class BatchVecEnv(VecEnv):
         super().__init__(num_envs, observation_space, action_space)
 
     # ------------------------------------------------------------------ what a subclass provides
+    @abstractmethod
     def _reset_batch(self, seeds: list[int | None], options: dict[str, Any] | None) -> VecEnvObs:
         """Reset every row with the checked per-row ``seeds`` and batch ``options``; fill
         ``reset_infos``; return the (N, *obs_shape) observations."""
         raise NotImplementedError
 
+    @abstractmethod
     def _step_batch(self, actions: np.ndarray) -> VecEnvStepReturn:
         """Step the batch with checked (N, *action_shape) float64 actions."""
         raise NotImplementedError
@@ -278,14 +282,17 @@ class BatchVecEnv(VecEnv):
         """The N row seeds that the base seed ``seed`` schedules."""
         return [seed + row for row in range(self.num_envs)]
 
+    @abstractmethod
     def _attribute_owners(self) -> tuple[object, ...]:
         """The objects ``get_attr`` reads, in order (the first that has the attribute wins)."""
         raise NotImplementedError
 
+    @abstractmethod
     def _setting_owner(self) -> object:
         """The object ``set_attr`` sets."""
         raise NotImplementedError
 
+    @abstractmethod
     def _method_owner(self) -> object:
         """The object whose method ``env_method`` calls."""
         raise NotImplementedError
