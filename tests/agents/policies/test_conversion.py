@@ -4,6 +4,7 @@ itself is tested end to end in tests/agents/test_agents_safety.py)."""
 from __future__ import annotations
 
 import pickle
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from agents.common.files import OutputExistsError
 from agents.convert import build_parser
 from agents.policies import TrainedPolicy
 from agents.policies.conversion import ConvertConfig, convert
+from agents.policies.format import verify_manifest
 from agents.policies.pickled import PickleTrustWarning
 from agents.policies.reference import reference_observations
 from tests.agents.helpers import ENV, sb3_actions
@@ -91,3 +93,37 @@ def test_converter_refuses_a_model_that_does_not_fit_the_id_before_it_runs_there
     ):
         convert(ConvertConfig(run, tmp_path / "converted", trust_pickle=True, env_id="TetherTriangle-v0"))
     assert not (tmp_path / "converted" / "policy.json").exists()
+
+
+def test_an_interrupted_conversion_leaves_the_earlier_one_whole_and_keeps_srcs_files(
+    sb3_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A conversion lands as a whole directory: interrupted at its last step, DST is the earlier
+    conversion, verifying; converted into SRC's own directory, SRC's files stay."""
+    import agents.policies.conversion
+
+    target = tmp_path / "converted"
+    with pytest.warns(PickleTrustWarning):
+        convert(ConvertConfig(sb3_run, target, trust_pickle=True, reference=True))
+    before = {p.name: p.read_bytes() for p in target.iterdir()}
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(agents.policies.conversion, "write_manifest", interrupted)
+        with pytest.warns(PickleTrustWarning), pytest.raises(KeyboardInterrupt):
+            # Another conversion of the same run: more files (the training state), other reference observations.
+            again = dict(force=True, reference=True, training_state=True, check_observations=16)
+            convert(ConvertConfig(sb3_run, target, trust_pickle=True, **again))
+    verify_manifest(target)
+    assert {p.name: p.read_bytes() for p in target.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["converted"]  # no staging directory left
+    # Into SRC's own directory: every file of SRC is still there, unchanged, beside the conversion.
+    source = tmp_path / "run"
+    shutil.copytree(sb3_run, source)
+    originals = {p.name: p.read_bytes() for p in source.iterdir() if p.is_file()}
+    with pytest.warns(PickleTrustWarning):
+        convert(ConvertConfig(source, source, trust_pickle=True))
+    assert {name: (source / name).read_bytes() for name in originals} == originals
+    verify_manifest(source, strict=False)
