@@ -199,6 +199,8 @@ def test_bad_input_gets_a_clear_error() -> None:
     assert env.task.sim.time[0] == 0.0 and env.batch.episode_steps[0] == 0  # the refused steps changed nothing
     with pytest.raises(EnvArgumentError, match="unknown agent"):
         env.observation_space("hub")
+    with pytest.raises(EnvArgumentError, match="unknown agent"):
+        env.action_space(["satellite_0"])  # not a name at all: refused by name, not a bare TypeError
     for options, message in (
         ({"communication": {"hops": 0}}, r"communication\['hops'\] must be a whole number"),
         ({"communication": {"hops": 1, "range": 2.0}}, "exactly one of 'hops'"),

@@ -122,7 +122,8 @@ class TetherParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         return self.batch.max_episode_steps
 
     def _check_name(self, agent: Any) -> None:
-        if agent not in self._index:
+        # A str first: an unhashable name (a list) would raise a bare TypeError in the lookup.
+        if not isinstance(agent, str) or agent not in self._index:
             raise EnvArgumentError(f"unknown agent {short_repr(agent)}; the agents are {self.possible_agents}")
 
     # ------------------------------------------------------------------ API
