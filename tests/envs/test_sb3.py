@@ -385,4 +385,10 @@ def test_works_over_a_same_step_sync_vector_env() -> None:
     for info in infos:
         assert info["TimeLimit.truncated"] is True and info["end_reason"] == "running"
         assert info["terminal_observation"].shape == (OBS_SIZE,)
+    # The limits live in each sub-env's TimeLimit: setting one on the SyncVectorEnv object would
+    # do nothing, so it is refused instead of silently making a new attribute.
+    with pytest.raises(AttributeError, match="SyncVectorEnv has no attribute 'max_episode_steps'"):
+        env.set_attr("max_episode_steps", 5)
+    with pytest.raises(AttributeError, match="SyncVectorEnv has no method 'set_difficulty'"):
+        env.env_method("set_difficulty", 0.5)
     env.close()
