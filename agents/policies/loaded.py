@@ -256,7 +256,11 @@ class TrainedPolicy:
         if self.multiagent is not None:
             from ..controllers.decentralised import LocalObserver
 
-            self.observer = LocalObserver(env, self.multiagent)
+            try:
+                self.observer = LocalObserver(env, self.multiagent)
+            except ValueError as error:
+                # The options come from the policy's file: say which file and entry.
+                raise ValueError(f"{self.path}: {METADATA_FILE}: multiagent: {error}") from error
             if self.observer.observation_size != self.observation_size:
                 raise ValueError(
                     f"{self.path} takes local observations of size {self.observation_size}, but the agents of "

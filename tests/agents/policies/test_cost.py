@@ -273,3 +273,16 @@ def test_the_counted_parameters_are_sb3s_for_any_settings(
     built = _policy_class(algo, "MlpPolicy", "test")(observation, action, lambda _: 0.0, **kwargs)
     expected = sum(tensor.numel() for tensor in built.state_dict().values())
     assert parameter_count(algo, kwargs, *sizes, "test") == expected
+
+
+def test_bad_multiagent_options_in_policy_json_are_refused_naming_the_file(tmp_path: Path) -> None:
+    source = shipped_models("TetherTetrahedron-v0")["ppo_multiagent"]
+    directory = tmp_path / "p"
+    directory.mkdir()
+    for file in source.iterdir():
+        if file.name != "MANIFEST.sha256":
+            (directory / file.name).write_bytes(file.read_bytes())
+    edit_metadata(directory, multiagent={"bogus": 1})
+    env = gym.make("tether_gym:TetherTetrahedron-v0")
+    with pytest.raises(ValueError, match=r"p: policy.json: multiagent: unknown multi-agent option\(s\) \['bogus'\]"):
+        make_controller(str(directory), env)
