@@ -8,6 +8,7 @@ torch, as loading a policy needs it; the modules hold the rest, each importing o
 * :mod:`.layout`: a policy directory's file names, the format's version, and its errors;
 * :mod:`.codecs`: strict JSON, spaces, and classes by name;
 * :mod:`.normalization`: the observation normalisation statistics, without SB3's wrapper;
+* :mod:`.size`: the size of the network a ``policy.json`` describes, without building it;
 * :mod:`.sb3_state`: an SB3 model's optimizer state and counters (the only module touching SB3's
   private attributes);
 * :mod:`.format`: the safe format itself (save, load, manifest, metadata), and why it describes an

@@ -22,7 +22,9 @@ space and class-name codecs in :mod:`.codecs`.
 Loading (:func:`load_policy`) reads only JSON, ``sha256`` text and safetensors. It builds the SB3
 policy object from the metadata: the class comes from the algorithm's own alias table, every
 class-valued keyword argument (activation, feature extractor, optimizer) from a fixed table of
-names, so the files cannot name arbitrary code. It then loads the weights with
+names, so the files cannot name arbitrary code. Before it builds anything, it bounds what the
+files may cost: each file's size, and the network's parameter count computed from ``policy.json``
+alone (:mod:`.size`), which must match the weights file's. It then loads the weights with
 ``load_state_dict(strict=True)``. Nothing here imports :mod:`pickle`: the pickle-based SB3 files
 are handled, behind an explicit opt-in, by :mod:`agents.policies.pickled`.
 
@@ -496,8 +498,11 @@ def load_policy(directory: str | Path, require_manifest: bool = False, device: s
     """Rebuild the policy stored in ``directory`` (see the module docstring).
 
     With ``require_manifest`` (shipped models), the directory must have a ``MANIFEST.sha256``
-    that lists exactly its files; otherwise a manifest is verified when present. Raises
-    :class:`PolicyFormatError` (or :class:`ChecksumError`) naming the file and the problem."""
+    that lists exactly its files; otherwise a manifest is verified when present. The network's
+    size is computed from ``policy.json`` and checked against :data:`.size.MAX_POLICY_PARAMETERS`
+    and the weights file's value count before the policy is built; an unbounded action space is
+    refused. Raises :class:`PolicyFormatError` (or :class:`ChecksumError`) naming the file and the
+    problem."""
     directory = Path(directory)
     if not is_policy_dir(directory):
         raise PolicyFormatError(f"{directory} is not a policy directory (it has no {METADATA_FILE})")
