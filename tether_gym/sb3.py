@@ -227,7 +227,7 @@ class BatchVecEnv(VecEnv):
       single-agent env. A second ``step_async`` before ``step_wait`` is refused, and so is a
       ``step_wait`` with no pending ``step_async``.
     * ``get_attr(name)``: a public attribute (no leading underscore) of the adapter, or else of
-      the batch;
+      the batch, or else of its batched task;
       ``AttributeError`` for a private or missing one (so ``has_attr`` is False for them).
     * ``set_attr(name, value)``: only the names of :attr:`SETTABLE`, each value checked by the
       same function the env's own setter runs, for the whole batch (``indices`` None or all N).
@@ -558,7 +558,8 @@ class SB3VecEnv(BatchVecEnv):
     See the module docstring for the mapping between the two APIs, and :class:`BatchVecEnv` for
     the checks of every argument. Works with VecNormalize, VecMonitor and the other SB3
     ``VecEnvWrapper`` classes on top. ``get_attr`` reads the adapter's attributes (its one-row
-    spaces), then the vector env's; ``set_attr`` and ``env_method`` act on the vector env itself.
+    spaces), then the vector env's, then its task's; ``set_attr`` and ``env_method`` act on the
+    vector env itself.
 
     Args:
         venv: the vector env, e.g. ``gym.make_vec("tether_gym:TetherTetrahedron-v0", num_envs=N,
@@ -652,8 +653,10 @@ class SB3VecEnv(BatchVecEnv):
             self.reset_infos[i] = new
 
     def _attribute_owners(self) -> tuple[object, ...]:
-        # The adapter first, as AgentVecEnv: its spaces are one row's, as SB3's get_attr gives them.
-        return (self, self.venv)
+        # As AgentVecEnv: the adapter (its spaces are one row's, as SB3's get_attr gives them),
+        # the batch, then the batched task (where env_method's methods live) if there is one.
+        task = getattr(self.venv, "task", None)
+        return (self, self.venv) if task is None else (self, self.venv, task)
 
     def _setting_owner(self) -> object:
         return self.venv

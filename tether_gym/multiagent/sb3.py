@@ -63,7 +63,7 @@ class AgentVecEnv(BatchVecEnv):
     Every argument is checked as :class:`~tether_gym.sb3.SB3VecEnv` checks it, by the same code
     (:class:`~tether_gym.sb3.BatchVecEnv`): seeds, reset options, actions, indices, and the
     names and values of ``get_attr``, ``set_attr`` and ``env_method``. ``get_attr`` reads the
-    adapter's attributes, then the engine's; ``set_attr`` sets the engine's
+    adapter's attributes, then the engine's, then the task's; ``set_attr`` sets the engine's
     (``max_episode_steps``); ``env_method`` calls the task's (``set_difficulty``).
 
     Args:
@@ -169,7 +169,7 @@ class AgentVecEnv(BatchVecEnv):
 
     # ------------------------------------------------------------------ where the batch's parts live
     def _attribute_owners(self) -> tuple[object, ...]:
-        return (self, self.batch)
+        return (self, self.batch, self.task)
 
     def _setting_owner(self) -> object:
         return self.batch
