@@ -382,6 +382,8 @@ def test_both_adapters_give_the_same_verdict(
     for adapter, env in adapters.items():
         indices = list(range(env.num_envs)) if drawn is ALL_ROWS else drawn
         env.set_attr("max_episode_steps", 50)
+        task = env.get_attr("task", indices=0)[0]
+        before = (env.get_attr("max_episode_steps", indices=0), task.difficulty, task.sim.time.copy(), list(env._seeds))
         if call == "set_attr":
             verdicts[adapter] = verdict(lambda env=env, rows=indices: env.set_attr(name, value, indices=rows))
         elif call == "get_attr":
@@ -394,6 +396,10 @@ def test_both_adapters_give_the_same_verdict(
             with np.errstate(invalid="ignore", over="ignore"):
                 actions = actions_for(env, form, element, dtype)
             verdicts[adapter] = verdict(lambda env=env, actions=actions: env.step(actions))
+        if verdicts[adapter] != "accepted":  # a refused call changed nothing
+            after = (env.get_attr("max_episode_steps", indices=0), task.difficulty, task.sim.time, env._seeds)
+            assert after[:2] == before[:2] and after[3] == before[3], f"{call}: {before} -> {after}"
+            np.testing.assert_array_equal(after[2], before[2])
         env.env_method("set_difficulty", 1.0)
     assert len(set(verdicts.values())) == 1, f"{call}({name!r}, {value!r}, indices={drawn!r}): {verdicts}"
     event(f"{call}: {verdicts['SB3VecEnv']}")
