@@ -500,3 +500,22 @@ def test_local_sensors_check_what_the_engine_checks() -> None:
             parallel_env(ENV_ID, **kwargs)
         assert str(direct.value) == str(engine.value)
     assert LocalSensors(task, {"hops": 1}).layout == parallel_env(ENV_ID, communication={"hops": 1}).layout
+
+
+def test_reset_options_give_both_adapters_the_same_clusters() -> None:
+    """The same exact initial state through set_options puts the same bits in both batches, and
+    AgentVecEnv reports each row's reset info as SB3VecEnv reports each sub-env's."""
+    envs = {name: make() for name, make in ADAPTERS.items()}
+    nominal = nominal_states(envs["SB3VecEnv"])
+    offsets = np.random.default_rng(0).normal(0.0, 0.05, nominal.shape)
+    for env in envs.values():
+        env.seed(3)
+        env.set_options({"positions": nominal + offsets, "velocities": 0.01 * offsets})
+        env.reset()
+    single, multi = (env.get_attr("task", indices=0)[0].sim for env in envs.values())
+    np.testing.assert_array_equal(single.positions, multi.positions)
+    np.testing.assert_array_equal(single.velocities, multi.velocities)
+    agents = envs["AgentVecEnv"].num_envs // CLUSTERS
+    for row, info in enumerate(envs["AgentVecEnv"].reset_infos):
+        expected = envs["SB3VecEnv"].reset_infos[row // agents]
+        assert info.keys() == expected.keys() and info["vibration_energy"] == expected["vibration_energy"]
