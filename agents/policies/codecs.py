@@ -146,9 +146,20 @@ def json_depth(data: bytes, limit: int) -> int:
     return deepest
 
 
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object's entries as a dict, refusing a key given twice: ``json`` would keep the last one
+    silently, so a file could say two things about the same entry and be read as one of them."""
+    table: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in table:
+            raise ValueError(f"the key {key[:40]!r} appears twice in one object (each key once)")
+        table[key] = value
+    return table
+
+
 def parse_json(data: bytes, where: Path) -> Any:
     """Strict JSON (UTF-8, no NaN/Infinity literals, no numbers that overflow to inf, no integers
-    beyond 64 bits, at most
+    beyond 64 bits, no key twice in an object, at most
     :data:`MAX_JSON_BYTES` long and :data:`MAX_JSON_DEPTH` deep) with errors that name the file."""
     if len(data) > MAX_JSON_BYTES:
         raise PolicyFormatError(
@@ -162,7 +173,11 @@ def parse_json(data: bytes, where: Path) -> Any:
         )
     try:
         return json.loads(
-            data.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float, parse_int=_bounded_int
+            data.decode("utf-8"),
+            parse_constant=_reject_constant,
+            parse_float=_finite_float,
+            parse_int=_bounded_int,
+            object_pairs_hook=_unique_keys,
         )
     except (UnicodeDecodeError, ValueError) as error:
         raise PolicyFormatError(f"{where} is not valid JSON ({error}): restore or re-create the file") from error

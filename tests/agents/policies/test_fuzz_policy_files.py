@@ -259,3 +259,61 @@ def test_every_format_and_reader_is_fuzzed() -> None:
     assert not unfuzzed, f"functions that parse policy files but are in no READERS row: {unfuzzed}"
     assert covered <= parsing_functions(), sorted(covered - parsing_functions())
     assert {reader for _, (_, readers) in FORMATS.items() for reader in readers} == set(READERS)
+
+
+def objects_in(value: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+    """The paths of every non-empty JSON object inside ``value``."""
+    found = [path] if isinstance(value, dict) and value else []
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, item in items:
+        found += objects_in(item, (*path, key))
+    return found
+
+
+def dump_with_a_key_twice(
+    value: Any, target: tuple[Any, ...], key: str, second: Any, here: tuple[Any, ...] = ()
+) -> str:
+    """``value`` as JSON text in which the object at ``target`` gives ``key`` twice: first its own
+    entry, then ``second``."""
+    if isinstance(value, dict):
+        entries = [
+            f"{json.dumps(k)}: {dump_with_a_key_twice(v, target, key, second, (*here, k))}" for k, v in value.items()
+        ]
+        if here == target:
+            entries.append(f"{json.dumps(key)}: {json.dumps(second)}")
+        return "{" + ", ".join(entries) + "}"
+    if isinstance(value, list):
+        return (
+            "["
+            + ", ".join(dump_with_a_key_twice(v, target, key, second, (*here, i)) for i, v in enumerate(value))
+            + "]"
+        )
+    return json.dumps(value)
+
+
+JSON_CASES = [(name, reader) for name, reader in CASES if FORMATS[name][0] == "json"]
+
+
+@pytest.mark.parametrize(("name", "reader"), JSON_CASES)
+@settings(FUZZ, max_examples=25)
+@given(data=st.data())
+def test_a_key_given_twice_in_any_json_object_is_refused(
+    base_directory: Path, name: str, reader: str, data: st.DataObject
+) -> None:
+    """The "file listed twice" class for every JSON file: ``json`` keeps the last of two entries
+    with the same key silently, so a file could say two things about one entry (the same value
+    twice included) and be read as the second. Every reader refuses it, naming the file."""
+    read, _ = READERS[reader]
+    with tempfile.TemporaryDirectory() as scratch:
+        directory = Path(scratch) / "policy"
+        shutil.copytree(base_directory, directory)
+        value = json.loads((directory / name).read_bytes())
+        target = data.draw(st.sampled_from(objects_in(value)))
+        table = value
+        for step in target:
+            table = table[step]
+        key = data.draw(st.sampled_from(sorted(table)))
+        second = data.draw(st.just(table[key]) | st.sampled_from([None, True, 0, 1.5, "ppo", [], {}, [0.0]]))
+        (directory / name).write_text(dump_with_a_key_twice(value, target, key, second), encoding="utf-8")
+        with pytest.raises(PolicyFormatError, match=rf"{name}.*appears twice"):
+            read(directory)
