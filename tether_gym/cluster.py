@@ -13,7 +13,7 @@ import dataclasses
 import json
 import math
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,12 +28,15 @@ from tether_gym.limits import (
     MAX_FORCE,
     MAX_LENGTH,
     MAX_MASS,
+    MIN_BEAD_MASS,
     MIN_EA,
     MIN_LENGTH,
     MIN_MASS,
     check_range,
+    is_whole_number,
     real_array,
 )
+from tether_gym.tethers import Tether, TetherError
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -77,6 +80,119 @@ def _connected(n_nodes: int, cables: np.ndarray) -> np.ndarray:
     return seen
 
 
+def _tether_layout(tethers: Any, n_nodes: int) -> tuple[tuple[Tether, ...], np.ndarray]:
+    """The checked tether specs and the (n,) tether index of each node (-1 for a satellite)."""
+    node_tether = np.full(n_nodes, -1, dtype=np.int64)
+    if isinstance(tethers, (tuple, list)) and len(tethers) == 0:
+        return (), node_tether
+    if isinstance(tethers, (str, bytes, Mapping, Tether)) or not isinstance(tethers, Sequence):
+        raise ClusterError(f"tethers must be a list of tether specs (tether_gym.tethers.Tether); got {tethers!r:.120}")
+    specs: list[Tether] = []
+    for t, spec in enumerate(tethers):
+        try:
+            specs.append(Tether.from_dict(spec))
+        except (TetherError, TypeError) as error:
+            raise ClusterError(f"tether {t}: {error}") from None
+        if specs[-1].L0 is None:
+            raise ClusterError(
+                f"tether {t} ({specs[-1].label}): L0 is not set; a cluster's tethers carry their reference length "
+                "(tether_gym.tethers.build_cluster fills it in)"
+            )
+    n_beads = sum(spec.num_beads for spec in specs)
+    n_satellites = n_nodes - n_beads
+    if n_satellites < 2:
+        raise ClusterError(
+            f"the tethers have {n_beads} beads in all, but the cluster has only {n_nodes} nodes: it needs its "
+            "satellites (at least 2) first, then the beads; build it with tether_gym.tethers.build_cluster"
+        )
+    first = n_satellites
+    for t, spec in enumerate(specs):
+        node_tether[first : first + spec.num_beads] = t
+        first += spec.num_beads
+        for end in spec.ends:
+            if end >= n_satellites:
+                raise ClusterError(
+                    f"tether {t} ({spec.label}) ends at node {end}, which is not a satellite: the satellites are "
+                    f"nodes 0..{n_satellites - 1} and the beads come after them"
+                )
+    return tuple(specs), node_tether
+
+
+def _node_label(node: int, n_satellites: int, tethers: tuple[Tether, ...]) -> str:
+    """``"satellite i"``, or ``"bead k of tether t"`` (k from 0 at the tether's first end)."""
+    if node < n_satellites:
+        return f"satellite {node}"
+    first = n_satellites
+    for t, spec in enumerate(tethers):
+        if node < first + spec.num_beads:
+            return f"bead {node - first} of tether {t} (node {node})"
+        first += spec.num_beads
+    return f"node {node}"
+
+
+def _check_nodes(
+    name: str,
+    values: np.ndarray,
+    low: float,
+    high: float,
+    unit: str,
+    n_satellites: int,
+    tethers: tuple[Tether, ...],
+    *,
+    where: str = "satellite",
+    bead_low: float | None = None,
+) -> None:
+    """:func:`check_range` over per-node ``values`` ((n,) or (n, 3)); the satellites are checked
+    first, as before beads existed, and a bead out of range is named as a bead of its tether
+    (beads may be as light as ``bead_low``)."""
+    check_range(name, values[:n_satellites], low, high, unit, error=ClusterError, where=where)
+    beads = values[n_satellites:]
+    if beads.shape[0] == 0:
+        return
+    bead_min = low if bead_low is None else bead_low
+    bad = (beads < bead_min) | (beads > high) | np.isnan(beads)
+    if bad.any():
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        label = _node_label(n_satellites + index[0], n_satellites, tethers)
+        axis = f", axis {index[1]}" if len(index) > 1 else ""
+        raise ClusterError(f"{name} must lie in [{bead_min:g}, {high:g}] {unit}; got {beads[index]} ({label}{axis})")
+
+
+def _check_tether_cables(tethers: tuple[Tether, ...], cables: np.ndarray, n_satellites: int, n_nodes: int) -> None:
+    """Refuse cables that do not hold each tether's segments, in order, after the plain cables,
+    or plain cables that touch a bead."""
+    if not tethers:
+        return
+    n_segments = sum(spec.segments for spec in tethers)
+    n_plain = cables.shape[0] - n_segments
+    if n_plain < 0:
+        raise ClusterError(
+            f"the tethers have {n_segments} segments in all, but the cluster has only {cables.shape[0]} cables; "
+            "the last cables must be the tethers' segments (build it with tether_gym.tethers.build_cluster)"
+        )
+    touching = np.flatnonzero((cables[:n_plain] >= n_satellites).any(axis=1))
+    if touching.size:
+        c = int(touching[0])
+        node = int(cables[c].max())
+        raise ClusterError(
+            f"cable {c} is not a tether segment but joins {_node_label(node, n_satellites, tethers)}; "
+            "a bead is joined only to its neighbours along its tether"
+        )
+    bead, cable = n_satellites, n_plain
+    for t, spec in enumerate(tethers):
+        chain = [spec.ends[0], *range(bead, bead + spec.num_beads), spec.ends[1]]
+        expected = np.array([chain[:-1], chain[1:]], dtype=np.int64).T
+        found = cables[cable : cable + spec.segments]
+        if not np.array_equal(found, expected):
+            raise ClusterError(
+                f"tether {t} ({spec.label}): cables {cable}..{cable + spec.segments - 1} must be its segments "
+                f"{expected.tolist()} (from satellite {spec.ends[0]} through its beads to satellite {spec.ends[1]}); "
+                f"got {found.tolist()}"
+            )
+        bead += spec.num_beads
+        cable += spec.segments
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Cluster:
     """A cluster of point-mass satellites joined by massless, linear-elastic, tension-only cables.
@@ -104,6 +220,12 @@ class Cluster:
         frame: the :class:`~tether_gym.frames.Frame` of ``positions`` and of the motion (default
             inertial); a Hill or rotating frame adds Coriolis, centrifugal and tidal forces.
         name: a short label.
+        tethers: the :class:`~tether_gym.tethers.Tether` specs of the tethers with beads (default
+            none: every node is a satellite).  With tethers, the first ``S = n - sum(N_t - 1)``
+            nodes are the satellites, then come the beads of tether 0 from its ``ends[0]`` to its
+            ``ends[1]``, then those of tether 1, ...; the last ``sum(N_t)`` cables are the
+            tethers' segments in the same order (plain cables come first).  Build such clusters
+            with :func:`tether_gym.tethers.build_cluster`.
     """
 
     # Each field is stored as an array (see __post_init__); the constructor takes anything array-like.
@@ -118,6 +240,8 @@ class Cluster:
     axial_damping: np.ndarray = 0.0  # type: ignore[assignment]
     frame: Frame = dataclasses.field(default_factory=Frame.inertial)
     name: str = "custom"
+
+    tethers: tuple[Tether, ...] = ()
 
     if TYPE_CHECKING:  # the signature type checkers see; at run time the dataclass's own
 
@@ -134,6 +258,7 @@ class Cluster:
             axial_damping: ArrayLike = 0.0,
             frame: Frame = ...,
             name: str = "custom",
+            tethers: Sequence[Tether | Mapping[str, Any]] = (),
         ) -> None: ...
 
     def __post_init__(self) -> None:
@@ -141,20 +266,23 @@ class Cluster:
         if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 2:
             raise ClusterError(f"positions must have shape (n, 3) with n >= 2 satellites; got shape {positions.shape}")
         n_nodes = positions.shape[0]
+        tethers, node_tether = _tether_layout(self.tethers, n_nodes)
+        n_satellites = n_nodes - int((node_tether >= 0).sum())
         positions = _float_array("positions", positions, (n_nodes, 3), "node positions in m")
-        check_range(
+        _check_nodes(
             "positions",
             np.abs(positions),
             0.0,
             MAX_COORDINATE,
             "m (absolute value)",
-            error=ClusterError,
+            n_satellites,
+            tethers,
             where="satellite, axis",
         )
         masses = _float_array("masses", self.masses, (n_nodes,), "kg per satellite")
-        check_range("masses", masses, MIN_MASS, MAX_MASS, "kg", error=ClusterError, where="satellite")
+        _check_nodes("masses", masses, MIN_MASS, MAX_MASS, "kg", n_satellites, tethers, bead_low=MIN_BEAD_MASS)
         damping = _float_array("damping", self.damping, (n_nodes,), "N*s/m per satellite")
-        check_range("damping", damping, 0.0, MAX_DAMPING, "N*s/m", error=ClusterError, where="satellite")
+        _check_nodes("damping", damping, 0.0, MAX_DAMPING, "N*s/m", n_satellites, tethers)
 
         cables = real_array("cables", self.cables, ClusterError)
         if cables.ndim != 2 or cables.shape[1] != 2 or cables.shape[0] < 1:
@@ -185,6 +313,7 @@ class Cluster:
             seen[key] = c
         cables.setflags(write=False)
         n_cables = cables.shape[0]
+        _check_tether_cables(tethers, cables, n_satellites, n_nodes)
 
         lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
         if np.any(lengths <= 0.0):
@@ -268,14 +397,78 @@ class Cluster:
             ("breaking_load", breaking),
             ("axial_damping", axial_damping),
             ("frame", frame),
+            ("tethers", tethers),
         ):
             object.__setattr__(self, field, value)
+        object.__setattr__(self, "_node_tether", node_tether)
+        object.__setattr__(self, "_num_satellites", n_satellites)
 
     # ------------------------------------------------------------------ derived quantities
     @property
     def num_nodes(self) -> int:
         """Number of satellites n."""
         return int(self.positions.shape[0])
+
+    @property
+    def num_satellites(self) -> int:
+        """Number of satellites S: the nodes that carry thrusters; ``num_nodes`` without beads."""
+        return int(self._num_satellites)  # type: ignore[attr-defined]
+
+    @property
+    def satellite_indices(self) -> np.ndarray:
+        """(S,) node indices of the satellites: ``0 .. S - 1`` (the beads come after them)."""
+        return np.arange(self.num_satellites)
+
+    @property
+    def num_beads(self) -> int:
+        """Number of beads, n - S."""
+        return self.num_nodes - self.num_satellites
+
+    @property
+    def num_tethers(self) -> int:
+        """Number of tethers with a spec (0 for a cluster of plain cables)."""
+        return len(self.tethers)
+
+    @property
+    def node_tether(self) -> np.ndarray:
+        """(n,) int: the tether each node is a bead of, -1 for a satellite (a copy)."""
+        return self._node_tether.copy()  # type: ignore[attr-defined]
+
+    @property
+    def is_bead(self) -> np.ndarray:
+        """(n,) bool: True for beads, False for satellites."""
+        return self._node_tether >= 0  # type: ignore[attr-defined]
+
+    def _tether_index(self, tether: int) -> int:
+        if not is_whole_number(tether) or not 0 <= tether < self.num_tethers:
+            raise ValueError(
+                f"tether must be a tether index in 0..{self.num_tethers - 1}; got {tether!r}"
+                if self.num_tethers
+                else f"this cluster has no tethers with beads (asked for tether {tether!r})"
+            )
+        return int(tether)
+
+    def tether_beads(self, tether: int) -> np.ndarray:
+        """(N_t - 1,) node indices of the beads of tether ``tether``, from its ``ends[0]`` to ``ends[1]``."""
+        t = self._tether_index(tether)
+        first = self.num_satellites + sum(spec.num_beads for spec in self.tethers[:t])
+        return np.arange(first, first + self.tethers[t].num_beads)
+
+    def tether_nodes(self, tether: int) -> np.ndarray:
+        """(N_t + 1,) node indices along tether ``tether``: its first satellite, its beads, its second satellite."""
+        t = self._tether_index(tether)
+        a, b = self.tethers[t].ends
+        return np.concatenate([[a], self.tether_beads(t), [b]]).astype(np.int64)
+
+    def tether_cables(self, tether: int) -> np.ndarray:
+        """(N_t,) cable indices of the segments of tether ``tether``, in order from ``ends[0]``."""
+        t = self._tether_index(tether)
+        first = self.num_cables - sum(spec.segments for spec in self.tethers[t:])
+        return np.arange(first, first + self.tethers[t].segments)
+
+    def node_label(self, node: int) -> str:
+        """How messages name node ``node``: ``"satellite i"`` or ``"bead k of tether t (node i)"``."""
+        return _node_label(int(node), self.num_satellites, self.tethers)
 
     @property
     def num_cables(self) -> int:
@@ -330,7 +523,7 @@ class Cluster:
             "breaking_load": self.breaking_load.tolist(),
             "axial_damping": self.axial_damping.tolist(),
             "frame": self.frame.to_dict(),
-        }
+        } | ({"tethers": [spec.to_dict() for spec in self.tethers]} if self.tethers else {})
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Cluster:
@@ -354,6 +547,7 @@ class Cluster:
         return (
             self.name == other.name
             and self.frame == other.frame
+            and self.tethers == other.tethers
             and all(
                 np.array_equal(getattr(self, f), getattr(other, f))
                 for f in (
@@ -374,8 +568,9 @@ class Cluster:
 
     def __repr__(self) -> str:
         frame = "" if self.frame.is_inertial else f", frame={self.frame.kind} at {self.frame.rate:.4g} rad/s"
+        beads = f", tethers={self.num_tethers} with {self.num_beads} beads" if self.tethers else ""
         return (
-            f"Cluster(name={self.name!r}, satellites={self.num_nodes}, cables={self.num_cables}, "
+            f"Cluster(name={self.name!r}, satellites={self.num_satellites}, cables={self.num_cables}{beads}, "
             f"mass={self.masses.sum():.4g} kg{frame})"
         )
 

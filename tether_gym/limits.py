@@ -33,6 +33,7 @@ __all__ = [
     "MAX_SPEED",
     "MIN_EA",
     "MIN_LENGTH",
+    "MIN_BEAD_MASS",
     "MIN_MASS",
     "check_range",
     "check_real",
@@ -48,6 +49,10 @@ MAX_COORDINATE = 1e8
 #: Satellite masses, kg: from a milligram (a chip-sat is grams) to 1e6 t (the ISS is 420 t).
 MIN_MASS = 1e-6
 MAX_MASS = 1e9
+#: A bead of a tether with mass, kg: a microgram, so that light lines can be meshed finely (a
+#: 1 m thread of 1 mg/m in 1000 segments).  Satellites keep MIN_MASS.  The stiffest cable between
+#: two such beads has omega^2 <= 1e18 * 2e9 = 2e27 (rad/s)^2, still far from overflow.
+MIN_BEAD_MASS = 1e-9
 #: Cable reference lengths and node distances, m: from a micrometre to 1e6 km (the longest
 #: distance between two positions within MAX_COORDINATE is 3.5e8 m).
 MIN_LENGTH = 1e-6

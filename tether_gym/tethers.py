@@ -1,0 +1,438 @@
+"""Tethers that have mass: a tether spec expanded into beads and segments (the lumped-mass line).
+
+A :class:`Tether` describes one line between two satellites: its total mass, its axial
+stiffness, pretension, reference length, damping and breaking load, and the number of segments
+``N`` it is split into.  :func:`build_cluster` expands satellites and tethers into a
+:class:`~tether_gym.cluster.Cluster` whose nodes are the satellites followed by the beads of each
+tether, and whose cables are the tethers' segments; the cluster keeps the specs, knows which node
+is a satellite and which a bead of which tether, and writes the specs to its files.
+
+The expansion of a tether of mass ``m_t``, reference length ``L`` and ``N`` segments:
+
+* ``N - 1`` beads on the straight chord between the end satellites, equally spaced;
+* each segment has reference length ``L / N``, the tether's ``EA``, ``N0`` and breaking load
+  (a line in series: the same force in every segment), and ``N`` times the tether's
+  Kelvin-Voigt coefficient (``N`` dashpots in series give back the tether's coefficient);
+* lumping ``"half"`` (default, the standard lumped-mass line): each bead carries ``m_t / N`` and
+  each end satellite gains half a segment's mass, ``m_t / (2 N)``; the frequencies then converge
+  at second order in ``N``.  Lumping ``"none"``: the beads share the whole mass (``m_t / (N - 1)``
+  each) and the satellites gain nothing; the axial mode converges at first order only.  With
+  ``N = 1`` and ``"none"`` the tether is the massless cable of the paper, bit for bit.
+
+A segment that breaks severs its tether (:attr:`TetherResults.broken`): the line no longer joins
+its satellites, and the beads on either side stay attached to their own end as loose debris.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from tether_gym.frames import Frame
+from tether_gym.limits import (
+    MAX_DAMPING,
+    MAX_EA,
+    MAX_FORCE,
+    MAX_LENGTH,
+    MAX_MASS,
+    MIN_BEAD_MASS,
+    MIN_EA,
+    MIN_LENGTH,
+    is_real_number,
+    is_whole_number,
+    short_repr,
+    to_float,
+)
+
+__all__ = [
+    "LUMPING_RULES",
+    "MAX_SEGMENTS",
+    "Tether",
+    "TetherError",
+    "TetherResults",
+    "build_cluster",
+    "tether_results",
+]
+
+#: The lumping rules: ``"half"`` puts half a segment's mass on each end satellite; ``"none"``
+#: spreads the whole mass over the beads.
+LUMPING_RULES = ("half", "none")
+#: Most segments in one tether: 10^4 beads already make the step 10^4 times smaller than the
+#: massless cable's, and the cost per simulated second grows as N^2.
+MAX_SEGMENTS = 10_000
+
+Lumping = Literal["half", "none"]
+
+
+class TetherError(ValueError):
+    """An invalid tether spec; the message names the tether and how to fix it."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Tether:
+    """One tether between two satellites, split into ``segments`` lumped-mass segments.
+
+    Args:
+        ends: ``(a, b)`` the indices of the two satellites it joins (beads run from ``a`` to ``b``).
+        EA: axial stiffness, N, > 0 (the same in every segment).
+        segments: number of segments N >= 1; N - 1 beads carry the mass.
+        mass: total mass of the line, kg, >= 0 (> 0 when N > 1: a bead needs mass).  The mass
+            per reference length is ``mass / L0``.
+        N0: pretension, N, >= 0 and < EA (else a segment would be shorter than its stretch).
+        L0: reference (unstretched-plus-pretension) length of the whole tether, m; ``None``: the
+            distance between its satellites, filled in by :func:`build_cluster`.
+        axial_damping: Kelvin-Voigt coefficient of the whole tether, N*s/m, >= 0.
+        breaking_load: tension at which a segment breaks, N, > 0 (default inf: unbreakable).
+        lumping: ``"half"`` (default) or ``"none"``; see the module docstring.
+        name: an optional label used in messages.
+    """
+
+    ends: tuple[int, int]
+    EA: float
+    segments: int = 1
+    mass: float = 0.0
+    N0: float = 0.0
+    L0: float | None = None
+    axial_damping: float = 0.0
+    breaking_load: float = math.inf
+    lumping: Lumping = "half"
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        ends = self.ends
+        if (
+            not isinstance(ends, (tuple, list))
+            or len(ends) != 2
+            or not all(is_whole_number(e) and e >= 0 for e in ends)
+        ):
+            raise TetherError(
+                f"{self.label}: ends must be two satellite indices (a, b), whole numbers >= 0; got {short_repr(ends)}"
+            )
+        ends = (int(ends[0]), int(ends[1]))
+        if ends[0] == ends[1]:
+            raise TetherError(
+                f"{self.label}: both ends are satellite {ends[0]}; a tether joins two distinct satellites"
+            )
+        object.__setattr__(self, "ends", ends)
+        if not is_whole_number(self.segments) or not 1 <= self.segments <= MAX_SEGMENTS:
+            raise TetherError(
+                f"{self.label}: segments must be a whole number in 1..{MAX_SEGMENTS}; got {short_repr(self.segments)}"
+            )
+        object.__setattr__(self, "segments", int(self.segments))
+        self._set_number("EA", MIN_EA, MAX_EA, "N")
+        self._set_number("mass", 0.0, MAX_MASS, "kg")
+        self._set_number("N0", 0.0, MAX_FORCE, "N")
+        if self.L0 is not None:
+            self._set_number("L0", MIN_LENGTH, MAX_LENGTH, "m")
+        self._set_number("axial_damping", 0.0, MAX_DAMPING, "N*s/m")
+        if isinstance(self.breaking_load, str) and self.breaking_load.strip().lower().lstrip("+") in (
+            "inf",
+            "infinity",
+        ):
+            object.__setattr__(self, "breaking_load", math.inf)  # strict JSON's spelling of an unbreakable tether
+        if not (is_real_number(self.breaking_load) and to_float(self.breaking_load) == math.inf):
+            self._set_number("breaking_load", 0.0, MAX_FORCE, "N (or inf: unbreakable)", low_inclusive=False)
+        object.__setattr__(self, "breaking_load", float(self.breaking_load))
+        if self.lumping not in LUMPING_RULES:
+            raise TetherError(f"{self.label}: lumping must be one of {LUMPING_RULES}; got {short_repr(self.lumping)}")
+        if not isinstance(self.name, str):
+            raise TetherError(f"{self.label}: name must be a string; got {short_repr(self.name)}")
+        if self.segments > 1 and self.mass == 0.0:
+            raise TetherError(
+                f"{self.label}: {self.segments} segments need a mass > 0 (its beads carry it); give the tether "
+                "its mass in kg, or segments=1 for a massless cable"
+            )
+        if self.N0 >= self.EA:
+            raise TetherError(
+                f"{self.label}: pretension N0={self.N0:g} N is not below EA={self.EA:g} N, so each segment would be "
+                "shorter than its pretension stretch (unstretched length L0 * (1 - N0/EA) <= 0); lower N0 or raise EA"
+            )
+
+    def _set_number(self, field: str, low: float, high: float, unit: str, *, low_inclusive: bool = True) -> None:
+        value = getattr(self, field)
+        number = to_float(value) if is_real_number(value) else math.nan
+        inside = (number >= low if low_inclusive else number > low) and number <= high
+        if not inside:
+            bracket = "[" if low_inclusive else "("
+            raise TetherError(
+                f"{self.label}: {field} must be a number in {bracket}{low:g}, {high:g}] {unit}; got {short_repr(value)}"
+            )
+        object.__setattr__(self, field, number)
+
+    @property
+    def label(self) -> str:
+        """How messages name this tether: ``tether 'name'`` or ``tether between satellites a and b``."""
+        if isinstance(self.name, str) and self.name:
+            return f"tether {self.name!r}"
+        ends = self.ends
+        if isinstance(ends, (tuple, list)) and len(ends) == 2:
+            return f"tether between satellites {ends[0]} and {ends[1]}"
+        return "tether"
+
+    @property
+    def num_beads(self) -> int:
+        """N - 1."""
+        return self.segments - 1
+
+    @property
+    def bead_mass(self) -> float:
+        """Mass of each bead, kg (0 when the tether has no beads)."""
+        if self.segments == 1:
+            return 0.0
+        return self.mass / self.segments if self.lumping == "half" else self.mass / (self.segments - 1)
+
+    @property
+    def end_mass(self) -> float:
+        """Mass added to each end satellite, kg: ``m_t / (2 N)`` with ``"half"`` lumping, else 0."""
+        return self.mass / (2 * self.segments) if self.lumping == "half" else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every field as plain values (the ends as a list), for cluster files."""
+        if self.L0 is None:
+            raise TetherError(f"{self.label}: only a tether with its L0 set can be written (build_cluster sets it)")
+        return {
+            "ends": list(self.ends),
+            "EA": self.EA,
+            "segments": self.segments,
+            "mass": self.mass,
+            "N0": self.N0,
+            "L0": self.L0,
+            "axial_damping": self.axial_damping,
+            "breaking_load": self.breaking_load,
+            "lumping": self.lumping,
+            "name": self.name,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Tether:
+        """A tether from :meth:`to_dict` output (unknown keys are an error)."""
+        if isinstance(data, Tether):
+            return data
+        if not isinstance(data, Mapping):
+            raise TetherError(f"a tether is a mapping of field names to values; got {type(data).__name__}")
+        fields = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - fields
+        if unknown:
+            raise TetherError(f"unknown tether key(s) {sorted(map(str, unknown))}; allowed keys are {sorted(fields)}")
+        missing = {"ends", "EA"} - set(data)
+        if missing:
+            raise TetherError(f"a tether lacks required key(s) {sorted(missing)}")
+        values = dict(data)
+        if isinstance(values["ends"], list):
+            values["ends"] = tuple(values["ends"])
+        return cls(**values)
+
+    def segment_parameters(self, length: float) -> dict[str, float]:
+        """Each segment's cable parameters for a tether of reference length ``length`` (m):
+        ``L0`` (m), ``EA`` (N), ``N0`` (N), ``axial_damping`` (N*s/m), ``breaking_load`` (N)."""
+        return {
+            "L0": length / self.segments,
+            "EA": self.EA,
+            "N0": self.N0,
+            "axial_damping": self.axial_damping * self.segments,
+            "breaking_load": self.breaking_load,
+        }
+
+
+def build_cluster(
+    positions: ArrayLike,
+    masses: ArrayLike,
+    tethers: Sequence[Tether],
+    *,
+    damping: ArrayLike = 0.0,
+    frame: Frame | None = None,
+    name: str = "custom",
+) -> Any:
+    """A :class:`~tether_gym.cluster.Cluster` of satellites joined by tethers with beads.
+
+    Args:
+        positions: (S, 3) satellite positions, m.
+        masses: (S,) or scalar satellite masses, kg (before the tethers' lumped mass is added).
+        tethers: the tethers; tether ``t``'s beads are nodes ``S + sum_{u<t} (N_u - 1) + k`` for
+            ``k = 0 .. N_t - 2``, from ``ends[0]`` to ``ends[1]``, and its segments are the cables
+            ``sum_{u<t} N_u + k``, ``k = 0 .. N_t - 1``, in the same order.
+        damping: (S,) or scalar diagonal damping of the satellites, N*s/m; beads have none (a
+            line's physical damping is its axial damping).
+        frame: the frame of ``positions`` (default inertial).
+        name: the cluster's label.
+
+    Returns:
+        The cluster, holding the tether specs with each ``L0`` filled in (a tether's ``L0=None``
+        becomes the distance between its satellites).  Bad specs raise :class:`TetherError`
+        naming the tether by its index.
+    """
+    from tether_gym.cluster import Cluster, ClusterError
+    from tether_gym.limits import real_array
+
+    sat_positions = real_array("positions", positions, ClusterError)
+    if sat_positions.ndim != 2 or sat_positions.shape[1] != 3 or sat_positions.shape[0] < 2:
+        raise ClusterError(f"positions must have shape (S, 3) with S >= 2 satellites; got shape {sat_positions.shape}")
+    S = sat_positions.shape[0]
+    sat_masses = real_array("masses", masses, ClusterError)
+    if sat_masses.ndim == 0:
+        sat_masses = np.full(S, float(sat_masses))
+    if sat_masses.shape != (S,):
+        raise ClusterError(f"masses must have shape ({S},) (kg per satellite) or be a scalar; got {sat_masses.shape}")
+    sat_damping = real_array("damping", damping, ClusterError)
+    if sat_damping.ndim == 0:
+        sat_damping = np.full(S, float(sat_damping))
+    if sat_damping.shape != (S,):
+        raise ClusterError(
+            f"damping must have shape ({S},) (N*s/m per satellite) or be a scalar; got {sat_damping.shape}"
+        )
+    if isinstance(tethers, (Tether, Mapping)) or not isinstance(tethers, Sequence) or len(tethers) == 0:
+        raise TetherError("tethers must be a non-empty sequence of Tether specs")
+
+    node_positions = [sat_positions]
+    node_masses = [sat_masses.copy()]
+    cables: list[tuple[int, int]] = []
+    columns: dict[str, list[float]] = {key: [] for key in ("L0", "EA", "N0", "axial_damping", "breaking_load")}
+    resolved: list[Tether] = []
+    next_bead = S
+    for t, spec in enumerate(tethers):
+        spec = _indexed(t, spec)
+        a, b = spec.ends
+        if max(a, b) >= S:
+            raise TetherError(
+                f"tether {t} ({spec.label}) ends at satellite {max(a, b)}, but there are {S} satellites (0..{S - 1})"
+            )
+        chord = sat_positions[b] - sat_positions[a]
+        length = float(np.linalg.norm(chord)) if spec.L0 is None else spec.L0
+        if not MIN_LENGTH <= length <= MAX_LENGTH:
+            raise TetherError(
+                f"tether {t} ({spec.label}): its length {length:g} m (the distance between its satellites) must lie "
+                f"in [{MIN_LENGTH:g}, {MAX_LENGTH:g}] m; move its satellites apart or give L0"
+            )
+        spec = dataclasses.replace(spec, L0=length)
+        params = spec.segment_parameters(length)
+        if params["L0"] < MIN_LENGTH:
+            raise TetherError(
+                f"tether {t} ({spec.label}): {spec.segments} segments of {length:g} m are {params['L0']:g} m each, "
+                f"shorter than the {MIN_LENGTH:g} m minimum; use fewer segments"
+            )
+        if spec.segments > 1 and spec.bead_mass < MIN_BEAD_MASS:
+            raise TetherError(
+                f"tether {t} ({spec.label}): beads of {spec.bead_mass:g} kg are lighter than the {MIN_BEAD_MASS:g} kg "
+                "minimum; use fewer segments or a heavier tether"
+            )
+        if params["axial_damping"] > MAX_DAMPING:
+            raise TetherError(
+                f"tether {t} ({spec.label}): axial_damping * segments = {params['axial_damping']:g} N*s/m exceeds "
+                f"{MAX_DAMPING:g}; lower the damping or the segment count"
+            )
+        beads = list(range(next_bead, next_bead + spec.num_beads))
+        next_bead += spec.num_beads
+        fractions = np.arange(1, spec.segments)[:, None] / spec.segments
+        node_positions.append(sat_positions[a] + fractions * chord)
+        node_masses.append(np.full(spec.num_beads, spec.bead_mass))
+        node_masses[0][a] += spec.end_mass
+        node_masses[0][b] += spec.end_mass
+        chain = [a, *beads, b]
+        for k in range(spec.segments):
+            cables.append((chain[k], chain[k + 1]))
+            for key, value in params.items():
+                columns[key].append(value)
+        resolved.append(spec)
+
+    n_beads = next_bead - S
+    all_damping = np.concatenate([sat_damping, np.zeros(n_beads)])
+    return Cluster(
+        positions=np.concatenate(node_positions),
+        masses=np.concatenate(node_masses),
+        cables=np.array(cables, dtype=np.int64).reshape(-1, 2),
+        damping=all_damping,
+        frame=Frame.inertial() if frame is None else frame,
+        name=name,
+        tethers=tuple(resolved),
+        **{key: np.array(values) for key, values in columns.items()},
+    )
+
+
+def _indexed(t: int, spec: Any) -> Tether:
+    """``spec`` as a :class:`Tether`, with any error prefixed by the tether's index."""
+    if isinstance(spec, Tether):
+        return spec
+    try:
+        return Tether.from_dict(spec)
+    except TetherError as error:
+        raise TetherError(f"tether {t}: {error}") from None
+    except TypeError as error:
+        raise TetherError(f"tether {t}: {error}") from None
+
+
+@dataclasses.dataclass(frozen=True)
+class TetherResults:
+    """Per-tether quantities of B clusters at their current state; arrays are (B, T).
+
+    Attributes:
+        end_tension: (B, T, 2) tension of the first and last segment, N: the pulls the tether
+            exerts on its satellites ``ends[0]`` and ``ends[1]``.
+        peak_tension: (B, T) largest segment tension along the line, N.
+        slack: (B, T) bool: some segment carries no tension, so the line does not pull end to end.
+        slack_fraction: (B, T) fraction of its segments that are slack.
+        sag: (B, T) largest distance of a bead from the chord between the end satellites, m (0
+            without beads).
+        broken: (B, T) bool: some segment broke since the reset; one broken segment severs the
+            tether, which then joins its satellites no more.
+    """
+
+    end_tension: np.ndarray
+    peak_tension: np.ndarray
+    slack: np.ndarray
+    slack_fraction: np.ndarray
+    sag: np.ndarray
+    broken: np.ndarray
+
+
+def tether_results(cluster: Any, positions: ArrayLike, tension: ArrayLike, broken: ArrayLike) -> TetherResults:
+    """Per-tether results of a cluster with tethers from node and cable arrays.
+
+    Args:
+        cluster: the :class:`~tether_gym.cluster.Cluster` (with ``tethers``).
+        positions: (B, n, 3) node positions, m (e.g. ``BatchSimulator.positions``).
+        tension: (B, m) cable tensions, N (``BatchSimulator.tension``).
+        broken: (B, m) bool, broken cables (``BatchSimulator.broken``).
+    """
+    x = np.asarray(positions, dtype=np.float64)
+    tension_array = np.asarray(tension, dtype=np.float64)
+    broken_array = np.asarray(broken, dtype=bool)
+    n, m = cluster.num_nodes, cluster.num_cables
+    if x.ndim != 3 or x.shape[1:] != (n, 3):
+        raise ValueError(f"positions must have shape (B, {n}, 3); got {x.shape}")
+    B = x.shape[0]
+    for what, array in (("tension", tension_array), ("broken", broken_array)):
+        if array.shape != (B, m):
+            raise ValueError(f"{what} must have shape ({B}, {m}) (B clusters, m cables); got {array.shape}")
+    T = cluster.num_tethers
+    end_tension = np.zeros((B, T, 2))
+    peak, slack_fraction, sag = np.zeros((B, T)), np.zeros((B, T)), np.zeros((B, T))
+    severed = np.zeros((B, T), dtype=bool)
+    for t, spec in enumerate(cluster.tethers):
+        segments = cluster.tether_cables(t)
+        line = tension_array[:, segments]
+        end_tension[:, t, 0], end_tension[:, t, 1] = line[:, 0], line[:, -1]
+        peak[:, t] = line.max(axis=1)
+        slack_fraction[:, t] = (line <= 0.0).mean(axis=1)
+        severed[:, t] = broken_array[:, segments].any(axis=1)
+        beads = cluster.tether_beads(t)
+        if beads.size:
+            a, b = spec.ends
+            start = x[:, a, None, :]
+            chord = x[:, b, None, :] - start
+            offset = x[:, beads, :] - start
+            along = (offset * chord).sum(axis=2) / np.maximum((chord * chord).sum(axis=2), 1e-300)
+            across = offset - along[:, :, None] * chord
+            sag[:, t] = np.linalg.norm(across, axis=2).max(axis=1)
+    return TetherResults(
+        end_tension=end_tension,
+        peak_tension=peak,
+        slack=slack_fraction > 0.0,
+        slack_fraction=slack_fraction,
+        sag=sag,
+        broken=severed,
+    )
