@@ -13,6 +13,7 @@ The reading and checking of the files around it is :func:`agents.policies.format
 
 from __future__ import annotations
 
+import inspect
 import operator
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -205,6 +206,27 @@ def _negative(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and value < 0
 
 
+#: Per-parameter entries that are running averages of squares, which no optimizer step makes
+#: negative: a negative one makes Adam's or RMSprop's square root NaN at the first step.
+_SQUARES = frozenset({"exp_avg_sq", "max_exp_avg_sq", "square_avg"})
+
+
+def _check_entry_content(entry: str, value: torch.Tensor, label: str) -> None:
+    """Refuse an optimizer state entry whose values no optimizer writes: a ``step`` that is not a
+    whole number >= 0 (a negative one makes Adam's bias correction negative, and its step NaN) or
+    a negative average of squares (:data:`_SQUARES`). Finiteness is checked where tensors are read."""
+    if entry == "step":
+        if not bool(torch.isfinite(value).all()) or bool((value < 0).any()) or bool((value != value.round()).any()):
+            raise PolicyFormatError(
+                f"{label} must be a whole number of steps >= 0; got {value.tolist()}: restore or re-create it"
+            )
+    elif entry in _SQUARES and bool((value < 0).any()):
+        raise PolicyFormatError(
+            f"{label} is an average of squares and has negative entries (min {float(value.min())}), which no "
+            "optimizer step writes: restore or re-create the checkpoint"
+        )
+
+
 def _optimizer_state(
     optimizer: torch.optim.Optimizer,
     saved: Any,
@@ -252,8 +274,38 @@ def _param_groups(optimizer: torch.optim.Optimizer, saved: list[Any], name: str,
                 # a negative one steps the wrong way or divides by zero.
                 raise PolicyFormatError(f"{label}.{key} must be >= 0; got {value!r}")
         # JSON has no tuples; give back tuples where the optimizer uses them (Adam's betas).
-        groups.append({key: tuple(value) if isinstance(current[key], tuple) else value for key, value in group.items()})
+        group = {key: tuple(value) if isinstance(current[key], tuple) else value for key, value in group.items()}
+        _check_settings(optimizer, group, current, label)
+        groups.append(group)
     return groups
+
+
+#: Param-group entries that choose how an optimizer runs, not what it computes, or that its class
+#: fixes (AdamW's ``decoupled_weight_decay``): they must be what this run's optimizer has, since
+#: ``load_state_dict`` would switch them (``capturable`` on a CPU model fails at the first step).
+_FIXED_SETTINGS = frozenset({"foreach", "fused", "capturable", "differentiable", "decoupled_weight_decay"})
+
+
+def _check_settings(
+    optimizer: torch.optim.Optimizer, group: dict[str, Any], current: dict[str, Any], label: str
+) -> None:
+    """Refuse a param group whose settings this optimizer's own constructor refuses (Adam's
+    ``betas`` must lie in [0, 1): a beta of 1 divides by zero at the first step), or whose
+    :data:`_FIXED_SETTINGS` differ from this run's, naming ``label`` and the entry."""
+    for key in sorted(_FIXED_SETTINGS & set(group)):
+        if group[key] != current[key]:
+            raise PolicyFormatError(
+                f"{label}.{key} is {group[key]!r}; this run's {type(optimizer).__name__} has {current[key]!r}, "
+                "and it must stay so: restore or re-create the checkpoint"
+            )
+    accepted = inspect.signature(type(optimizer).__init__).parameters
+    settings = {key: value for key, value in group.items() if key in accepted and key not in ("params", "self")}
+    try:
+        type(optimizer)([torch.nn.Parameter(torch.zeros(1))], **settings)
+    except (ValueError, TypeError, RuntimeError) as error:
+        raise PolicyFormatError(
+            f"{label}: {type(optimizer).__name__} refuses these settings ({error}): restore or re-create the checkpoint"
+        ) from error
 
 
 def _parameter_state(
@@ -270,7 +322,9 @@ def _parameter_state(
     parameters = [parameter for group in optimizer.param_groups for parameter in group["params"]]
 
     def index_of(text: str, label: str) -> int:
-        if not (text.isdigit() and int(text) < len(parameters)):
+        # Only the canonical decimal form: "00", "0 " or a non-ASCII digit would name parameter 0 a
+        # second time, and whichever came last would be kept silently.
+        if not (text.isascii() and text.isdigit() and str(int(text)) == text and int(text) < len(parameters)):
             raise PolicyFormatError(
                 f"{label}: parameter index {text!r} is not one of this optimizer's 0..{len(parameters) - 1}"
             )
@@ -289,19 +343,9 @@ def _parameter_state(
                     f"{tensors_where}: tensor {key!r} is {tuple(tensor.shape)} {tensor.dtype}; the parameter it "
                     f"belongs to needs {shape} {parameter.dtype}: restore or re-create the checkpoint"
                 )
+            _check_entry_content(entry, tensor, f"{tensors_where}: tensor {key!r}")
             state.setdefault(index, {})[entry] = tensor
-    scalars = saved.get("scalars") or {}
-    if not isinstance(scalars, dict):
-        raise PolicyFormatError(f"{where}: optimizers.{name}.scalars must be an object; got {scalars!r}")
-    for text, entries in scalars.items():
-        label = f"{where}: optimizers.{name}.scalars.{text}"
-        index = index_of(text, label)
-        if not isinstance(entries, dict):
-            raise PolicyFormatError(f"{label} must be an object; got {entries!r}")
-        for key, value in entries.items():
-            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise PolicyFormatError(f"{label}.{key} must be a number or null; got {value!r}")
-            state.setdefault(index, {})[key] = value
+    _add_scalars(state, saved.get("scalars") or {}, index_of, name, where, tensors_where)
     required = _REQUIRED_STATE.get(type(optimizer).__name__, frozenset())
     for index, entries in state.items():
         missing, extra = sorted(required - set(entries)), sorted(set(entries) - required - _OPTIONAL_STATE)
@@ -318,3 +362,33 @@ def _parameter_state(
             f"{len(parameters)}: restore or re-create the checkpoint"
         )
     return state
+
+
+def _add_scalars(
+    state: dict[int, dict[str, Any]],
+    scalars: Any,
+    index_of: Callable[[str, str], int],
+    name: str,
+    where: Path,
+    tensors_where: Path,
+) -> None:
+    """Add the per-parameter scalars of ``training.json`` (``optimizers.<name>.scalars``) to
+    ``state``, each a number or null, checked, and not an entry a tensor gives already."""
+    if not isinstance(scalars, dict):
+        raise PolicyFormatError(f"{where}: optimizers.{name}.scalars must be an object; got {scalars!r}")
+    for text, entries in scalars.items():
+        label = f"{where}: optimizers.{name}.scalars.{text}"
+        index = index_of(text, label)
+        if not isinstance(entries, dict):
+            raise PolicyFormatError(f"{label} must be an object; got {entries!r}")
+        for key, value in entries.items():
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise PolicyFormatError(f"{label}.{key} must be a number or null; got {value!r}")
+            if key in state.get(index, {}):
+                raise PolicyFormatError(
+                    f"{label}.{key} is also a tensor of {tensors_where}: each entry once; restore or re-create the "
+                    "checkpoint"
+                )
+            if value is not None:
+                _check_entry_content(key, torch.tensor(float(value), dtype=torch.float64), f"{label}.{key}")
+            state.setdefault(index, {})[key] = value

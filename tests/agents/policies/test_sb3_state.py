@@ -254,6 +254,40 @@ BAD_STATES: dict[str, tuple[Any, str]] = {
         lambda t, m: (t, corrupted(m, ("counters", "n_updates"), "2")),
         r"'n_updates' must be int; got '2'",
     ),
+    # Indices that name parameter 0 a second time: the last one read would have been kept.
+    "padded_index": (
+        lambda t, m: ({**t, "policy.optimizer/state/00/exp_avg": torch.zeros_like(t[MOMENT])}, m),
+        r"parameter index '00' is not one of this optimizer's",
+    ),
+    "unicode_index": (
+        lambda t, m: (renamed(t, MOMENT, "policy.optimizer/state/\u0660/exp_avg"), m),
+        r"parameter index '\u0660' is not one of this optimizer's",
+    ),
+    "step_twice": (
+        lambda t, m: (t, corrupted(m, ("optimizers", "policy.optimizer", "scalars"), {"0": {"step": 3}})),
+        r"scalars.0.step is also a tensor of .*training.safetensors",
+    ),
+    # Content no optimizer writes, which made the first step NaN.
+    "negative_square": (
+        lambda t, m: ({**t, "policy.optimizer/state/0/exp_avg_sq": -torch.ones_like(t[MOMENT])}, m),
+        r"'policy.optimizer/state/0/exp_avg_sq' is an average of squares and has negative entries",
+    ),
+    "negative_step": (
+        lambda t, m: ({**t, "policy.optimizer/state/0/step": torch.tensor(-5.0)}, m),
+        r"'policy.optimizer/state/0/step' must be a whole number of steps >= 0; got -5.0",
+    ),
+    "fractional_step": (
+        lambda t, m: ({**t, "policy.optimizer/state/0/step": torch.tensor(2.5)}, m),
+        r"must be a whole number of steps >= 0; got 2.5",
+    ),
+    "beta_of_one": (
+        lambda t, m: (t, corrupted(m, (*GROUP, "betas"), [1.0, 0.999])),
+        r"param_groups\[0\]: Adam refuses these settings \(Invalid beta parameter at index 0: 1.0\)",
+    ),
+    "capturable": (
+        lambda t, m: (t, corrupted(m, (*GROUP, "capturable"), True)),
+        r"param_groups\[0\].capturable is True; this run's Adam has False",
+    ),
 }
 
 
