@@ -220,6 +220,8 @@ def checked_indices(name: str, indices: object, count: int) -> np.ndarray:
                 f"got shape {idx.shape}"
             )
         return np.flatnonzero(idx)
+    if idx.shape == (0,) and isinstance(indices, (list, tuple, range, np.ndarray)):
+        return np.zeros(0, dtype=np.int64)  # numpy types an empty list float64: still no index
     if idx.ndim != 1 or not np.issubdtype(idx.dtype, np.integer):
         raise ValueError(
             f"{name} must be a 1-D sequence of whole cluster indices in 0..{count - 1} or a ({count},) boolean "
@@ -301,6 +303,15 @@ _STATE_CHECKS: dict[str, tuple[tuple[int | str, ...], type, float, float, str]] 
     "status": (("k",), np.int64, 0.0, 0.0, ""),
     "energy_scale": (("k",), np.float64, 0.0, math.inf, "J"),
 }
+
+
+#: Relative round-off allowed when :meth:`BatchSimulator.restore` recomputes what a state's
+#: arrays imply (forces, tensions, omega^2, the energy books): a snapshot agrees to the bit, a
+#: state computed with numpy to about 1e-15; parameters or positions edited by hand are off by
+#: far more.
+_CONSISTENCY = 1e-9
+#: The absolute floor of that comparison (N, (rad/s)^2 or J): values that small are round-off.
+_CONSISTENCY_FLOOR = 1e-300
 
 
 def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str, limit: float = math.inf) -> np.ndarray:
@@ -658,7 +669,15 @@ class BatchSimulator:
             )
         if idx.size and (idx.max() >= self.num_clusters):
             raise ValueError(f"indices must be in 0..{self.num_clusters - 1}; got {idx.tolist()}")
-        # Everything is checked above; from here on nothing can refuse the state.
+        if np.unique(idx).size != idx.size:
+            raise ValueError(
+                f"indices must name each cluster at most once (two states cannot go into one cluster); "
+                f"got {short_repr(idx.tolist())}"
+            )
+        # Whether the arrays agree with each other and with the clusters' parameters is measured
+        # on the restored rows themselves, by the kernels that made them; a refusal puts the rows
+        # (and their cluster objects) back as they were.
+        saved = tuple(table[idx].copy() for table in self._tables()) + ([self.clusters[int(b)] for b in idx],)
         source = np.zeros(idx.size, dtype=np.int64) if count == 1 else np.arange(idx.size)
         for k, b in zip(source, idx, strict=True):
             cluster = state.clusters[int(k)]
@@ -669,10 +688,92 @@ class BatchSimulator:
                 self.cable_table[idx, :, _kernels.INTACT] = arrays[name][source]
             else:
                 getattr(self, attribute)[idx] = arrays[name][source]
+        try:
+            self._check_consistent(idx)
+        except ValueError:
+            for table, rows in zip(self._tables(), saved, strict=False):
+                table[idx] = rows
+            for b, cluster in zip(idx, saved[-1], strict=True):
+                self.clusters[int(b)] = cluster
+            raise
+
+    def _tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The four tables of the kernels' contract, in the order ``restore`` saves them."""
+        return (self.node_table, self.cable_table, self.cluster_table, self.counter_table)
+
+    def _check_consistent(self, idx: np.ndarray) -> None:
+        """Refuse (``ValueError``) restored clusters ``idx`` whose arrays contradict each other
+        or their parameters, as only a state built or edited by hand can: the internal forces,
+        tensions (zero for broken cables) and omega^2 must be what the kernels compute from the
+        positions, half-step velocities and intact flags with the clusters' parameters, and the
+        energy books must balance within ``energy_tolerance`` of an energy scale no smaller than
+        the books' largest entry.  Clusters that are not healthy (status other than 0) are frozen
+        until reset and are not measured."""
+        rows = idx[self.counter_table[idx, _kernels.STATUS] == _kernels.STATUS_OK]
+        if not rows.size:
+            return
+        k = _kernels
+        nodes, cables, clusters, finite = self.evaluate_at(
+            self.positions_[rows], rows, velocities=self._v_half[rows], intact=None
+        )
+        cause = (
+            "state.arrays['positions'], state.arrays['half_step_velocities'], state.arrays['intact'] and the "
+            "parameters of state.clusters"
+        )
+        if not finite.all():
+            raise ValueError(
+                f"state.arrays['positions'] of cluster(s) {rows[~finite].tolist()} give a zero-length cable; "
+                "two connected satellites may not occupy the same point"
+            )
+        tension = cables[:, :, k.TENSION]
+        # Forces are compared on the scale of the cluster's tensions: at an equilibrium they
+        # cancel to round-off of the tensions, not of zero.
+        force_scale = np.maximum(np.abs(tension).max(axis=1, initial=0.0), self.tension[rows].max(axis=1, initial=0.0))
+        for name, computed, stored, scale in (
+            ("internal_forces", nodes[:, :, k.INTERNAL_FORCE : k.INTERNAL_FORCE + 3], self._f_int[rows], force_scale),
+            ("tension", tension, self.tension[rows], force_scale),
+            ("omega2", clusters[:, k.OMEGA2], self._omega2[rows], np.abs(clusters[:, k.OMEGA2])),
+        ):
+            difference = np.abs(computed - stored).reshape(rows.size, -1).max(axis=1)
+            bad = ~(difference <= _CONSISTENCY * scale + _CONSISTENCY_FLOOR)
+            if bad.any():
+                raise ValueError(
+                    f"state.arrays[{name!r}] of cluster(s) {rows[bad].tolist()} does not follow from {cause} "
+                    f"(off by up to {difference[bad].max():.3g}); restore takes states from "
+                    "BatchSimulator.snapshot, or states whose arrays agree as a snapshot's do"
+                )
+        report = self.energy()
+        books = np.maximum.reduce(
+            [
+                np.abs(report.initial[rows]),
+                report.kinetic[rows] + report.strain[rows] + np.abs(report.frame_potential[rows]),
+                np.abs(report.work[rows]),
+                report.dissipated[rows],
+            ]
+        )
+        scale = self._energy_scale[rows]
+        books_text = (
+            "state.arrays['positions'], state.arrays['velocities'], state.arrays['initial_energy'], "
+            "state.arrays['work'], state.arrays['dissipated'] and state.arrays['energy_scale']"
+        )
+        small = ~(scale >= books * (1.0 - _CONSISTENCY))
+        if small.any():
+            raise ValueError(
+                f"state.arrays['energy_scale'] of cluster(s) {rows[small].tolist()} is below the largest entry of "
+                f"its energy books ({books[small].max():.6g} J), which a snapshot's never is; check {books_text}"
+            )
+        residual = np.abs(report.residual[rows])
+        unbalanced = ~(residual <= self.energy_tolerance * scale * (1.0 + _CONSISTENCY) + _CONSISTENCY_FLOOR)
+        if unbalanced.any():
+            raise ValueError(
+                f"the energy books of healthy cluster(s) {rows[unbalanced].tolist()} do not balance: a residual of "
+                f"{residual[unbalanced].max():.3g} J, more than energy_tolerance={self.energy_tolerance:g} of "
+                f"the energy scale; check {books_text} (a cluster whose books are out has status 3)"
+            )
 
     def _checked_state(self, state: SimulatorState) -> dict[str, np.ndarray]:
         """The arrays of ``state`` once every part of it is checked against this batch: its
-        clusters (a non-empty tuple of :class:`Cluster` of this topology), its settings, and each
+        clusters (a tuple of :class:`Cluster` of this topology), its settings, and each
         array of :data:`STATE_FIELDS` (the exact set of names; numpy arrays of shape (k, ...)
         exactly, no broadcasting; dtype float64, bool for ``intact``, int64 for ``status``;
         finite; within the ranges of :mod:`tether_gym.limits` and of physics: positions within
@@ -680,9 +781,13 @@ class BatchSimulator:
         tensions and dissipated energy, a known status code).  A ``ValueError`` or ``TypeError``
         names the first bad part."""
         clusters = state.clusters
-        if not isinstance(clusters, tuple) or not clusters or not all(isinstance(c, Cluster) for c in clusters):
-            raise TypeError("state.clusters must be a non-empty tuple of tether_gym.Cluster objects")
+        if not isinstance(clusters, tuple) or not all(isinstance(c, Cluster) for c in clusters):
+            raise TypeError("state.clusters must be a tuple of tether_gym.Cluster objects")
+        checked: set[int] = set()  # a snapshot of a batch of one cluster object holds it k times
         for position, cluster in enumerate(clusters):
+            if id(cluster) in checked:
+                continue
+            checked.add(id(cluster))
             if cluster.num_nodes != self.num_nodes or not np.array_equal(cluster.cables, self.cables):
                 raise ValueError(
                     f"state.clusters[{position}] has a different topology ({cluster.num_nodes} satellites, "

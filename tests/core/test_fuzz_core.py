@@ -463,3 +463,111 @@ def test_restore_checks_every_array_and_changes_nothing_when_it_refuses(
         return
     stats = target.advance(0.1)
     assert np.all(np.isfinite(target.positions[[0, 2]])) or np.all(stats.status[[0, 2]] != 0)
+
+
+# ---------------------------------------------------------------------- restore: states that agree with themselves
+def moving_batch(preset: str, elongation: str, seed: int, steps: int, fragile: bool) -> tg.BatchSimulator:
+    """Two clusters of ``preset`` (different masses) pushed about for ``steps`` intervals; with
+    ``fragile`` one cable breaks easily."""
+    base = tg.make_cluster(preset)
+    if fragile:
+        base = base.replace(breaking_load=np.where(np.arange(base.num_cables) == 0, 1e-3, base.breaking_load))
+    clusters = [base, base.replace(masses=base.masses * 1.3)]
+    batch = tg.BatchSimulator(clusters, elongation=elongation)
+    rng = np.random.default_rng(seed)
+    n = base.num_nodes
+    batch.reset(base.positions + rng.normal(0, 0.02, (2, n, 3)), rng.normal(0, 0.05, (2, n, 3)))
+    for _ in range(steps):
+        batch.advance(0.05, rng.normal(0, 0.2, (2, n, 3)))
+    return batch
+
+
+@FUZZ
+@given(
+    preset=st.sampled_from(tg.preset_names()),
+    elongation=st.sampled_from(["exact", "linearised"]),
+    seed=st.integers(0, 2**16),
+    steps=st.integers(0, 4),
+    fragile=st.booleans(),
+)
+def test_every_snapshot_restores_and_continues_bit_identically(
+    preset: str, elongation: str, seed: int, steps: int, fragile: bool
+) -> None:
+    source = moving_batch(preset, elongation, seed, steps, fragile)
+    state = source.snapshot()
+    target = tg.BatchSimulator(list(state.clusters[::-1]), elongation=elongation)
+    target.restore(state, indices=[1, 0])
+    force = np.full((2, source.num_nodes, 3), 0.1)
+    source.advance(0.05, force)
+    target.advance(0.05, force)
+    for name in ("positions", "velocities", "tension", "status", "time"):
+        assert bits(getattr(target, name)[[1, 0]]) == bits(getattr(source, name)), name
+
+
+@FUZZ
+@given(
+    preset=st.sampled_from(tg.preset_names()),
+    seed=st.integers(0, 2**16),
+    steps=st.integers(0, 3),
+    fragile=st.booleans(),
+    edit=st.sampled_from(["internal_forces", "tension", "omega2", "energy_scale", "initial_energy", "clusters"]),
+    entry=st.integers(0, 10**6),
+    delta=st.floats(1e-6, 1e6),
+)
+def test_restore_refuses_arrays_that_contradict_each_other_and_changes_nothing(
+    preset: str, seed: int, steps: int, fragile: bool, edit: str, entry: int, delta: float
+) -> None:
+    import dataclasses
+
+    source = moving_batch(preset, "exact", seed, steps, fragile)
+    assume(np.all(source.status == 0))
+    state = source.snapshot()
+    arrays = dict(state.arrays)
+    clusters = state.clusters
+    report = source.energy()
+    if edit == "clusters":  # the same arrays, told to belong to clusters of other masses
+        clusters = tuple(c.replace(masses=c.masses * (1.0 + min(delta, 10.0))) for c in clusters)
+    elif edit == "energy_scale":  # below what the books hold
+        books = np.maximum.reduce(
+            [np.abs(report.initial), report.kinetic + report.strain + np.abs(report.frame_potential)]
+        )
+        assume(np.all(books > 0.0))
+        arrays[edit] = books / (1.0 + delta)
+    elif edit == "initial_energy":  # books that no longer balance
+        arrays[edit] = arrays[edit] + (1.0 + delta) * source.energy_tolerance * arrays["energy_scale"] + delta
+    else:  # one entry of an array that follows from the positions and parameters
+        edited = arrays[edit].copy()
+        edited.flat[entry % edited.size] += delta * (1.0 + np.abs(edited).max())
+        arrays[edit] = edited
+    target = tg.BatchSimulator(list(state.clusters))
+    target.advance(0.05, np.ones((2, source.num_nodes, 3)))
+    before = [t.tobytes() for t in (target.node_table, target.cable_table, target.cluster_table, target.counter_table)]
+    objects = list(target.clusters)
+    with pytest.raises(ValueError) as caught:
+        target.restore(dataclasses.replace(state, clusters=clusters, arrays=arrays))
+    assert_names(caught.value, "state.arrays[")
+    after = [t.tobytes() for t in (target.node_table, target.cable_table, target.cluster_table, target.counter_table)]
+    assert after == before and [id(c) for c in target.clusters] == [id(c) for c in objects]
+
+
+@FUZZ
+@given(
+    rows=st.one_of(st.just([]), st.just(()), st.just(range(0)), st.just(np.zeros(0)), st.lists(st.integers(0, 2))),
+)
+def test_restore_takes_each_cluster_once_and_an_empty_selection_is_one(rows: Any) -> None:
+    batch = tg.BatchSimulator(tg.make_cluster("triangle"), 3)
+    batch.advance(0.1, np.full((3, 3, 3), 0.1))
+    picked = batch.snapshot(rows)
+    assert picked.num_clusters == len(rows)
+    target = tg.BatchSimulator(tg.make_cluster("triangle"), 3)
+    before = target.cluster_table.tobytes()
+    try:
+        target.restore(picked, indices=rows)
+    except ValueError as error:
+        assert len(set(np.asarray(rows, dtype=np.int64).tolist())) < len(rows)
+        assert_names(error, "indices")
+        assert target.cluster_table.tobytes() == before
+        return
+    assert len(set(np.asarray(rows, dtype=np.int64).tolist())) == len(rows)
+    idx = np.asarray(rows, dtype=np.int64)
+    assert bits(target.positions[idx]) == bits(batch.positions[idx])
