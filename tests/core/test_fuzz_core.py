@@ -473,7 +473,7 @@ def moving_batch(preset: str, elongation: str, seed: int, steps: int, fragile: b
     if fragile:
         base = base.replace(breaking_load=np.where(np.arange(base.num_cables) == 0, 1e-3, base.breaking_load))
     clusters = [base, base.replace(masses=base.masses * 1.3)]
-    batch = tg.BatchSimulator(clusters, elongation=elongation)
+    batch = tg.BatchSimulator(clusters, elongation=elongation)  # type: ignore[arg-type]  # drawn from both
     rng = np.random.default_rng(seed)
     n = base.num_nodes
     batch.reset(base.positions + rng.normal(0, 0.02, (2, n, 3)), rng.normal(0, 0.05, (2, n, 3)))
@@ -495,7 +495,7 @@ def test_every_snapshot_restores_and_continues_bit_identically(
 ) -> None:
     source = moving_batch(preset, elongation, seed, steps, fragile)
     state = source.snapshot()
-    target = tg.BatchSimulator(list(state.clusters[::-1]), elongation=elongation)
+    target = tg.BatchSimulator(list(state.clusters[::-1]), elongation=elongation)  # type: ignore[arg-type]
     target.restore(state, indices=[1, 0])
     force = np.full((2, source.num_nodes, 3), 0.1)
     source.advance(0.05, force)
