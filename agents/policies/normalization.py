@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -92,6 +92,19 @@ class NormalizationStatistics:
         normalizer.clip_obs, normalizer.clip_reward = self.clip_obs, self.clip_reward
         normalizer.epsilon, normalizer.gamma = self.epsilon, self.gamma
         normalizer.norm_obs, normalizer.norm_reward = self.norm_obs, self.norm_reward
+
+    #: The normaliser's settings (not its running statistics): what a resumed run must share with
+    #: the checkpoint, since the weights were trained on observations normalised so.
+    SETTINGS: ClassVar[tuple[str, ...]] = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "epsilon", "gamma")
+
+    def settings(self) -> dict[str, Any]:
+        """The :data:`SETTINGS` of these statistics, by name."""
+        return {name: getattr(self, name) for name in self.SETTINGS}
+
+    @classmethod
+    def settings_of(cls, normalizer: VecNormalize) -> dict[str, Any]:
+        """The :data:`SETTINGS` of a ``VecNormalize`` (read from its public attributes)."""
+        return {name: getattr(normalizer, name) for name in cls.SETTINGS}
 
     def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
         """``clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs)`` as float32 (obs
@@ -178,6 +191,15 @@ class NormalizationStatistics:
                 raise PolicyFormatError(f"{where}: {name} has negative entries")
         if self.obs_mean.shape != self.obs_var.shape or self.ret_mean.shape != self.ret_var.shape:
             raise PolicyFormatError(f"{where}: mean and var shapes differ")
+        if self.ret_mean.shape != ():
+            # The return statistics are one number (VecNormalize's ret_rms has shape ()): any other
+            # shape broadcast against the batch of rewards and failed, or scaled them wrongly.
+            raise PolicyFormatError(
+                f"{where}: ret_rms.mean and ret_rms.var must have shape [] (one number each); got "
+                f"{list(self.ret_mean.shape)}: restore or re-create the file"
+            )
+        if not self.gamma <= 1:
+            raise PolicyFormatError(f"{where}: gamma is a discount and must be in (0, 1]; got {self.gamma}")
         for name in ("obs_count", "ret_count", "clip_obs", "clip_reward", "epsilon", "gamma"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0) and not (name == "epsilon" and value == 0):

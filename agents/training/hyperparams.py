@@ -444,6 +444,13 @@ def _check_normalize(value: Any, where: str) -> bool | dict[str, Any]:
         if key in ("clip_obs", "clip_reward", "epsilon") and not checked[key] > 0:
             raise HyperparameterError(f"{where}: 'normalize.{key}' must be positive; got {option!r}")
         _check_range(key, checked[key], f"{where}: normalize")
+    # The policy format stores the observation statistics (normalization.json); VecNormalize keeps
+    # none without norm_obs, so such a run was refused only when its first checkpoint was saved.
+    if checked.get("norm_obs", True) is not True:
+        raise HyperparameterError(
+            f"{where}: 'normalize.norm_obs' must be true (a normalised run keeps observation statistics): "
+            "to train on raw observations, set normalize: false"
+        )
     return checked
 
 

@@ -7,6 +7,7 @@ import json
 import pickle
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -144,4 +145,31 @@ def test_zero_epsilon_with_a_zero_variance_is_refused(sb3_model: tuple[PPO, obje
     (directory / "normalization.json").write_text(json.dumps(table))
     (directory / "MANIFEST.sha256").unlink()
     with pytest.raises(PolicyFormatError, match="epsilon is 0 and a variance is 0"):
+        load_policy(directory)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        # One return statistic per key: any other shape broadcast against the batch of rewards.
+        (
+            lambda t: t["ret_rms"].update(
+                mean={"shape": [3], "dtype": "float64", "values": [0.0] * 3},
+                var={"shape": [3], "dtype": "float64", "values": [1.0] * 3},
+            ),
+            r"ret_rms.mean and ret_rms.var must have shape \[\]",
+        ),
+        (lambda t: t.update(gamma=1.5), r"gamma is a discount and must be in \(0, 1\]; got 1.5"),
+    ],
+)
+def test_normalisation_statistics_no_normaliser_writes_are_refused(
+    sb3_model: tuple[PPO, object], tmp_path: Path, change: Any, message: str
+) -> None:
+    model, venv = sb3_model
+    directory = save_policy(tmp_path / "policy", model, venv, ENV)
+    table = json.loads((directory / "normalization.json").read_text())
+    change(table)
+    (directory / "normalization.json").write_text(json.dumps(table))
+    (directory / "MANIFEST.sha256").unlink()
+    with pytest.raises(PolicyFormatError, match=rf"normalization.json: {message}"):
         load_policy(directory)

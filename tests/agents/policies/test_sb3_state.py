@@ -333,3 +333,35 @@ def test_a_refused_checkpoint_directory_leaves_the_model_and_statistics_as_they_
     assert all(torch.equal(weights[key], value) for key, value in fresh.policy.state_dict().items())
     np.testing.assert_array_equal(fresh_venv.obs_rms.mean, mean)
     assert fresh.num_timesteps == 0
+
+
+@pytest.mark.parametrize(
+    ("options", "named"),
+    [
+        ({"norm_obs": True, "norm_reward": True}, "norm_reward: False (the run's: True)"),
+        ({"norm_obs": False, "norm_reward": False}, "norm_obs: True (the run's: False)"),
+        ({"norm_obs": True, "norm_reward": False, "clip_obs": 5.0}, "clip_obs: 10.0 (the run's: 5.0)"),
+        ({"norm_obs": True, "norm_reward": False, "epsilon": 1e-4}, "epsilon: 1e-08 (the run's: 0.0001)"),
+    ],
+)
+def test_a_checkpoint_normalised_otherwise_than_the_run_is_refused(
+    tmp_path: Path, options: dict[str, Any], named: str
+) -> None:
+    """The checkpoint's normaliser settings silently replaced the run's 'normalize' options: a run
+    asking for norm_reward (or clip_obs 5) continued with the checkpoint's. They change what the
+    weights mean, so a difference is refused, naming normalization.json, the setting and both values."""
+    venv = make_training_env(ENV, 2, seed=0, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
+    model = PPO("MlpPolicy", venv, n_steps=16, batch_size=32, device="cpu", seed=0, policy_kwargs={"net_arch": [8]})
+    model.learn(32)
+    directory = save_policy(tmp_path / "checkpoint", model, venv, ENV, training_state=True)
+    fresh_venv = make_training_env(ENV, 2, seed=5, normalize=options, env_kwargs=SHORT)
+    fresh = PPO(
+        "MlpPolicy", fresh_venv, n_steps=16, batch_size=32, device="cpu", seed=1, policy_kwargs={"net_arch": [8]}
+    )
+    with pytest.raises(PolicyFormatError, match=rf"normalization.json records {re.escape(named)}"):
+        load_training_state(fresh, directory, fresh_venv)
+    assert fresh.num_timesteps == 0 and fresh_venv.norm_reward == options["norm_reward"]
+    same = make_training_env(ENV, 2, seed=5, normalize={"norm_obs": True, "norm_reward": False}, env_kwargs=SHORT)
+    resumed = PPO("MlpPolicy", same, n_steps=16, batch_size=32, device="cpu", seed=1, policy_kwargs={"net_arch": [8]})
+    load_training_state(resumed, directory, same)
+    assert resumed.num_timesteps == model.num_timesteps

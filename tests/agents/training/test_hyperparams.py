@@ -49,6 +49,8 @@ def test_hyperparameter_files_cover_every_id() -> None:
             "unknown key 'netarch' .did you mean 'net_arch'",
         ),
         ("default: {n_timesteps: 1000, normalize: {clip_ob: 5}}", "unknown key 'clip_ob'"),
+        # VecNormalize keeps no observation statistics without norm_obs: the first save failed.
+        ("default: {n_timesteps: 1000, normalize: {norm_obs: false}}", "'normalize.norm_obs' must be true"),
         ("default: {n_timesteps: 1000, curriculum: {start: 0.2}}", "'curriculum' must be a mapping with exactly"),
         ("default: {n_timesteps: 1000, rollout_buffer_class: RolloutBuffer}", "'rollout_buffer_class' cannot be set"),
         (
