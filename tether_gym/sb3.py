@@ -531,6 +531,7 @@ class BatchVecEnv(VecEnv):
     # ------------------------------------------------------------------ rendering / closing
     def render(self, mode: str | None = None) -> np.ndarray | None:
         """Not supported: warns and returns None (no image)."""
+        self._check_open("render")
         warnings.warn(
             f"{type(self).__name__} does not render (asked for mode={mode!r}); render a single env instead, e.g. "
             "gym.make('TetherTetrahedron-v0', render_mode='rgb_array').",
@@ -540,6 +541,7 @@ class BatchVecEnv(VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         """Not supported: warns and returns N Nones."""
+        self._check_open("get_images")
         warnings.warn(f"{type(self).__name__} does not render; get_images() returns no images", stacklevel=2)
         return [None] * self.num_envs
 

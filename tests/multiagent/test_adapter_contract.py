@@ -188,6 +188,11 @@ BAD: list[tuple[str, Callable[[BatchVecEnv], Any], type[BaseException], str]] = 
     ("set_attr after close", closed(lambda e: e.set_attr("max_episode_steps", 5)), RuntimeError, "closed"),
     ("env_method after close", closed(lambda e: e.env_method("set_difficulty", 0.5)), RuntimeError, "closed"),
     ("seed after close", closed(lambda e: e.seed(0)), RuntimeError, "closed"),
+    # Every call but close, the rendering ones too (they warn and return nothing while open).
+    ("set_options after close", closed(lambda e: e.set_options({})), RuntimeError, "closed"),
+    ("env_is_wrapped after close", closed(lambda e: e.env_is_wrapped(gym.Wrapper)), RuntimeError, "closed"),
+    ("render after close", closed(lambda e: e.render()), RuntimeError, "closed"),
+    ("get_images after close", closed(lambda e: e.get_images()), RuntimeError, "closed"),
 ]
 
 
