@@ -699,15 +699,15 @@ def load_training_state(
         statistics = NormalizationStatistics.from_json(reader.read(NORMALIZATION_FILE), statistics_where)
         # The run's normaliser settings (its hyperparameters' 'normalize' options) were replaced by
         # the checkpoint's without a word: a run asking for norm_reward: false continued with it on.
-        recorded, ours_settings = (
+        theirs, ours_settings = (
             statistics.settings(),
             NormalizationStatistics.settings_of(normalizer),
         )
-        differing = [key for key in recorded if recorded[key] != ours_settings[key]]
+        differing = [key for key in theirs if theirs[key] != ours_settings[key]]
         if differing:
             raise PolicyFormatError(
                 f"{statistics_where} records "
-                + ", ".join(f"{key}: {recorded[key]!r} (the run's: {ours_settings[key]!r})" for key in differing)
+                + ", ".join(f"{key}: {theirs[key]!r} (the run's: {ours_settings[key]!r})" for key in differing)
                 + ": the weights were trained on observations normalised with the checkpoint's settings; resume with "
                 "the run's hyperparameters (its config.yml: --hyperparams, or --set normalize=...)"
             )
