@@ -6,6 +6,8 @@ differences with an element-by-element critical-step estimate.  Main entry point
 * :class:`Cluster`, :func:`make_cluster`, :func:`load_cluster`, :func:`save_cluster`: describe a
   cluster, or take a named preset.
 * :class:`Simulator` (one cluster) and :class:`BatchSimulator` (B clusters, one core).
+* :class:`Tether`, :func:`build_cluster`: tethers with mass, split into beads and segments
+  (:mod:`tether_gym.tethers`).
 * :class:`Frame`: inertial, orbiting (Hill / Clohessy-Wiltshire) or spinning frames.
 * Gymnasium ids ``TetherTetrahedron-v0`` (default), ``TetherChain-v0``, ``TetherTriangle-v0``,
   ``TetherOctahedron-v0``, ``TetherHub-v0``, and in turning frames ``TetherRadialChain-v0``
@@ -28,6 +30,7 @@ from tether_gym.simulator import (
     Simulator,
     SimulatorState,
 )
+from tether_gym.tethers import Tether, TetherError, build_cluster
 
 __version__ = "0.1.0"
 
@@ -48,6 +51,9 @@ __all__ = [
     "SimulationDiverged",
     "Simulator",
     "SimulatorState",
+    "Tether",
+    "TetherError",
+    "build_cluster",
     "load_cluster",
     "make_cluster",
     "preset_names",

@@ -54,8 +54,10 @@ __all__ = [
     "MAX_SEGMENTS",
     "Tether",
     "TetherError",
+    "StaticEquilibrium",
     "TetherResults",
     "build_cluster",
+    "static_equilibrium",
     "tether_results",
 ]
 
@@ -83,7 +85,9 @@ class Tether:
         segments: number of segments N >= 1; N - 1 beads carry the mass.
         mass: total mass of the line, kg, >= 0 (> 0 when N > 1: a bead needs mass).  The mass
             per reference length is ``mass / L0``.
-        N0: pretension, N, >= 0 and < EA (else a segment would be shorter than its stretch).
+        N0: pretension, N, >= 0 and < EA (else a segment would be shorter than its stretch).  In a
+            turning frame, the mean pretension of its segments: :func:`build_cluster` varies it
+            along the line so that the frame's load along the line is in equilibrium.
         L0: reference (unstretched-plus-pretension) length of the whole tether, m; ``None``: the
             distance between its satellites, filled in by :func:`build_cluster`.
         axial_damping: Kelvin-Voigt coefficient of the whole tether, N*s/m, >= 0.
@@ -258,7 +262,11 @@ def build_cluster(
             ``sum_{u<t} N_u + k``, ``k = 0 .. N_t - 1``, in the same order.
         damping: (S,) or scalar diagonal damping of the satellites, N*s/m; beads have none (a
             line's physical damping is its axial damping).
-        frame: the frame of ``positions`` (default inertial).
+        frame: the frame of ``positions`` (default inertial).  In a Hill or rotating frame each
+            tether's segment pretensions vary along the line by the frame's load on its beads
+            along the chord (gravity gradient, centripetal load), about a mean of the spec's
+            ``N0``, so that the straight line is in equilibrium along itself; a load across the
+            line is left to :func:`static_equilibrium`, which finds the sagged shape.
         name: the cluster's label.
 
     Returns:
@@ -302,41 +310,23 @@ def build_cluster(
                 f"tether {t} ({spec.label}) ends at satellite {max(a, b)}, but there are {S} satellites (0..{S - 1})"
             )
         chord = sat_positions[b] - sat_positions[a]
-        length = float(np.linalg.norm(chord)) if spec.L0 is None else spec.L0
-        if not MIN_LENGTH <= length <= MAX_LENGTH:
-            raise TetherError(
-                f"tether {t} ({spec.label}): its length {length:g} m (the distance between its satellites) must lie "
-                f"in [{MIN_LENGTH:g}, {MAX_LENGTH:g}] m; move its satellites apart or give L0"
-            )
-        spec = dataclasses.replace(spec, L0=length)
-        params = spec.segment_parameters(length)
-        if params["L0"] < MIN_LENGTH:
-            raise TetherError(
-                f"tether {t} ({spec.label}): {spec.segments} segments of {length:g} m are {params['L0']:g} m each, "
-                f"shorter than the {MIN_LENGTH:g} m minimum; use fewer segments"
-            )
-        if spec.segments > 1 and spec.bead_mass < MIN_BEAD_MASS:
-            raise TetherError(
-                f"tether {t} ({spec.label}): beads of {spec.bead_mass:g} kg are lighter than the {MIN_BEAD_MASS:g} kg "
-                "minimum; use fewer segments or a heavier tether"
-            )
-        if params["axial_damping"] > MAX_DAMPING:
-            raise TetherError(
-                f"tether {t} ({spec.label}): axial_damping * segments = {params['axial_damping']:g} N*s/m exceeds "
-                f"{MAX_DAMPING:g}; lower the damping or the segment count"
-            )
+        spec, params = _resolved(t, spec, float(np.linalg.norm(chord)) if spec.L0 is None else spec.L0)
         beads = list(range(next_bead, next_bead + spec.num_beads))
         next_bead += spec.num_beads
         fractions = np.arange(1, spec.segments)[:, None] / spec.segments
-        node_positions.append(sat_positions[a] + fractions * chord)
+        bead_positions = sat_positions[a] + fractions * chord
+        node_positions.append(bead_positions)
         node_masses.append(np.full(spec.num_beads, spec.bead_mass))
         node_masses[0][a] += spec.end_mass
         node_masses[0][b] += spec.end_mass
+        pretension = np.full(spec.segments, spec.N0)
+        if frame is not None and not frame.is_inertial and spec.num_beads:
+            pretension = _pretension_profile(t, spec, frame, bead_positions, chord)
         chain = [a, *beads, b]
         for k in range(spec.segments):
             cables.append((chain[k], chain[k + 1]))
             for key, value in params.items():
-                columns[key].append(value)
+                columns[key].append(float(pretension[k]) if key == "N0" else value)
         resolved.append(spec)
 
     n_beads = next_bead - S
@@ -351,6 +341,55 @@ def build_cluster(
         tethers=tuple(resolved),
         **{key: np.array(values) for key, values in columns.items()},
     )
+
+
+def _resolved(t: int, spec: Tether, length: float) -> tuple[Tether, dict[str, float]]:
+    """Tether ``t`` with its reference length ``length`` (m) filled in, and its segments'
+    parameters; a mesh the limits refuse raises :class:`TetherError` naming the tether."""
+    if not MIN_LENGTH <= length <= MAX_LENGTH:
+        raise TetherError(
+            f"tether {t} ({spec.label}): its length {length:g} m (the distance between its satellites) must lie "
+            f"in [{MIN_LENGTH:g}, {MAX_LENGTH:g}] m; move its satellites apart or give L0"
+        )
+    spec = dataclasses.replace(spec, L0=length)
+    params = spec.segment_parameters(length)
+    if params["L0"] < MIN_LENGTH:
+        raise TetherError(
+            f"tether {t} ({spec.label}): {spec.segments} segments of {length:g} m are {params['L0']:g} m each, "
+            f"shorter than the {MIN_LENGTH:g} m minimum; use fewer segments"
+        )
+    if spec.segments > 1 and spec.bead_mass < MIN_BEAD_MASS:
+        raise TetherError(
+            f"tether {t} ({spec.label}): beads of {spec.bead_mass:g} kg are lighter than the {MIN_BEAD_MASS:g} kg "
+            "minimum; use fewer segments or a heavier tether"
+        )
+    if params["axial_damping"] > MAX_DAMPING:
+        raise TetherError(
+            f"tether {t} ({spec.label}): axial_damping * segments = {params['axial_damping']:g} N*s/m exceeds "
+            f"{MAX_DAMPING:g}; lower the damping or the segment count"
+        )
+    return spec, params
+
+
+def _pretension_profile(
+    t: int, spec: Tether, frame: Frame, bead_positions: np.ndarray, chord: np.ndarray
+) -> np.ndarray:
+    """(N,) segment pretensions, N, of a straight tether in equilibrium along itself under the
+    frame's load ``m_b diag(T) x`` on its beads, with mean ``spec.N0``.
+
+    Bead k sits between segments k - 1 and k: ``N_k - N_{k-1} + F_k . e = 0`` along the chord
+    direction ``e``."""
+    direction = chord / np.linalg.norm(chord)
+    load = spec.bead_mass * (bead_positions * frame.tidal) @ direction  # (N-1,) N, along e
+    steps = np.concatenate([[0.0], -np.cumsum(load)])
+    profile = spec.N0 + (steps - steps.mean())
+    if profile.min() < 0.0 or profile.max() >= spec.EA:
+        raise TetherError(
+            f"tether {t} ({spec.label}): the frame's load along the line varies its tension by "
+            f"{np.ptp(profile):.4g} N about N0={spec.N0:g} N, which takes a segment's pretension out of [0, EA); "
+            f"raise N0 to at least {spec.N0 - profile.min():.4g} N (or keep it below EA)"
+        )
+    return profile
 
 
 def _indexed(t: int, spec: Any) -> Tether:
@@ -435,4 +474,76 @@ def tether_results(cluster: Any, positions: ArrayLike, tension: ArrayLike, broke
         slack_fraction=slack_fraction,
         sag=sag,
         broken=severed,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class StaticEquilibrium:
+    """The static equilibrium of a cluster's beads with its satellites held.
+
+    Attributes:
+        positions: (n, 3) node positions, m: the satellites where they were held, the beads in
+            equilibrium (the nominal shape of the tethers, sagged by any load across them).
+        tension: (m,) cable tensions there, N: each tether's tension profile.
+        residual: largest force left on a bead, N.
+        iterations: Newton iterations taken.
+    """
+
+    positions: np.ndarray
+    tension: np.ndarray
+    residual: float
+    iterations: int
+
+
+def static_equilibrium(
+    cluster: Any, positions: ArrayLike | None = None, *, tolerance: float = 1e-10, max_iterations: int = 50
+) -> StaticEquilibrium:
+    """Solve for the beads' equilibrium in the cluster's frame, the satellites held at ``positions``.
+
+    Newton's method on the beads' net force ``f_int(x) - M diag(T) x`` (the simulator's
+    :meth:`~tether_gym.BatchSimulator.equilibrium_force`, from the compiled force kernel), with the
+    tangent stiffness of :func:`tether_gym.analysis.tangent_stiffness` (taut branch) plus the
+    frame's stiffness as the Jacobian.
+
+    Args:
+        cluster: a :class:`~tether_gym.cluster.Cluster`.
+        positions: (n, 3) start, m (default: the cluster's positions); its satellites stay there.
+        tolerance: stop when the largest force on a bead is below ``tolerance`` times the largest
+            segment tension (N/N).
+        max_iterations: Newton iterations allowed.
+
+    Raises:
+        ValueError: no convergence in ``max_iterations`` (e.g. a slack tether, whose beads have
+            no equilibrium: raise its pretension).
+    """
+    from tether_gym.analysis import frame_stiffness, tangent_stiffness
+    from tether_gym.simulator import BatchSimulator
+
+    x = np.array(cluster.positions if positions is None else positions, dtype=np.float64)
+    if x.shape != cluster.positions.shape or not np.isfinite(x).all():
+        raise ValueError(f"positions must be a finite array of shape {cluster.positions.shape}; got {x.shape}")
+    if not is_real_number(tolerance) or not 0.0 < to_float(tolerance) < 1.0:
+        raise ValueError(f"tolerance must be a number in (0, 1); got {tolerance!r}")
+    if not is_whole_number(max_iterations) or max_iterations < 1:
+        raise ValueError(f"max_iterations must be a whole number >= 1; got {max_iterations!r}")
+    beads = np.flatnonzero(cluster.is_bead)
+    dofs = (3 * beads[:, None] + np.arange(3)[None, :]).ravel()
+    sim = BatchSimulator(cluster, 1)
+    frame_part = frame_stiffness(cluster)
+    residual = math.inf
+    for iteration in range(int(max_iterations) + 1):
+        sim.reset(x[None])
+        force = sim.equilibrium_force(x[None])[0]
+        scale = max(float(sim.tension[0].max()), 1e-300)
+        residual = float(np.abs(force[beads]).max()) if beads.size else 0.0
+        if residual <= tolerance * scale:
+            return StaticEquilibrium(x, sim.tension[0].copy(), residual, iteration)
+        if iteration == max_iterations:
+            break
+        jacobian = (tangent_stiffness(cluster, x, taut_branch=True) + frame_part)[np.ix_(dofs, dofs)]
+        step = np.linalg.lstsq(jacobian, -force[beads].ravel(), rcond=None)[0]
+        x[beads] += step.reshape(-1, 3)
+    raise ValueError(
+        f"static_equilibrium did not converge in {max_iterations} iterations: a force of {residual:.3g} N is left "
+        "on a bead; a slack tether has no equilibrium (raise its N0), or allow more iterations"
     )

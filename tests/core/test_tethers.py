@@ -22,7 +22,7 @@ from scipy.optimize import brentq
 import tether_gym as tg
 from tether_gym.analysis import max_frequency
 from tether_gym.limits import MIN_BEAD_MASS, MIN_MASS
-from tether_gym.tethers import Tether, TetherError, build_cluster, tether_results
+from tether_gym.tethers import Tether, TetherError, build_cluster, static_equilibrium, tether_results
 
 LENGTH, SAT_MASS, LINE_MASS, EA, TENSION = 100.0, 50.0, 2.0, 40e3, 5.0
 MU = LINE_MASS / LENGTH  # kg/m
@@ -369,6 +369,55 @@ def test_tether_results_end_and_peak_tension_slack_sag_and_break() -> None:
     assert results.broken[:, 0].tolist() == [True, True, False]  # one broken segment severs the tether
     with pytest.raises(ValueError, match="tension must have shape"):
         tether_results(cluster, sim.positions, sim.tension[:, :2], sim.broken)
+
+
+# ---------------------------------------------------------------------------------- turning frames
+def test_a_radial_tether_in_orbit_is_built_in_equilibrium_along_itself() -> None:
+    """The gravity gradient stretches a radial line: the tension peaks at its middle, and the
+    built pretension profile balances every bead."""
+    frame = tg.Frame.hill()
+    spec = Tether((0, 1), EA=EA, segments=8, mass=20.0, N0=1.0)
+    cluster = build_cluster([[-500.0, 0, 0], [500.0, 0, 0]], 100.0, [spec], frame=frame)
+    profile = cluster.N0
+    assert profile.mean() == pytest.approx(1.0, rel=1e-12)
+    assert profile.argmax() in (3, 4) and profile[0] == profile.min()
+    # Bead k's net load: the segments' pull plus the tidal force, zero to round-off.
+    tidal_force = 2.5 * 3 * frame.rate**2 * cluster.positions[cluster.is_bead, 0]  # bead mass 20/8 kg
+    assert np.abs(np.diff(profile) + tidal_force).max() < 1e-12
+    held = tg.BatchSimulator(cluster, 1).equilibrium_force(cluster.positions[None])[0]
+    assert np.abs(held[cluster.is_bead]).max() < 1e-12 * np.abs(tidal_force).max() * 1e3
+    assert static_equilibrium(cluster).iterations == 0
+    uniform = build_cluster([[-500.0, 0, 0], [500.0, 0, 0]], 100.0, [spec])
+    assert (uniform.N0 == 1.0).all()
+    with pytest.raises(TetherError, match=r"tether 0 .*raise N0 to at least 0\.00"):
+        build_cluster(
+            [[-500.0, 0, 0], [500.0, 0, 0]], 100.0, [Tether((0, 1), EA=EA, segments=8, mass=20.0, N0=1e-3)], frame=frame
+        )
+
+
+def test_a_load_across_a_spinning_tether_sags_it_into_the_funicular_parabola() -> None:
+    """A tether across the radius of a spinning frame carries the centripetal load q = mu w^2 R
+    across it; with its ends held, its beads lie on the parabola of sag q L^2 / (8 H), H the
+    tension's component along the chord."""
+    spin, radius, length, mu, segments = 0.03, 1000.0, 100.0, 0.02, 16
+    spec = Tether((0, 1), EA=EA, segments=segments, mass=mu * length, N0=50.0)
+    cluster = build_cluster(
+        [[radius, -length / 2, 0], [radius, length / 2, 0]], 100.0, [spec], frame=tg.Frame.rotating(spin)
+    )
+    equilibrium = static_equilibrium(cluster)
+    assert equilibrium.residual < 1e-9 * equilibrium.tension.max()
+    nodes = equilibrium.positions[cluster.tether_nodes(0)]
+    middle = segments // 2
+    delta = nodes[middle + 1] - nodes[middle]
+    along_chord = equilibrium.tension[cluster.tether_cables(0)][middle] * abs(delta[1]) / np.linalg.norm(delta)
+    offsets = nodes[:, 0] - radius
+    y = nodes[:, 1] + length / 2
+    parabola = mu * spin**2 * radius * y * (length - y) / (2 * along_chord)
+    np.testing.assert_allclose(offsets, parabola, rtol=2e-3, atol=1e-12)  # measured 5.5e-4: q grows with the sag
+    results = tether_results(
+        cluster, equilibrium.positions[None], equilibrium.tension[None], np.zeros((1, cluster.num_cables), bool)
+    )
+    assert results.sag[0, 0] == pytest.approx(offsets.max())
 
 
 # ---------------------------------------------------------------------------------- bad specs
