@@ -41,6 +41,7 @@ __all__ = [
     "BatchSimulator",
     "EnergyReport",
     "STATE_FIELDS",
+    "STATUS_NAMES",
     "SimulationDiverged",
     "SimulatorState",
     "Simulator",
@@ -83,6 +84,16 @@ MAX_RECORDED_STEPS = 10**6
 
 Elongation = Literal["exact", "linearised"]
 CriticalStepMethod = Literal["closed-form", "finite-difference"]
+
+
+#: Each status code of :attr:`AdvanceStats.status` by name: what the environments report as
+#: ``info["simulator_status"]``, so that an episode ended as ``numerics_diverged`` says why.
+STATUS_NAMES: dict[int, str] = {
+    _kernels.STATUS_OK: "ok",
+    _kernels.STATUS_NON_FINITE: "non_finite",
+    _kernels.STATUS_TOO_MANY_SUBSTEPS: "too_many_substeps",
+    _kernels.STATUS_ENERGY_RUNAWAY: "energy_runaway",
+}
 
 
 class SimulationDiverged(FloatingPointError):

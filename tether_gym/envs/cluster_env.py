@@ -129,6 +129,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     - the reward terms;
     - ``substeps``, ``step_min`` and ``step_max`` (s) of the interval, and ``peak_tension``
       ((c,) N, each cable's largest tension within it);
+    - ``simulator_status``: the simulator's status code, which says why an episode ended as
+      ``numerics_diverged`` (0 ok, 1 non-finite state, 2 interval refused for its sub-step
+      budget, 3 energy runaway; ``tether_gym.simulator.STATUS_NAMES``);
     - ``vibration_energy``, ``kinetic_energy``, ``strain_energy``, ``frame_potential``,
       ``dissipated_energy``, ``external_work`` and ``energy_residual`` (J);
     - ``tensions`` (N), ``slack_count``, ``broken_cables`` ((c,) bool), and ``propellant_used``

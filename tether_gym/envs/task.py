@@ -814,6 +814,7 @@ class DampingTask:
                 substeps=kept(sim.counter_table[:, k.SUBSTEPS]),
                 step_min=kept(clusters[:, k.STEP_MIN]),
                 step_max=kept(clusters[:, k.STEP_MAX]),
+                simulator_status=kept(sim.counter_table[:, k.STATUS]),
                 peak_tension=kept(cables[:, :, k.PEAK_TENSION]),
                 **{key: values[key] for key in REWARD_TERM_KEYS},
                 end_reason=kept(self.end_reason),
@@ -868,6 +869,9 @@ class DampingTask:
             info["substeps"] = int(sim.counter_table[index, k.SUBSTEPS])
             info["step_min"] = cluster[k.STEP_MIN]
             info["step_max"] = cluster[k.STEP_MAX]
+            # Why a numerics_diverged end happened (tether_gym.simulator.STATUS_NAMES): a
+            # non-finite state, an interval refused for its sub-step budget, an energy runaway.
+            info["simulator_status"] = int(sim.counter_table[index, k.STATUS])
             info["peak_tension"] = cables[:, k.PEAK_TENSION].copy()
             for key in REWARD_TERM_KEYS:
                 info[key] = values[key]

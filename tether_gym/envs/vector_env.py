@@ -28,7 +28,15 @@ from tether_gym.limits import is_whole_number
 __all__ = ["TetherClusterVectorEnv"]
 
 #: Info keys that exist only after a step (a reset's info lacks them, as in the single env).
-STEP_KEYS = ("substeps", "step_min", "step_max", "peak_tension", *REWARD_TERM_KEYS, "end_reason")
+STEP_KEYS = (
+    "substeps",
+    "step_min",
+    "step_max",
+    "simulator_status",
+    "peak_tension",
+    *REWARD_TERM_KEYS,
+    "end_reason",
+)
 
 #: The autoreset modes the native vector env implements (Gymnasium's ``DISABLED`` is not one).
 AUTORESET_MODES = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
