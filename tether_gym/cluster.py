@@ -193,6 +193,35 @@ def _check_tether_cables(tethers: tuple[Tether, ...], cables: np.ndarray, n_sate
         cable += spec.segments
 
 
+def _cable_lengths(
+    positions: np.ndarray, cables: np.ndarray, n_satellites: int, tethers: tuple[Tether, ...]
+) -> np.ndarray:
+    """(m,) distances between each cable's nodes, m; a zero length or a disconnected cluster is
+    refused, naming the nodes (a bead as a bead of its tether)."""
+    lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
+    if np.any(lengths <= 0.0):
+        c = int(np.argmax(lengths <= 0.0))
+        if tethers:
+            i, j = (_node_label(int(k), n_satellites, tethers) for k in cables[c])
+            raise ClusterError(
+                f"positions give cable {c} zero length: {i} and {j} share the same position; "
+                "give every node a distinct position"
+            )
+        raise ClusterError(
+            f"positions give cable {c} zero length: nodes {tuple(int(k) for k in cables[c])} share the "
+            "same position; give every satellite a distinct position"
+        )
+    reachable = _connected(positions.shape[0], cables)
+    if not np.all(reachable):
+        # A bead is always linked to its tether's satellites: only satellites can be cut off.
+        loose = [int(k) for k in np.flatnonzero(~reachable[:n_satellites])]
+        raise ClusterError(
+            f"the cluster is disconnected: satellites {loose} are not linked to satellite 0 by "
+            "any chain of cables; add cables or simulate the parts as separate clusters"
+        )
+    return lengths
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Cluster:
     """A cluster of point-mass satellites joined by massless, linear-elastic, tension-only cables.
@@ -315,20 +344,7 @@ class Cluster:
         n_cables = cables.shape[0]
         _check_tether_cables(tethers, cables, n_satellites, n_nodes)
 
-        lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
-        if np.any(lengths <= 0.0):
-            c = int(np.argmax(lengths <= 0.0))
-            raise ClusterError(
-                f"positions give cable {c} zero length: nodes {tuple(int(k) for k in cables[c])} share the "
-                "same position; give every satellite a distinct position"
-            )
-        reachable = _connected(n_nodes, cables)
-        if not np.all(reachable):
-            loose = [int(k) for k in np.flatnonzero(~reachable)]
-            raise ClusterError(
-                f"the cluster is disconnected: satellites {loose} are not linked to satellite 0 by "
-                "any chain of cables; add cables or simulate the parts as separate clusters"
-            )
+        lengths = _cable_lengths(positions, cables, n_satellites, tethers)
 
         EA = _float_array("EA", self.EA, (n_cables,), "axial stiffness in N per cable")
         check_range("EA", EA, MIN_EA, MAX_EA, "N", error=ClusterError, where="cable")

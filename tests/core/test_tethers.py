@@ -479,6 +479,10 @@ def test_cluster_errors_name_a_bead_as_a_bead_of_its_tether() -> None:
     with pytest.raises(tg.ClusterError, match=r"tether 0 .*cables 0\.\.3 must be its segments"):
         tg.Cluster.from_dict(data)
     data = line(4).to_dict()
+    data["positions"][3] = data["positions"][2]
+    with pytest.raises(tg.ClusterError, match=r"cable 1 zero length: bead 0 of tether 0 \(node 2\) and bead 1"):
+        tg.Cluster.from_dict(data)
+    data = line(4).to_dict()
     data["tethers"][0]["segments"] = 9
     with pytest.raises(tg.ClusterError, match="the tethers have 8 beads in all, but the cluster has only 5 nodes"):
         tg.Cluster.from_dict(data)
