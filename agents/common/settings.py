@@ -3,7 +3,7 @@
 A settings file maps env ids to entries, with a ``default`` entry for the ids it does not list;
 each entry gives fields of a frozen dataclass (:class:`agents.controllers.mpc.MPCSettings`,
 :class:`agents.training.ars.ARSSettings`), whose ``__post_init__`` checks the values. Nothing in the file
-is evaluated (``yaml.safe_load``).
+is evaluated, and a key given twice is refused (:func:`agents.common.reading.read_yaml`).
 """
 
 from __future__ import annotations
@@ -13,10 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-from tether_gym._optional import needs_extra
-
-with needs_extra("train", "reading the settings files"):
-    import yaml
+from .reading import read_yaml
 
 __all__ = ["load_settings"]
 
@@ -39,7 +36,7 @@ def load_settings(
         ValueError: a file that is not a mapping, or an unknown setting (named, with the known
             ones); ``cls`` raises it for bad values. ``label`` names the settings in messages.
     """
-    table = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
+    table = read_yaml(file) or {}
     if not isinstance(table, dict):
         raise ValueError(f"{file} must map env ids to {label} settings")
     if run_algo is not None and table.get("algo") == run_algo and isinstance(table.get("hyperparams"), dict):

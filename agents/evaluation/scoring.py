@@ -56,6 +56,7 @@ from tether_gym.limits import is_whole_number
 
 from ..common.commands import PACKAGE
 from ..common.data import REFERENCE_DIR
+from ..common.reading import read_json
 from .rollout import rollout
 from .stats import (
     SCORE_BOOTSTRAP_REPS,
@@ -552,12 +553,7 @@ def load_reference(path: str | Path | None = None) -> dict[str, Any]:
             f"no reference scores at {file}: write them from a benchmark with python -m {PACKAGE}.scoring "
             "BENCHMARK_JSON --commit COMMIT --out PATH"
         )
-    try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise ReferenceDataError(
-            f"{file} is not valid JSON ({error}): rewrite it with python -m agents.scoring"
-        ) from error
+    data = read_json(file, ReferenceDataError, "rewrite it with python -m agents.scoring")
     if not isinstance(data, dict) or data.get("format") != FORMAT or data.get("version") != FORMAT_VERSION:
         found = (data.get("format"), data.get("version")) if isinstance(data, dict) else type(data).__name__
         raise ReferenceDataError(
@@ -589,7 +585,7 @@ def write_reference(
     # Checked before the benchmark is read: a symlink or a directory at --out is refused, an
     # existing file is replaced only with force.
     check_output_files(target.parent, [target.name], force, argument="--out", what="an earlier scoring")
-    results = json.loads(source.read_text(encoding="utf-8"))
+    results = read_json(source, ReferenceDataError, "pass the benchmark.json that python -m agents.benchmark wrote")
     if date is None:
         written = datetime.datetime.fromtimestamp(source.stat().st_mtime, tz=datetime.timezone.utc)
         date = written.replace(microsecond=0).isoformat().replace("+00:00", "Z")

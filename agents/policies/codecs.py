@@ -28,6 +28,7 @@ import numpy as np
 from tether_gym._optional import needs_extra
 
 from ..common.checks import is_count
+from ..common.reading import MAX_JSON_INTEGER, json_depth, json_hooks
 from .layout import PolicyFormatError
 
 with needs_extra("train", "the policy files"):
@@ -89,72 +90,11 @@ _POSITIONAL = ("self", "observation_space", "action_space", "lr_schedule")
 # ---------------------------------------------------------------------------------------------
 
 
-def _reject_constant(name: str) -> None:
-    raise ValueError(f"non-finite number {name} is not allowed here")
-
-
-def _finite_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"number {text} overflows a float")
-    return value
-
-
-#: The largest integer magnitude a policy file may hold: 64-bit integers (counts, shapes), which a
-#: float also holds without overflowing (an integer beyond a float's range raised OverflowError
-#: wherever a number was read as a float).
-MAX_JSON_INTEGER = 2**63 - 1
-
-
-def _bounded_int(text: str) -> int:
-    value = int(text)
-    if abs(value) > MAX_JSON_INTEGER:
-        raise ValueError(f"integer {text[:20]}{'...' if len(text) > 20 else ''} does not fit in 64 bits")
-    return value
-
-
 #: The largest JSON file of a policy directory read, bytes: a policy.json or normalization.json of
 #: the largest network and observation the envs have is a few hundred KB.
 MAX_JSON_BYTES = 16 * 2**20
 #: The deepest nesting of lists and objects read: the format's own files nest 5 deep.
 MAX_JSON_DEPTH = 32
-
-
-def json_depth(data: bytes, limit: int) -> int:
-    """The nesting depth of the JSON text ``data`` (brackets inside strings not counted), read up
-    to the first point deeper than ``limit`` (then ``limit + 1``): found before parsing, so that a
-    crafted file cannot make the parser recurse."""
-    depth = deepest = 0
-    in_string = escaped = False
-    for byte in data:
-        if in_string:
-            if escaped:
-                escaped = False
-            elif byte == 0x5C:  # backslash
-                escaped = True
-            elif byte == 0x22:  # quote
-                in_string = False
-        elif byte == 0x22:
-            in_string = True
-        elif byte in (0x5B, 0x7B):  # [ {
-            depth += 1
-            if depth > limit:
-                return depth
-            deepest = max(deepest, depth)
-        elif byte in (0x5D, 0x7D):  # ] }
-            depth -= 1
-    return deepest
-
-
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """An object's entries as a dict, refusing a key given twice: ``json`` would keep the last one
-    silently, so a file could say two things about the same entry and be read as one of them."""
-    table: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in table:
-            raise ValueError(f"the key {key[:40]!r} appears twice in one object (each key once)")
-        table[key] = value
-    return table
 
 
 def parse_json(data: bytes, where: Path) -> Any:
@@ -172,13 +112,7 @@ def parse_json(data: bytes, where: Path) -> Any:
             "restore or re-create the file"
         )
     try:
-        return json.loads(
-            data.decode("utf-8"),
-            parse_constant=_reject_constant,
-            parse_float=_finite_float,
-            parse_int=_bounded_int,
-            object_pairs_hook=_unique_keys,
-        )
+        return json.loads(data.decode("utf-8"), **json_hooks())
     except (UnicodeDecodeError, ValueError) as error:
         raise PolicyFormatError(f"{where} is not valid JSON ({error}): restore or re-create the file") from error
 

@@ -18,11 +18,11 @@ from typing import Any
 from tether_gym._optional import needs_extra
 
 with needs_extra("train", "loading pickle-based SB3 models"):
-    import yaml
     from stable_baselines3.common.base_class import BaseAlgorithm
     from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from ..common.commands import program
+from ..common.reading import read_yaml
 from .format import ALGORITHMS
 from .layout import METADATA_FILE
 
@@ -118,11 +118,12 @@ def normalization_file_of(model_file: Path) -> Path | None:
 
 
 def run_config(model_file: Path) -> dict[str, Any]:
-    """The ``config.yml`` of the run a model file belongs to (read with ``yaml.safe_load``), or {}."""
+    """The ``config.yml`` of the run a model file belongs to (read with
+    :func:`~agents.common.reading.read_yaml`), or {}."""
     for directory in (model_file.parent, model_file.parent.parent):
         config_file = directory / "config.yml"
         if config_file.is_file():
-            config = yaml.safe_load(config_file.read_text(encoding="utf-8"))
+            config = read_yaml(config_file)
             return config if isinstance(config, dict) else {}
     return {}
 

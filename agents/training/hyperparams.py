@@ -22,12 +22,12 @@ from tether_gym._optional import needs_extra
 from ..common.checks import is_count
 from ..common.commands import program
 from ..common.data import HYPERPARAMS_DIR
+from ..common.reading import read_yaml
 from ..controllers.residual import check_residual_on
 from ..policies.codecs import CLASS_KWARGS
 from ..policies.format import ALGORITHMS
 
 with needs_extra("train", "training"):
-    import yaml
     from stable_baselines3.common.vec_env import VecNormalize
 
 __all__ = [
@@ -104,12 +104,7 @@ def read_hyperparameter_entry(file: Path, env_id: str, algo: str) -> tuple[dict[
     ``env_id``), and where it was found, for messages. Raises as :func:`load_hyperparameters`."""
     if not file.is_file():
         raise FileNotFoundError(f"hyperparameter file {file} does not exist")
-    try:
-        table = yaml.safe_load(file.read_bytes().decode("utf-8"))
-    except UnicodeDecodeError as error:
-        raise HyperparameterError(f"{file} is not UTF-8 text ({error})") from error
-    except yaml.YAMLError as error:
-        raise HyperparameterError(f"{file} is not valid YAML: {error}") from error
+    table = read_yaml(file, HyperparameterError)
     if table is None:
         table = {}
     if not isinstance(table, dict):

@@ -26,8 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from tether_gym._optional import needs_extra
-
 from ..common.cli import REFERENCE_FILE
 from ..common.commands import program
 from ..common.files import (
@@ -41,13 +39,11 @@ from ..common.files import (
     make_dirs_below,
     prepare_output_dir,
 )
+from ..common.reading import read_yaml
 from ..policies.codecs import parse_json
 from ..policies.format import POLICY_HOSTS, is_policy_dir, read_metadata, write_manifest
 from ..policies.layout import MANIFEST_FILE, METADATA_FILE, NORMALIZATION_FILE, WEIGHTS_FILE, PolicyFormatError
 from .selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
-
-with needs_extra("train", "shipping models"):
-    import yaml
 
 __all__ = [
     "MULTIAGENT_SUFFIX",
@@ -136,10 +132,7 @@ def _config(run: Path, policy_dir: Path) -> dict[str, Any]:
     """The run's ``config.yml`` (safe YAML), checked for the keys ship reads (``seed``, ``command``)."""
     for path in (policy_dir / "config.yml", run / "config.yml"):
         if path.is_file():
-            try:
-                config = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-            except (yaml.YAMLError, UnicodeDecodeError, RecursionError) as error:
-                raise RunFileError(f"{path} is not valid YAML ({error}): restore it from its run") from error
+            config = read_yaml(path, RunFileError) or {}
             _require(isinstance(config, dict), path, "the file", "a mapping", type(config).__name__)
             seed = config.get("seed")
             _require(

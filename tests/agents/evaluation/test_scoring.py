@@ -218,3 +218,22 @@ def test_the_command_writes_a_file_that_loads(small_benchmark: Path, tmp_path: P
         load_reference(out)
     with pytest.raises(FileNotFoundError, match="python -m agents.scoring BENCHMARK_JSON"):
         load_reference(tmp_path / "absent.json")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        # json kept the last of two entries: a reference could carry two sets of scores for one id.
+        ('{"format": "a", "format": "b"}', "the key 'format' appears twice in one object"),
+        ("[" * 100_000, "nests lists or objects more than 64 deep"),  # was a bare RecursionError
+        ('{"zero": NaN}', "non-finite number NaN is not allowed"),  # json accepts NaN literals
+        (b"\xff\xfe{}", "is not valid JSON"),  # was a bare UnicodeDecodeError
+    ],
+)
+def test_a_malformed_reference_file_is_refused_naming_it(tmp_path: Path, text: str | bytes, message: str) -> None:
+    file = tmp_path / "reference_scores.json"
+    file.write_bytes(text if isinstance(text, bytes) else text.encode())
+    with pytest.raises(ReferenceDataError, match=f"reference_scores.json .*{message}"):
+        load_reference(file)
+    with pytest.raises(ReferenceDataError, match=f"reference_scores.json .*{message}"):
+        write_reference(file, "abc1234", out=tmp_path / "out.json")

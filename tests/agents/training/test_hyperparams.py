@@ -60,6 +60,17 @@ def test_hyperparameter_files_cover_every_id() -> None:
         ("default: [1, 2]", "entry 'default': must be a mapping"),
         ("TetherChain-v0: {n_timesteps: 5}", "no entry for 'TetherTetrahedron-v0' and no 'default'"),
         ("default: {n_timesteps: [1000", "not valid YAML"),
+        # PyYAML kept the last of two entries silently: the run used 5 timesteps, or lost an entry.
+        ("default: {n_timesteps: 1000, n_timesteps: 5}", "the key 'n_timesteps' appears twice in one mapping"),
+        ("default: {n_timesteps: 1000}\ndefault: {n_timesteps: 5}", "the key 'default' appears twice"),
+        ("default: &x {n_timesteps: 1000, policy_kwargs: [*x]}", "an alias inside its own anchor"),
+        (
+            "a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n"
+            + "".join(f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join([f'*{chr(97 + i)}'] * 10)}]\n" for i in range(8))
+            + "default: {n_timesteps: 1000}",
+            "expands to more than 100,000 entries",
+        ),
+        ("default: " + "[" * 3000, "not valid YAML|too deep"),
     ],
 )
 def test_hyperparameter_errors_name_the_key(tmp_path: Path, text: str, message: str) -> None:

@@ -1,0 +1,238 @@
+"""Strict reading of the data files a user gives the agents' commands (JSON and YAML): what a
+file may cost and hold is bounded before it is parsed, and nothing in it is silently dropped.
+
+* JSON (:func:`read_json`, and the hooks :mod:`agents.policies.codecs` parses policy files with):
+  UTF-8, no NaN or Infinity literals, no number that overflows a float, no integer beyond 64
+  bits, no key twice in an object, a bounded size and nesting depth (found before parsing, so a
+  crafted file cannot make the parser recurse);
+* YAML (:func:`read_yaml`: hyperparameters, settings, a run's ``config.yml``): safe (nothing
+  evaluated), no key twice in a mapping, no alias inside its own anchor, a bounded expansion of
+  aliases, a bounded size.
+
+``json`` and PyYAML both keep the last of two entries with the same key without a word, so a
+file could say two things about one entry and be read as the second: here it is refused.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from tether_gym._optional import needs_extra
+
+__all__ = [
+    "MAX_JSON_INTEGER",
+    "MAX_YAML_BYTES",
+    "MAX_YAML_NODES",
+    "json_depth",
+    "json_hooks",
+    "read_json",
+    "read_yaml",
+]
+
+
+# ---------------------------------------------------------------------------------------------
+# JSON
+# ---------------------------------------------------------------------------------------------
+
+
+def _reject_constant(name: str) -> None:
+    raise ValueError(f"non-finite number {name} is not allowed here")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text} overflows a float")
+    return value
+
+
+#: The largest integer magnitude a policy file may hold: 64-bit integers (counts, shapes), which a
+#: float also holds without overflowing (an integer beyond a float's range raised OverflowError
+#: wherever a number was read as a float).
+MAX_JSON_INTEGER = 2**63 - 1
+
+
+def _bounded_int(text: str) -> int:
+    value = int(text)
+    if abs(value) > MAX_JSON_INTEGER:
+        raise ValueError(f"integer {text[:20]}{'...' if len(text) > 20 else ''} does not fit in 64 bits")
+    return value
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object's entries as a dict, refusing a key given twice: ``json`` would keep the last one
+    silently, so a file could say two things about the same entry and be read as one of them."""
+    table: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in table:
+            raise ValueError(f"the key {key[:40]!r} appears twice in one object (each key once)")
+        table[key] = value
+    return table
+
+
+def json_depth(data: bytes, limit: int) -> int:
+    """The nesting depth of the JSON text ``data`` (brackets inside strings not counted), read up
+    to the first point deeper than ``limit`` (then ``limit + 1``): found before parsing, so that a
+    crafted file cannot make the parser recurse."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in data:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:  # quote
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):  # [ {
+            depth += 1
+            if depth > limit:
+                return depth
+            deepest = max(deepest, depth)
+        elif byte in (0x5D, 0x7D):  # ] }
+            depth -= 1
+    return deepest
+
+
+def json_hooks() -> dict[str, Any]:
+    """The keyword arguments of ``json.loads`` for strict JSON: non-finite numbers, integers
+    beyond 64 bits and a key twice in one object raise ``ValueError``."""
+    return {
+        "parse_constant": _reject_constant,
+        "parse_float": _finite_float,
+        "parse_int": _bounded_int,
+        "object_pairs_hook": _unique_keys,
+    }
+
+
+#: The deepest nesting :func:`read_json` reads.
+MAX_READ_JSON_DEPTH = 64
+#: The largest file :func:`read_json` reads, bytes.
+MAX_READ_JSON_BYTES = 64 * 2**20
+
+
+def read_json(file: Path, error: type[Exception], fix: str) -> Any:
+    """The strict JSON data of ``file``, or ``error`` naming the file, the problem and ``fix``."""
+    size = file.stat().st_size
+    if size > MAX_READ_JSON_BYTES:
+        raise error(f"{file} is {size:,} bytes, more than such a file can be ({MAX_READ_JSON_BYTES:,}): {fix}")
+    data = file.read_bytes()
+    if json_depth(data, MAX_READ_JSON_DEPTH) > MAX_READ_JSON_DEPTH:
+        raise error(f"{file} nests lists or objects more than {MAX_READ_JSON_DEPTH} deep: {fix}")
+    try:
+        return json.loads(data.decode("utf-8"), **json_hooks())
+    except (UnicodeDecodeError, ValueError) as problem:
+        raise error(f"{file} is not valid JSON ({problem}): {fix}") from problem
+
+
+# ---------------------------------------------------------------------------------------------
+# YAML
+# ---------------------------------------------------------------------------------------------
+
+#: The largest YAML file read (hyperparameters, settings, a run's config.yml): they are a few KB.
+MAX_YAML_BYTES = 4 * 2**20
+
+
+#: The most nodes a YAML file read may expand to, aliases followed (the project's own files, with
+#: their ``<<: *default`` merges, expand to a few hundred).
+MAX_YAML_NODES = 100_000
+
+
+@functools.cache
+def _strict_loader() -> Any:
+    """The YAML loader of :func:`read_yaml` (PyYAML comes with the train extra: imported here, so
+    that reading JSON needs nothing beyond the core)."""
+    with needs_extra("train", "reading the settings files"):
+        import yaml
+
+    class _StrictLoader(yaml.SafeLoader):
+        """``yaml.SafeLoader`` that refuses a key given twice in one mapping (PyYAML keeps the last
+        one silently, so a file could say two things about one setting and be read as the second), an
+        alias inside its own anchor (a structure that contains itself, which recursed without end
+        wherever it was walked), and documents that expand beyond :data:`MAX_YAML_NODES` nodes with
+        their aliases followed (a few lines of nested aliases expand to billions of entries)."""
+
+        def get_single_node(self) -> Any:
+            node = super().get_single_node()
+            if node is not None:
+                _expanded_size(node, {}, set())
+            return node
+
+        def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+            seen: list[Any] = []
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # '<<: *default' merges another mapping's entries, which may be overridden
+                key = self.construct_object(key_node, deep=True)
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None,
+                        None,
+                        f"the key {str(key)[:40]!r} appears twice in one mapping (each key once)",
+                        key_node.start_mark,
+                    )
+                seen.append(key)
+            return super().construct_mapping(node, deep=deep)
+
+    return _StrictLoader
+
+
+def _expanded_size(node: Any, sizes: dict[int, int], open_nodes: set[int]) -> int:
+    """The number of nodes ``node`` stands for with every alias followed (``sizes`` memoises the
+    shared ones), or a ``ComposerError`` for a node inside itself or a size beyond the limit."""
+    import yaml
+
+    key = id(node)
+    if key in sizes:
+        return sizes[key]
+    if key in open_nodes:
+        raise yaml.composer.ComposerError(None, None, "an alias inside its own anchor", node.start_mark)
+    open_nodes.add(key)
+    size = 1
+    if isinstance(node, yaml.SequenceNode):
+        children = list(node.value)
+    elif isinstance(node, yaml.MappingNode):
+        children = [child for pair in node.value for child in pair]
+    else:
+        children = []
+    for child in children:
+        size += _expanded_size(child, sizes, open_nodes)
+        if size > MAX_YAML_NODES:
+            raise yaml.composer.ComposerError(
+                None,
+                None,
+                f"the document expands to more than {MAX_YAML_NODES:,} entries with its aliases",
+                node.start_mark,
+            )
+    open_nodes.discard(key)
+    sizes[key] = size
+    return size
+
+
+def read_yaml(file: Path, error: type[Exception] = ValueError) -> Any:
+    """The data of the YAML ``file`` (nothing in it evaluated), read strictly: at most
+    :data:`MAX_YAML_BYTES`, UTF-8, no key twice in a mapping, no alias inside its own anchor, at
+    most :data:`MAX_YAML_NODES` entries with aliases followed, no nesting deeper than the parser's
+    recursion allows. Raises ``error`` naming the file and the problem."""
+    size = file.stat().st_size
+    if size > MAX_YAML_BYTES:
+        raise error(
+            f"{file} is {size:,} bytes, more than a settings file can be ({MAX_YAML_BYTES:,}): pass another file"
+        )
+    loader = _strict_loader()
+    import yaml
+
+    try:
+        return yaml.load(file.read_bytes().decode("utf-8"), Loader=loader)  # noqa: S506 - a SafeLoader
+    except UnicodeDecodeError as problem:
+        raise error(f"{file} is not UTF-8 text ({problem})") from problem
+    except yaml.YAMLError as problem:
+        raise error(f"{file} is not valid YAML: {problem}") from problem
+    except RecursionError:
+        raise error(f"{file} nests lists or mappings too deep to read: it is not a settings file") from None
