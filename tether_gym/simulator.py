@@ -642,8 +642,27 @@ class BatchSimulator:
         self.counter_table[idx, k.SUBSTEPS] = 0
         report = self.energy()
         self.cluster_table[idx, k.INITIAL_ENERGY] = report.total[idx]
-        self.cluster_table[idx, k.ENERGY_SCALE] = np.maximum(
-            np.abs(report.total[idx]), report.kinetic[idx] + report.strain[idx] + np.abs(report.frame_potential[idx])
+        self.cluster_table[idx, k.ENERGY_SCALE] = self._guard_books(report, idx)
+
+    def _guard_books(self, report: EnergyReport, idx: np.ndarray) -> np.ndarray:
+        """(k,) the runaway guard's energy scale of clusters ``idx`` at their current state, J,
+        as the kernel measures it (:func:`tether_gym._kernels._energy_runaway`): the largest of
+        internal kinetic + strain + |frame potential|, |work|, dissipated, and
+        ``DRIFT_ROUND_OFF`` times the drift energy; the kinetic energy of the centre of mass is
+        left out (a uniform drift carries no integration error)."""
+        masses = self.masses[idx]
+        velocities = self.velocities_[idx]
+        total_mass = masses.sum(axis=1)
+        centre = np.einsum("bn,bnd->bd", masses, velocities) / total_mass[:, None]
+        drift = 0.5 * total_mass * (centre**2).sum(axis=1)
+        internal = 0.5 * np.einsum("bn,bnd->b", masses, (velocities - centre[:, None, :]) ** 2)
+        return np.maximum.reduce(
+            [
+                internal + report.strain[idx] + np.abs(report.frame_potential[idx]),
+                np.abs(report.work[idx]),
+                report.dissipated[idx],
+                _kernels.DRIFT_ROUND_OFF * drift,
+            ]
         )
 
     # ------------------------------------------------------------------ snapshots
@@ -754,14 +773,7 @@ class BatchSimulator:
                     "BatchSimulator.snapshot, or states whose arrays agree as a snapshot's do"
                 )
         report = self.energy()
-        books = np.maximum.reduce(
-            [
-                np.abs(report.initial[rows]),
-                report.kinetic[rows] + report.strain[rows] + np.abs(report.frame_potential[rows]),
-                np.abs(report.work[rows]),
-                report.dissipated[rows],
-            ]
-        )
+        books = self._guard_books(report, rows)
         scale = self._energy_scale[rows]
         books_text = (
             "state.arrays['positions'], state.arrays['velocities'], state.arrays['initial_energy'], "
