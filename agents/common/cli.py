@@ -22,6 +22,7 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
+from .checks import MAX_TRAINING_SEED
 from .commands import PACKAGE, description, program
 from .data import PACKAGE_DIR
 
@@ -156,7 +157,10 @@ def _training_arguments(parser: argparse.ArgumentParser, algo: str) -> None:
     """The options agents.train and agents.train_rllib share."""
     add_env_argument(parser)
     parser.add_argument(
-        "--seed", type=int_at_least(0), default=0, help="seed of the model, the envs and the run directory (default 0)"
+        "--seed",
+        type=int_at_least(0, MAX_TRAINING_SEED),
+        default=0,
+        help=f"seed of the model, the envs and the run directory, 0..{MAX_TRAINING_SEED} (default 0)",
     )
     parser.add_argument(
         "--multiagent",

@@ -11,7 +11,7 @@ from typing import Any
 
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from ..common.checks import check_int
+from ..common.checks import MAX_TRAINING_SEED, check_int
 from ..policies.format import ALGORITHMS
 
 __all__ = ["TrainConfig"]
@@ -86,7 +86,8 @@ class TrainConfig:
         # Two evaluation episodes at least: each evaluation's paired difference has a t interval.
         minimums = {"seed": 0, "eval_freq": 1, "eval_episodes": 2, "checkpoint_freq": 1, "verbose": 0}
         for name, minimum in minimums.items():
-            object.__setattr__(self, name, check_int(name, getattr(self, name), minimum))
+            maximum = MAX_TRAINING_SEED if name == "seed" else None
+            object.__setattr__(self, name, check_int(name, getattr(self, name), minimum, maximum))
         for name in ("timesteps", "num_envs"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, check_int(name, getattr(self, name), 1))

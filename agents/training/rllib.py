@@ -33,7 +33,7 @@ from tether_gym._optional import needs_extra
 from tether_gym.envs.arguments import MAX_NUM_ENVS
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from ..common.checks import check_int, is_count
+from ..common.checks import MAX_TRAINING_SEED, check_int, is_count
 from ..common.cli import RLLIB_ALGO as ALGO  # the run directory's prefix and config.yml's algo
 from ..common.commands import program
 from ..common.data import HYPERPARAMS_DIR
@@ -625,7 +625,8 @@ class RLlibConfig:
         ):
             if name not in optional or getattr(self, name) is not None:
                 # Stored as a plain int (a numpy integer passes the check), so that config.yml can hold it.
-                object.__setattr__(self, name, check_int(name, getattr(self, name), minimum))
+                maximum = MAX_TRAINING_SEED if name == "seed" else None
+                object.__setattr__(self, name, check_int(name, getattr(self, name), minimum, maximum))
         if self.num_cpus is not None and self.address is not None:
             raise ValueError(
                 "num_cpus sets the size of a local Ray instance; with --address the cluster's nodes set it"

@@ -49,7 +49,7 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
             lambda: rollout(make_controller("passive", gym.make_vec(ENV, num_envs=1)), ENV, [1.5]),
             r"seeds must be non-negative integers; got \[1\.5\]",
         ),
-        (lambda: train(TrainConfig("ppo", ENV, seed=-1, out=out)), "seed must be an integer >= 0"),
+        (lambda: train(TrainConfig("ppo", ENV, seed=-1, out=out)), "seed must be an integer in 0..2147483647"),
         (lambda: train(TrainConfig("ppo", ENV, eval_episodes=1, out=out)), "eval_episodes must be an integer >= 2"),
         (lambda: train(TrainConfig("ppo", ENV, timesteps=0, out=out)), "timesteps must be an integer >= 1"),
         (lambda: train(TrainConfig("a2c", ENV, out=out)), "unknown algorithm 'a2c'"),

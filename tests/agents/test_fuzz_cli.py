@@ -26,6 +26,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from agents.common import commands
+from agents.common.checks import MAX_TRAINING_SEED
 
 #: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
 pytestmark = pytest.mark.slow
@@ -155,6 +156,19 @@ def test_a_bad_count_names_its_option(command: str) -> None:
     assert option in stderr.getvalue()
 
 
+@pytest.mark.parametrize("command", ["train", "train_rllib"])
+def test_a_training_seed_beyond_numpy_s_seeding_is_refused_by_the_parser(command: str) -> None:
+    """SB3 and RLlib seed numpy's legacy generator, which takes seeds below 2**32: a larger --seed
+    was accepted, made the run directory, and failed there in numpy's words without naming --seed."""
+    parser = PARSERS[command]()
+    assert parser.parse_args(["--seed", str(MAX_TRAINING_SEED)]).seed == MAX_TRAINING_SEED
+    for seed in (MAX_TRAINING_SEED + 1, 2**32, 2**64):
+        stderr = io.StringIO()
+        with contextlib.redirect_stderr(stderr), pytest.raises(SystemExit):
+            parser.parse_args(["--seed", str(seed)])
+        assert "--seed" in stderr.getvalue() and f"must be at most {MAX_TRAINING_SEED}" in stderr.getvalue()
+
+
 def test_every_command_is_fuzzed() -> None:
     """A command added to agents.common.commands is fuzzed from the day it lands: it needs a
     parser, an ``ERRORS`` tuple and an entry in :data:`WORK` naming its work function."""
@@ -173,6 +187,8 @@ plausible_values = st.one_of(
     st.integers(0, 10**7).map(str),
     st.sampled_from(["nan", "inf", "-inf", "0.5", "1.5", "1e6", "mcp", "lqr", "mpc", "passive", "TetherChain-v0"]),
     st.sampled_from(["out", "out/sub", "/dev/null", "policy_dir", "benchmark.json", "."]),
+    # Seeds at the edge of what numpy's legacy generator (SB3's and RLlib's seeding) takes.
+    st.sampled_from(["2147483647", "2147483648", "4294967295", "4294967296", str(2**64)]),
 )
 
 

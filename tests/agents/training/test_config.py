@@ -16,8 +16,10 @@ from agents.training.config import TrainConfig
     [
         ({"algo": "a2c"}, "unknown algorithm 'a2c'; choose one of"),
         ({"env_id": "Nope-v0"}, "unknown env id 'Nope-v0'; tether-gym ids are"),
-        ({"seed": -1}, "seed must be an integer >= 0; got -1"),
-        ({"seed": True}, "seed must be an integer >= 0; got True"),
+        ({"seed": -1}, "seed must be an integer in 0..2147483647; got -1"),
+        ({"seed": True}, "seed must be an integer in 0..2147483647; got True"),
+        # numpy's legacy seeding (SB3's) takes seeds below 2**32: this failed after the run directory was made.
+        ({"seed": 2**32}, "seed must be an integer in 0..2147483647; got 4294967296"),
         ({"eval_freq": 0}, "eval_freq must be an integer >= 1; got 0"),
         ({"eval_episodes": 1.5}, "eval_episodes must be an integer >= 2; got 1.5"),
         ({"eval_episodes": 1}, "eval_episodes must be an integer >= 2; got 1"),

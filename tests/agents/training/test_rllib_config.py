@@ -20,8 +20,9 @@ ENV_ID = "TetherTetrahedron-v0"
     ("arguments", "message"),
     [
         ({"env_id": "TetherNothing-v0"}, "unknown env id 'TetherNothing-v0'"),
-        ({"seed": -1}, "seed must be an integer >= 0; got -1"),
-        ({"seed": None}, "seed must be an integer >= 0; got None"),
+        ({"seed": -1}, "seed must be an integer in 0..2147483647; got -1"),
+        ({"seed": None}, "seed must be an integer in 0..2147483647; got None"),
+        ({"seed": 2**32}, "seed must be an integer in 0..2147483647; got 4294967296"),
         ({"num_env_runners": -1}, "num_env_runners must be an integer >= 0"),
         ({"eval_freq": 0}, "eval_freq must be an integer >= 1"),
         ({"eval_episodes": 2.0}, "eval_episodes must be an integer >= 2; got 2.0"),
