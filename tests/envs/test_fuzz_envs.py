@@ -605,3 +605,45 @@ def test_the_registered_ids_pass_their_own_checks(env_id: str) -> None:
     spec = gym.spec(env_id)
     cluster = tg.make_cluster(spec.kwargs["preset"])
     TaskConfig(**{k: v for k, v in spec.kwargs.items() if k != "preset"}).validate(cluster)
+
+
+# ---------------------------------------------------------------------- task snapshots
+@fuzz(150)
+@given(
+    env_id=st.sampled_from(SMALL_IDS),
+    data=st.data(),
+    value=st.one_of(special, st.integers(-(2**40), 2**40)),
+)
+def test_task_restore_refuses_out_of_range_arrays_and_changes_nothing(
+    env_id: str, data: st.DataObject, value: Any
+) -> None:
+    import dataclasses
+
+    from tether_gym.envs.task import TASK_STATE_FIELDS
+
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    task = env.unwrapped.task  # type: ignore[attr-defined]
+    state = task.snapshot()
+    task.restore(state)  # every real snapshot restores
+    name = data.draw(st.sampled_from([n for n in TASK_STATE_FIELDS if state.arrays[n].size]))
+    poisoned = state.arrays[name].copy()
+    try:
+        poisoned.flat[0] = value
+    except (TypeError, ValueError, OverflowError):
+        return
+    arrays = dict(state.arrays)
+    arrays[name] = poisoned
+    env.step(np.full(env.action_space.shape, 0.5, dtype=np.float32))
+    before = env_state(env)
+    try:
+        task.restore(dataclasses.replace(state, arrays=arrays))
+    except ValueError as error:
+        assert f"state.arrays[{name!r}]" in str(error)
+        assert_unchanged(before, env_state(env))
+        return
+    # Accepted: then it was a value the task can hold, and the next step is finite.
+    observation, reward, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    assert np.isfinite(observation).all() and math.isfinite(reward)
+    assert info["propellant_used"] >= 0 and info["simulator_status"] in (0, 1, 2, 3)

@@ -78,7 +78,7 @@ from tether_gym.envs.contract import (
     Scalar,
 )
 from tether_gym.envs.disturbances import Disturbances
-from tether_gym.limits import MAX_COORDINATE, MAX_SPEED, short_repr
+from tether_gym.limits import MAX_COORDINATE, MAX_FORCE, MAX_SPEED, short_repr
 from tether_gym.simulator import (
     PARALLEL_MIN_BATCH,
     AdvanceStats,
@@ -225,6 +225,29 @@ TASK_STATE_FIELDS = (
     "stats.status",
     "stats.peak_tension",
 )
+
+
+#: What :meth:`DampingTask.restore` accepts in the task arrays beyond their dtype and shape:
+#: every float array must be finite, but for the fields of :data:`_TASK_INFINITE` (where +inf
+#: means "none": no failing thruster, no sub-step taken); the fields here must also lie in
+#: [lowest, highest].
+_TASK_RANGES: dict[str, tuple[float, float]] = {
+    "bias": (-MAX_FORCE, MAX_FORCE),
+    "nominal": (-MAX_COORDINATE, MAX_COORDINATE),
+    "nominal_strain_energy": (0.0, math.inf),
+    "force": (-MAX_FORCE, MAX_FORCE),
+    "thrust": (-MAX_FORCE, MAX_FORCE),
+    "impulse": (0.0, math.inf),
+    "propellant": (0.0, math.inf),
+    "disturbance": (-MAX_FORCE, MAX_FORCE),
+    "failure_time": (0.0, math.inf),
+    "end_reason": (0, len(END_REASONS) - 1),
+    "stats.substeps": (0, math.inf),
+    "stats.step_min": (0.0, math.inf),
+    "stats.step_max": (0.0, math.inf),
+    "stats.peak_tension": (0.0, math.inf),
+}
+_TASK_INFINITE = frozenset({"failure_time", "stats.step_min"})
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -546,7 +569,9 @@ class DampingTask:
     def _check_task_arrays(self, state: TaskState) -> None:
         """Refuse, naming the array, task arrays of ``state`` that this task could not hold: not
         exactly the names of :data:`TASK_STATE_FIELDS`, not numpy arrays of this task's dtypes,
-        not of shape (k, ...) with this task's trailing axes, or holding NaN."""
+        not of shape (k, ...) with this task's trailing axes, holding NaN or an infinity (but +inf
+        where it means none, :data:`_TASK_INFINITE`), or values outside their ranges
+        (:data:`_TASK_RANGES`, the status codes, the thruster indices)."""
         arrays = state.arrays
         if not isinstance(arrays, dict) or set(arrays) != set(TASK_STATE_FIELDS):
             given = sorted(arrays) if isinstance(arrays, dict) else type(arrays).__name__
@@ -559,8 +584,33 @@ class DampingTask:
                 raise TypeError(f"state.arrays[{name!r}] must be a numpy array of dtype {own.dtype}; got {got}")
             if value.shape != (k, *own.shape[1:]):
                 raise ValueError(f"state.arrays[{name!r}] must have shape {(k, *own.shape[1:])}; got {value.shape}")
-            if value.dtype.kind == "f" and np.isnan(value).any():
-                raise ValueError(f"state.arrays[{name!r}] holds NaN")
+            if value.dtype.kind == "f":
+                finite = np.isfinite(value) | ((value == math.inf) & (name in _TASK_INFINITE))
+                if not finite.all():
+                    raise ValueError(
+                        f"state.arrays[{name!r}] must be finite"
+                        + (" (or +inf for none)" if name in _TASK_INFINITE else "")
+                        + f"; it holds {short_repr(value[~finite][:3].tolist())}"
+                    )
+            if name == "stats.status":
+                if not np.isin(value, _kernels.STATUS_CODES).all():
+                    raise ValueError(
+                        f"state.arrays['stats.status'] must hold status codes {list(_kernels.STATUS_CODES)}; "
+                        f"got {short_repr(value.tolist())}"
+                    )
+                continue
+            if name == "failing_thruster":
+                low, high = 0.0, float(max(self.disturbances.thrusters.size - 1, 0))
+            elif name in _TASK_RANGES:
+                low, high = _TASK_RANGES[name]
+            else:
+                continue
+            outside = (value < low) | (value > high)
+            if outside.any():
+                raise ValueError(
+                    f"state.arrays[{name!r}] must lie in [{low:g}, {high:g}]; it holds "
+                    f"{short_repr(value[outside][:3].tolist())}"
+                )
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(
