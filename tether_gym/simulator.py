@@ -247,6 +247,16 @@ def checked_indices(name: str, indices: object, count: int) -> np.ndarray:
     return idx.astype(np.int64)
 
 
+def check_distinct(name: str, idx: np.ndarray) -> None:
+    """Refuse (``ValueError`` naming ``name``) cluster indices ``idx`` that name a cluster twice:
+    a reset or restore writes one state per cluster, and a repeat would silently keep the last."""
+    if np.unique(idx).size != idx.size:
+        raise ValueError(
+            f"{name} must name each cluster at most once (two states cannot go into one cluster); "
+            f"got {short_repr(idx.tolist())}"
+        )
+
+
 def read_only_rows(arrays: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
     """Read-only copies of rows ``rows`` (fancy indexing, so repeats are allowed) of every array."""
     selected = {}
@@ -607,12 +617,13 @@ class BatchSimulator:
         Args:
             positions: (k, n, 3) node positions in the cluster's frame, m, for the k selected clusters.
             velocities: (k, n, 3) node velocities relative to that frame, m/s (default: at rest).
-            indices: the k clusters to reset (default: all B, in order).
+            indices: the k clusters to reset (default: all B, in order), each at most once.
 
         Every cable is intact again.  The next :meth:`advance` of these clusters starts with
         uniformly accelerated motion.
         """
         idx = self.cluster_indices(indices)
+        check_distinct("indices", idx)
         shape = (idx.size, self.num_nodes, 3)
         x0 = _check_array("positions", positions, shape, "m", MAX_COORDINATE)
         v0 = np.zeros(shape) if velocities is None else _check_array("velocities", velocities, shape, "m/s", MAX_SPEED)
@@ -699,11 +710,7 @@ class BatchSimulator:
             )
         if idx.size and (idx.max() >= self.num_clusters):
             raise ValueError(f"indices must be in 0..{self.num_clusters - 1}; got {idx.tolist()}")
-        if np.unique(idx).size != idx.size:
-            raise ValueError(
-                f"indices must name each cluster at most once (two states cannot go into one cluster); "
-                f"got {short_repr(idx.tolist())}"
-            )
+        check_distinct("indices", idx)
         # Whether the arrays agree with each other and with the clusters' parameters is measured
         # on the restored rows themselves, by the kernels that made them; a refusal puts the rows
         # (and their cluster objects) back as they were.

@@ -622,3 +622,21 @@ def test_a_cluster_drifting_at_any_speed_is_not_flagged(preset: str, speed: floa
     for _ in range(10):
         batch.advance(0.2)
     assert batch.status[0] == 0
+
+
+@FUZZ
+@given(rows=st.lists(st.integers(0, 2), min_size=1, max_size=4), shift=st.floats(1e-3, 0.1))
+def test_reset_writes_one_state_per_cluster(rows: list[int], shift: float) -> None:
+    cluster = tg.make_cluster("triangle")
+    batch = tg.BatchSimulator(cluster, 3)
+    positions = cluster.positions + shift * np.arange(len(rows))[:, None, None]
+    before = batch.node_table.tobytes()
+    try:
+        batch.reset(positions, indices=rows)
+    except ValueError as error:
+        assert len(set(rows)) < len(rows)  # refused only for a repeat
+        assert_names(error, "indices")
+        assert batch.node_table.tobytes() == before
+        return
+    assert len(set(rows)) == len(rows)
+    assert bits(batch.positions[rows]) == bits(positions)
