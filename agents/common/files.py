@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import glob
 import os
 import shutil
 import tempfile
@@ -356,6 +357,7 @@ def atomic_directory(target: str | Path, ours: Iterable[str] = (), others: str =
                 f"{target} holds {', '.join(foreign)}, which this command does not write: move "
                 f"{'them' if len(foreign) > 1 else 'it'} away first (files a command did not write are never deleted)"
             )
+    _recover_from_a_killed_swap(target)
     staging = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.new-"))
     aside: Path | None = None
     try:
@@ -382,6 +384,25 @@ def atomic_directory(target: str | Path, ours: Iterable[str] = (), others: str =
         raise
     if aside is not None:
         shutil.rmtree(aside, ignore_errors=True)
+
+
+def _recover_from_a_killed_swap(target: Path) -> None:
+    """Deal with what a save killed outright (SIGKILL, power loss: no ``except`` ran) between its
+    two renames left: ``target`` missing and its old contents hidden in ``.<name>.old-*`` beside it
+    (refused, naming both and the fix: a new save would bury them); or, killed after the new
+    directory landed, a superseded ``.old-*`` copy (removed: what it held that the command did not
+    write was carried into the new directory before the swap)."""
+    leftovers = sorted(target.parent.glob(f".{glob.escape(target.name)}.old-*"))
+    if not leftovers:
+        return
+    if not target.exists():
+        raise OutputError(
+            f"{target} is missing, and {leftovers[0]} holds what it held before a save was killed between its "
+            f"two renames: move it back (mv {leftovers[0]} {target}) or remove it, then run again"
+        )
+    for leftover in leftovers:
+        if leftover.is_dir() and not leftover.is_symlink():
+            shutil.rmtree(leftover, ignore_errors=True)
 
 
 def _carry(source: Path, destination: Path) -> None:

@@ -228,3 +228,50 @@ def test_a_directory_that_cannot_be_opened_is_refused_by_name(tmp_path: Path, mo
     monkeypatch.setattr(os, "open", unreadable)
     with pytest.raises(OutputError, match="--out .*cannot be opened to claim it .*Permission denied"):
         claim_output_dir(tmp_path)
+
+
+KILLED_BETWEEN_THE_RENAMES = """
+import os, sys
+from pathlib import Path
+from agents.common.files import atomic_directory
+best = Path(sys.argv[1])
+real_replace = os.replace
+def replace(source, destination):
+    if Path(source).name.startswith(".best.new-"):
+        os._exit(9)  # killed outright: no except, no finally runs
+    real_replace(source, destination)
+os.replace = replace
+with atomic_directory(best) as staging:
+    (staging / "policy.json").write_text("new")
+"""
+
+
+def test_a_save_killed_between_the_renames_is_refused_next_time_naming_where_the_old_one_is(tmp_path: Path) -> None:
+    """Killed outright between its two renames, a save left best/ missing and its old contents
+    hidden in .best.old-*; the next save made a new best/ and buried them. It is refused now,
+    naming both and the fix, and once the old directory is back a save works and leaves no
+    leftover."""
+    best = tmp_path / "best"
+    best.mkdir()
+    (best / "policy.json").write_text("old")
+    (best / "notes.txt").write_text("the user's")
+    root = Path(__file__).resolve().parents[3]
+    killed = subprocess.run(
+        [sys.executable, "-c", KILLED_BETWEEN_THE_RENAMES, str(best)], cwd=root, capture_output=True, check=False
+    )
+    assert killed.returncode == 9, killed.stderr
+    assert not best.exists()
+    (aside,) = tmp_path.glob(".best.old-*")
+    with pytest.raises(OutputError, match=rf"best is missing, and .*{aside.name} holds what it held .*mv "):
+        with atomic_directory(best) as staging:
+            (staging / "policy.json").write_text("newer")
+    assert not best.exists() and aside.is_dir()  # nothing written, nothing removed
+    os.replace(aside, best)  # the fix the message gives
+    with atomic_directory(best) as staging:
+        (staging / "policy.json").write_text("newer")
+    assert (best / "policy.json").read_text() == "newer" and (best / "notes.txt").read_text() == "the user's"
+    # Killed after the new directory landed: the superseded copy beside it is removed by the next save.
+    (tmp_path / ".best.old-superseded").mkdir()
+    with atomic_directory(best) as staging:
+        (staging / "policy.json").write_text("newest")
+    assert not list(tmp_path.glob(".best.old-*"))
