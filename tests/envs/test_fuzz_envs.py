@@ -647,3 +647,22 @@ def test_task_restore_refuses_out_of_range_arrays_and_changes_nothing(
     observation, reward, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     assert np.isfinite(observation).all() and math.isfinite(reward)
     assert info["propellant_used"] >= 0 and info["simulator_status"] in (0, 1, 2, 3)
+
+
+@fuzz(60)
+@given(rows=st.lists(st.integers(-1, 3), min_size=1, max_size=4))
+def test_task_reset_refuses_bad_rows_before_any_generator_draws(rows: list[int]) -> None:
+    venv = gym.make_vec("TetherTetrahedron-v0", num_envs=3)
+    venv.reset(seed=0)
+    task = venv.unwrapped.task  # type: ignore[attr-defined]
+    rngs = [np.random.default_rng(k) for k in range(len(rows))]
+    before = env_state(venv), [rng.bit_generator.state for rng in rngs]
+    try:
+        task.reset(rngs, np.asarray(rows))
+    except ValueError as error:
+        assert "indices" in str(error)
+        assert len(set(rows)) < len(rows) or not all(0 <= r < 3 for r in rows)
+        assert_unchanged(before[0], env_state(venv))
+        assert [rng.bit_generator.state for rng in rngs] == before[1]
+        return
+    assert len(set(rows)) == len(rows) and all(0 <= r < 3 for r in rows)

@@ -85,6 +85,7 @@ from tether_gym.simulator import (
     BatchSimulator,
     SimulatorState,
     TableColumns,
+    check_distinct,
     checked_indices,
     read_only_rows,
 )
@@ -724,7 +725,9 @@ class DampingTask:
         or use the given (k, n, 3) positions/velocities; then draw its episode's disturbances and
         faults (if configured).  Each cluster draws only from its own generator, so a cluster
         reset in a batch matches the same cluster reset alone.  Exact states must come from
-        :meth:`check_reset_state` (the envs call it before they reseed anything)."""
+        :meth:`check_reset_state` (the envs call it before they reseed anything).  Indices
+        outside the batch or naming a cluster twice are refused before any generator draws."""
+        check_distinct("indices", self.sim.cluster_indices(indices))
         for rng, b in zip(rngs, indices, strict=True):
             if self.config.randomize:
                 self._set_nominal(int(b), self.config.initial_state.randomised(self.cluster, rng, self.difficulty))
