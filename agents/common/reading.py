@@ -18,6 +18,8 @@ from __future__ import annotations
 import functools
 import json
 import math
+import os
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +27,7 @@ from tether_gym._optional import needs_extra
 
 __all__ = [
     "MAX_JSON_INTEGER",
+    "read_bounded",
     "MAX_YAML_BYTES",
     "MAX_YAML_NODES",
     "json_depth",
@@ -32,6 +35,26 @@ __all__ = [
     "read_json",
     "read_yaml",
 ]
+
+
+def read_bounded(file: Path, limit: int, error: type[Exception], fix: str) -> bytes:
+    """The bytes of the regular file ``file``, or ``error`` naming it, the problem and ``fix``
+    when it is not a regular file (a FIFO, which would block the read, a device such as
+    /dev/zero, which never ends, a directory) or holds more than ``limit`` bytes. At most
+    ``limit + 1`` bytes are read, whatever the file's size said a moment before: a file that grows
+    (or is swapped) between a check and the read costs no more."""
+    try:
+        descriptor = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as problem:
+        raise error(f"{file} cannot be read ({problem.strerror}): {fix}") from problem
+    if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+        os.close(descriptor)
+        raise error(f"{file} is not a regular file (a FIFO, a device or a directory): {fix}")
+    with os.fdopen(descriptor, "rb") as stream:
+        data = stream.read(limit + 1)
+    if len(data) > limit:
+        raise error(f"{file} holds more than {limit:,} bytes, more than such a file can be: {fix}")
+    return data
 
 
 # ---------------------------------------------------------------------------------------------
@@ -119,10 +142,7 @@ MAX_READ_JSON_BYTES = 64 * 2**20
 
 def read_json(file: Path, error: type[Exception], fix: str) -> Any:
     """The strict JSON data of ``file``, or ``error`` naming the file, the problem and ``fix``."""
-    size = file.stat().st_size
-    if size > MAX_READ_JSON_BYTES:
-        raise error(f"{file} is {size:,} bytes, more than such a file can be ({MAX_READ_JSON_BYTES:,}): {fix}")
-    data = file.read_bytes()
+    data = read_bounded(file, MAX_READ_JSON_BYTES, error, fix)
     if json_depth(data, MAX_READ_JSON_DEPTH) > MAX_READ_JSON_DEPTH:
         raise error(f"{file} nests lists or objects more than {MAX_READ_JSON_DEPTH} deep: {fix}")
     try:
@@ -220,16 +240,12 @@ def read_yaml(file: Path, error: type[Exception] = ValueError) -> Any:
     :data:`MAX_YAML_BYTES`, UTF-8, no key twice in a mapping, no alias inside its own anchor, at
     most :data:`MAX_YAML_NODES` entries with aliases followed, no nesting deeper than the parser's
     recursion allows. Raises ``error`` naming the file and the problem."""
-    size = file.stat().st_size
-    if size > MAX_YAML_BYTES:
-        raise error(
-            f"{file} is {size:,} bytes, more than a settings file can be ({MAX_YAML_BYTES:,}): pass another file"
-        )
+    data = read_bounded(file, MAX_YAML_BYTES, error, "pass another file")
     loader = _strict_loader()
     import yaml
 
     try:
-        return yaml.load(file.read_bytes().decode("utf-8"), Loader=loader)  # noqa: S506 - a SafeLoader
+        return yaml.load(data.decode("utf-8"), Loader=loader)  # noqa: S506 - a SafeLoader
     except UnicodeDecodeError as problem:
         raise error(f"{file} is not UTF-8 text ({problem})") from problem
     except yaml.YAMLError as problem:

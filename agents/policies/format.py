@@ -96,6 +96,7 @@ from tether_gym._optional import needs_extra, require
 
 from ..common.commands import program
 from ..common.files import atomic_write_bytes, atomic_write_text
+from ..common.reading import read_bounded
 from ..common.versions import POLICY_PACKAGES, package_versions
 from .codecs import (
     MAX_JSON_BYTES,
@@ -159,6 +160,8 @@ ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3
 #: Training algorithms that are not SB3's, and the SB3 algorithm whose policy classes store their
 #: policies: ARS (:mod:`agents.ars`) trains the linear actor of PPO's ``ActorCriticPolicy``.
 POLICY_HOSTS: dict[str, type[BaseAlgorithm]] = {"ars": PPO}
+#: The largest manifest read, bytes: one line of 67 bytes and a name per file of the directory.
+MAX_MANIFEST_BYTES = 64 * 2**10
 _SHA256_LINE = re.compile(r"^([0-9a-f]{64})  ([^/\\\x00]+)$")
 
 
@@ -238,8 +241,9 @@ def read_manifest(directory: Path) -> dict[str, str] | None:
     if not path.is_file():
         return None
     entries = {}
+    data = read_bounded(path, MAX_MANIFEST_BYTES, ChecksumError, "restore it")
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = data.decode("utf-8")
     except UnicodeDecodeError as error:
         raise ChecksumError(f"{path} is not UTF-8 text: restore it") from error
     for number, line in enumerate(text.splitlines(), start=1):
@@ -289,7 +293,7 @@ class _VerifiedReader:
                 f"{path} is {size:,} bytes, more than a policy file can be ({limit:,} for a "
                 f"{'JSON' if name.endswith('.json') else 'safetensors'} file): restore or re-create it"
             )
-        data = path.read_bytes()
+        data = read_bounded(path, limit, PolicyFormatError, "restore or re-create it")
         if self.manifest is not None:
             if name not in self.manifest:
                 raise ChecksumError(f"{path} is not listed in {self.directory / MANIFEST_FILE}: the manifest is stale")

@@ -39,8 +39,8 @@ from ..common.files import (
     make_dirs_below,
     prepare_output_dir,
 )
-from ..common.reading import read_yaml
-from ..policies.codecs import parse_json
+from ..common.reading import read_bounded, read_yaml
+from ..policies.codecs import MAX_JSON_BYTES, parse_json
 from ..policies.format import POLICY_HOSTS, is_policy_dir, read_metadata, write_manifest
 from ..policies.layout import MANIFEST_FILE, METADATA_FILE, NORMALIZATION_FILE, WEIGHTS_FILE, PolicyFormatError
 from .selection import EVALUATIONS_FILE, baseline_returns, episode_returns, evaluation_seeds
@@ -115,7 +115,7 @@ def _training_log(run: Path, policy_dir: Path) -> dict[str, Any] | None:
     for path in (policy_dir / EVALUATIONS_FILE, run / "best" / EVALUATIONS_FILE):
         if path.is_file():
             try:
-                log = parse_json(path.read_bytes(), path)
+                log = parse_json(read_bounded(path, MAX_JSON_BYTES, RunFileError, "restore it from its run"), path)
             except PolicyFormatError as error:
                 raise RunFileError(str(error)) from error
             _require(isinstance(log, dict), path, "the file", "a JSON object", type(log).__name__)
@@ -171,7 +171,7 @@ def read_runs_table(out: Path) -> list[dict[str, Any]]:
     if not table.is_file():
         return []
     try:
-        data = parse_json(table.read_bytes(), table)
+        data = parse_json(read_bounded(table, MAX_JSON_BYTES, RunFileError, "restore it from git"), table)
     except PolicyFormatError as error:
         raise RunFileError(f"{error} (or move it away: ship then starts a new table)") from error
     _require(isinstance(data, dict) and isinstance(data.get("runs"), list), table, "runs", "a list", data)

@@ -122,3 +122,28 @@ def test_nested_aliases_are_refused_before_they_expand(depth: int, width: int) -
                 read_yaml(file, FileError)
         else:
             assert len(json.loads(json.dumps(read_yaml(file, FileError)))) == depth + 1
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "directory", "large"])
+def test_a_file_that_is_not_a_bounded_regular_file_is_refused_before_it_is_read(tmp_path: Path, kind: str) -> None:
+    """A FIFO blocked the read, /dev/zero never ended, a large file was read whole before its size
+    was checked: read_bounded refuses each after reading at most limit + 1 bytes."""
+    import os
+
+    from agents.common.reading import read_bounded
+
+    file = tmp_path / "settings.yml"
+    if kind == "fifo":
+        os.mkfifo(file)
+    elif kind == "device":
+        file = Path("/dev/zero")
+    elif kind == "directory":
+        file.mkdir()
+    else:
+        with open(file, "wb") as stream:
+            stream.truncate(2**30)  # sparse: 1 GiB that costs no disk
+    began = time.perf_counter()
+    message = "is not a regular file" if kind != "large" else "holds more than 1,024 bytes"
+    with pytest.raises(FileError, match=f"{file.name} {message}.*: restore it"):
+        read_bounded(file, 1024, FileError, "restore it")
+    assert time.perf_counter() - began < 1.0

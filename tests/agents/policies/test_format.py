@@ -135,6 +135,19 @@ def test_a_file_listed_twice_in_the_manifest_is_refused(sb3_model: tuple[PPO, ob
     assert line in manifest.read_text()
 
 
+def test_an_oversized_manifest_is_refused_before_it_is_read(sb3_model: tuple[PPO, object], tmp_path: Path) -> None:
+    """The manifest was the one policy file read whole whatever its size (a sparse 256 MB
+    MANIFEST.sha256 cost 256 MB and seconds before its first line was checked)."""
+    model, venv = sb3_model
+    directory = save_policy(tmp_path / "policy", model, venv, ENV)
+    with open(directory / "MANIFEST.sha256", "ab") as stream:
+        stream.truncate(256 * 2**20)
+    began = time.perf_counter()
+    with pytest.raises(ChecksumError, match=r"MANIFEST.sha256 holds more than 65,536 bytes.*: restore it"):
+        load_policy(directory)
+    assert time.perf_counter() - began < 1.0
+
+
 def test_zero_epsilon_with_a_zero_variance_is_refused(sb3_model: tuple[PPO, object], tmp_path: Path) -> None:
     """(x - mean) / sqrt(var + epsilon) with both zero is NaN for every observation."""
     model, venv = sb3_model
