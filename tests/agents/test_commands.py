@@ -24,11 +24,11 @@ from agents.training.sb3 import train
 from tests.agents.helpers import ENV
 
 
-def _quietly_on_another_id(model: Path) -> None:
-    """make_controller(model) on ENV with the other-id opt-in, its warning expected and silenced."""
+def _quietly_on_another_id(model: Path, env_id: str = ENV) -> None:
+    """make_controller(model) on ``env_id`` with the other-id opt-in, its warning expected and silenced."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OtherIdWarning)
-        make_controller(str(model), gym.make_vec(ENV, num_envs=1), allow_other_id=True)
+        make_controller(str(model), gym.make_vec(env_id, num_envs=1), allow_other_id=True)
 
 
 def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -62,7 +62,12 @@ def test_bad_arguments_name_the_argument(tmp_path: Path, capsys: pytest.CaptureF
         ),
         (
             lambda: _quietly_on_another_id(shipped_models("TetherSpinningTriangle-v0")["ppo"]),
-            "takes observations of shape .21,., but TetherTetrahedron-v0 gives .30,.",
+            r"acts with 9 actions \(policy.json: action_space.shape \[9\]\), but TetherTetrahedron-v0 takes 12",
+        ),
+        (
+            # The same 9 actions, one observation fewer: the observation check names the sizes.
+            lambda: _quietly_on_another_id(shipped_models("TetherRadialChain-v0")["ppo"], "TetherTriangle-v0"),
+            "takes observations of shape .20,., but TetherTriangle-v0 gives .21,.",
         ),
     ]
     shipped = TrainedPolicy(shipped_models(ENV)["ppo"])
