@@ -806,9 +806,10 @@ class BatchSimulator:
         clusters (a tuple of :class:`Cluster` of this topology), its settings, and each
         array of :data:`STATE_FIELDS` (the exact set of names; numpy arrays of shape (k, ...)
         exactly, no broadcasting; dtype float64, bool for ``intact``, int64 for ``status``;
-        finite; within the ranges of :mod:`tether_gym.limits` and of physics: positions within
-        MAX_COORDINATE, velocities within MAX_SPEED, non-negative time, last step, omega^2,
-        tensions and dissipated energy, a known status code).  A ``ValueError`` or ``TypeError``
+        a known status code; finite and within the ranges of :mod:`tether_gym.limits` and of
+        physics, but in clusters frozen for a non-finite state: positions within MAX_COORDINATE,
+        velocities within MAX_SPEED, non-negative time, last step, omega^2, tensions and
+        dissipated energy).  A ``ValueError`` or ``TypeError``
         names the first bad part."""
         clusters = state.clusters
         if not isinstance(clusters, tuple) or not all(isinstance(c, Cluster) for c in clusters):
@@ -847,15 +848,26 @@ class BatchSimulator:
                     f"state.arrays[{name!r}] must have shape {full} (k={k} clusters, n={n} satellites, m={m} "
                     f"cables); got shape {value.shape}"
                 )
-            if dtype == np.float64:
-                if not np.isfinite(value).all():
-                    raise ValueError(f"state.arrays[{name!r}] must be finite; it holds NaN or an infinity")
-                check_range(f"state.arrays[{name!r}]", value, low, high, unit)
-            elif name == "status" and not np.isin(value, _kernels.STATUS_CODES).all():
+        status = arrays["status"]
+        if not np.isin(status, _kernels.STATUS_CODES).all():
+            raise ValueError(
+                f"state.arrays['status'] must hold status codes {list(_kernels.STATUS_CODES)}; "
+                f"got {short_repr(status.tolist())}"
+            )
+        # A cluster frozen for a non-finite state (status 1) holds what it diverged to, and is
+        # never integrated again before a reset: its arrays need not be finite, so that a
+        # snapshot of a batch with such a cluster restores.
+        measured = status != _kernels.STATUS_NON_FINITE
+        for name, value in arrays.items():
+            if value.dtype != np.float64:
+                continue
+            _, _, low, high, unit = _STATE_CHECKS[name]
+            rows = value[measured]
+            if not np.isfinite(rows).all():
                 raise ValueError(
-                    f"state.arrays['status'] must hold status codes {list(_kernels.STATUS_CODES)}; "
-                    f"got {short_repr(value.tolist())}"
+                    f"state.arrays[{name!r}] must be finite (but in clusters of status 1); it holds NaN or an infinity"
                 )
+            check_range(f"state.arrays[{name!r}]", rows, low, high, unit)
         return arrays
 
     def evaluate_at(

@@ -640,3 +640,21 @@ def test_reset_writes_one_state_per_cluster(rows: list[int], shift: float) -> No
         return
     assert len(set(rows)) == len(rows)
     assert bits(batch.positions[rows]) == bits(positions)
+
+
+@FUZZ
+@given(preset=st.sampled_from(tg.preset_names()), row=st.integers(0, 1), steps=st.integers(0, 3))
+def test_a_snapshot_with_a_non_finite_cluster_restores(preset: str, row: int, steps: int) -> None:
+    source = moving_batch(preset, "exact", 0, steps, False)
+    source.positions_[row, 0] = math.nan  # the writable view: a state the kernels then flag
+    source.advance(0.05)
+    assert source.status[row] == 1 and source.status[1 - row] == 0
+    state = source.snapshot()
+    target = tg.BatchSimulator(list(state.clusters))
+    target.restore(state)
+    assert target.status.tolist() == source.status.tolist()
+    force = np.full((2, source.num_nodes, 3), 0.1)
+    source.advance(0.05, force)
+    target.advance(0.05, force)
+    assert bits(target.positions[1 - row]) == bits(source.positions[1 - row])
+    assert target.status[row] == 1

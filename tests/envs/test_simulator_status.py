@@ -33,3 +33,17 @@ def test_the_vector_env_reports_it_per_row() -> None:
     assert terminated.tolist() == [False, True, False]
     assert info["simulator_status"].tolist() == [0, _kernels.STATUS_ENERGY_RUNAWAY, 0]
     assert info["end_reason"][1] == "numerics_diverged"
+
+
+def test_a_task_snapshot_with_a_non_finite_cluster_restores() -> None:
+    venv = gym.make_vec("TetherTetrahedron-v0", num_envs=2)
+    venv.reset(seed=0)
+    task = venv.unwrapped.task  # type: ignore[attr-defined]
+    task.sim.positions_[1, 0] = np.nan  # the writable view: a state the kernels then flag
+    venv.step(np.zeros((2, 12)))
+    assert task.sim.status.tolist() == [0, _kernels.STATUS_NON_FINITE]
+    state = task.snapshot()
+    task.step(np.zeros((2, 12)))
+    task.restore(state)  # the frozen cluster's NaN is what it diverged to, not a bad state
+    assert task.sim.status.tolist() == [0, _kernels.STATUS_NON_FINITE]
+    assert np.array_equal(task.sim.positions[0], state.simulator.positions[0])

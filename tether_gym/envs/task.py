@@ -578,6 +578,14 @@ class DampingTask:
             given = sorted(arrays) if isinstance(arrays, dict) else type(arrays).__name__
             raise ValueError(f"state.arrays must hold exactly the task arrays {list(TASK_STATE_FIELDS)}; got {given}")
         k = len(state.simulator.clusters) if isinstance(state.simulator.clusters, tuple) else -1
+        # Clusters frozen for a non-finite state hold what they diverged to (the simulator's
+        # restore checks its status array): their task arrays need not be finite either.
+        status = state.simulator.arrays.get("status") if isinstance(state.simulator.arrays, dict) else None
+        frozen = (
+            status == _kernels.STATUS_NON_FINITE
+            if isinstance(status, np.ndarray) and status.shape == (k,)
+            else np.zeros(max(k, 0), dtype=np.bool_)
+        )
         for name in TASK_STATE_FIELDS:
             value, own = arrays[name], self._state_array(name)
             if not isinstance(value, np.ndarray) or value.dtype != own.dtype:
@@ -585,6 +593,7 @@ class DampingTask:
                 raise TypeError(f"state.arrays[{name!r}] must be a numpy array of dtype {own.dtype}; got {got}")
             if value.shape != (k, *own.shape[1:]):
                 raise ValueError(f"state.arrays[{name!r}] must have shape {(k, *own.shape[1:])}; got {value.shape}")
+            value = value[~frozen]
             if value.dtype.kind == "f":
                 finite = np.isfinite(value) | ((value == math.inf) & (name in _TASK_INFINITE))
                 if not finite.all():
