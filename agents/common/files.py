@@ -13,6 +13,7 @@ followed) -- but the checks refuse symlinked outputs explicitly before that.
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
 import glob
 import os
@@ -246,6 +247,14 @@ def claim_output_dir(directory: str | Path, argument: str = "--out") -> Path:
         fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as error:
         os.close(descriptor)
+        if error.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            # Not another holder: a file system without locks (NFS without lockd: ENOLCK) or another
+            # failure, which "in use by another command" would have misreported.
+            raise OutputError(
+                f"{argument} {directory} cannot be locked for this command ({error.strerror or error}): its file "
+                f"system does not support locks, so a second command could write it at the same time; pass an "
+                f"{argument} on a local file system"
+            ) from error
         raise OutputBusyError(
             f"{argument} {directory} is in use by another running command (it holds the directory's lock): "
             f"wait for that command to end, or pass another {argument}"

@@ -4,6 +4,7 @@ root; a multi-file save replaces its directory as a whole; and a command deletes
 
 from __future__ import annotations
 
+import errno
 import os
 import subprocess
 import sys
@@ -275,3 +276,26 @@ def test_a_save_killed_between_the_renames_is_refused_next_time_naming_where_the
     with atomic_directory(best) as staging:
         (staging / "policy.json").write_text("newest")
     assert not list(tmp_path.glob(".best.old-*"))
+
+
+@pytest.mark.parametrize(
+    ("code", "busy"), [(errno.EWOULDBLOCK, True), (errno.ENOLCK, False), (errno.EOPNOTSUPP, False)]
+)
+def test_a_lock_that_fails_for_another_reason_than_a_holder_is_not_reported_as_busy(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, code: int, busy: bool
+) -> None:
+    """On a file system without locks (NFS without lockd) flock raises ENOLCK: that was reported as
+    'in use by another running command', sending the user to wait for a command that does not exist."""
+    import fcntl
+
+    def flock(descriptor: int, operation: int) -> None:
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(fcntl, "flock", flock)
+    with holding_output_claims():
+        with pytest.raises(OutputError) as raised:
+            claim_output_dir(tmp_path, argument="--out")
+    assert isinstance(raised.value, OutputBusyError) == busy
+    assert "--out" in str(raised.value)
+    if not busy:
+        assert "cannot be locked" in str(raised.value) and "local file system" in str(raised.value)
