@@ -317,3 +317,65 @@ def test_a_key_given_twice_in_any_json_object_is_refused(
         (directory / name).write_text(dump_with_a_key_twice(value, target, key, second), encoding="utf-8")
         with pytest.raises(PolicyFormatError, match=rf"{name}.*appears twice"):
             read(directory)
+
+
+@pytest.fixture(scope="module")
+def captured_state() -> tuple[dict[str, Any], dict[str, Any]]:
+    """A trained tiny model's optimizer state, as training.safetensors and training.json hold it."""
+    from agents.policies.sb3_state import capture_training_state
+
+    model, _ = tiny_model(seed=0)
+    model.learn(32)
+    tensors, meta = capture_training_state(model)
+    return tensors, json.loads(json.dumps(meta))
+
+
+@settings(FUZZ, max_examples=80)
+@given(
+    key=st.sampled_from(["lr", "eps", "weight_decay", "betas.0", "betas.1"]),
+    value=st.floats(-2.0, 2.0, allow_nan=False) | st.sampled_from([0.0, 1.0, 0.999999, 1e-300, 1e300, -0.0]),
+    moment=st.sampled_from(["exp_avg", "exp_avg_sq", "step"]),
+    scale=st.sampled_from([None, -1.0, 0.5, 2.5, -3.0]),
+)
+def test_a_resumed_optimizer_state_is_what_the_optimizer_itself_accepts(
+    captured_state: tuple[dict[str, Any], dict[str, Any]], key: str, value: float, moment: str, scale: float | None
+) -> None:
+    """Differential: a param group setting is restored exactly when the optimizer's own
+    constructor accepts it (Adam refuses betas outside [0, 1), negative rates and epsilons), and a
+    per-parameter entry exactly when an optimizer step could have written it (averages of squares
+    >= 0, steps whole and >= 0); otherwise the refusal names training.json or training.safetensors."""
+    import torch
+
+    from agents.policies.sb3_state import restore_training_state
+
+    tensors, meta = captured_state
+    meta = json.loads(json.dumps(meta))
+    group = meta["optimizers"]["policy.optimizer"]["param_groups"][0]
+    name, _, index = key.partition(".")
+    settings_ = {k: v for k, v in group.items() if k not in ("params",)}
+    if index:
+        group[name][int(index)] = value
+    else:
+        group[name] = value
+    tensors = dict(tensors)
+    target = f"policy.optimizer/state/0/{moment}"
+    if scale is not None:
+        tensors[target] = tensors[target] * scale if moment != "step" else torch.tensor(float(tensors[target]) * scale)
+    try:
+        torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))], **{**settings_, name: group[name]})
+        accepted = True
+    except ValueError:
+        accepted = False
+    written = tensors[target]
+    if moment == "step":
+        accepted = accepted and float(written) >= 0 and float(written) == round(float(written))
+    elif moment == "exp_avg_sq":
+        accepted = accepted and bool((written >= 0).all())
+    model, _ = tiny_model(seed=1)
+    try:
+        restore_training_state(model, meta, tensors, "ppo", Path("training.json"), Path("training.safetensors"))
+    except PolicyFormatError as error:
+        assert not accepted, f"refused what the optimizer accepts: {error}"
+        assert "training.json" in str(error) or "training.safetensors" in str(error)
+    else:
+        assert accepted, f"restored {key}={value}, {moment} x {scale}, which the optimizer would not have"
