@@ -367,6 +367,10 @@ def atomic_directory(target: str | Path, ours: Iterable[str] = (), others: str =
                 f"{'them' if len(foreign) > 1 else 'it'} away first (files a command did not write are never deleted)"
             )
     _recover_from_a_killed_swap(target)
+    # Directories carried into the new one are held for the swap: a command running in one of them
+    # (a training whose run directory lies below a conversion's DST) would keep its lock on the old
+    # directory, removed after the swap, while a second command could claim the new one.
+    held = _hold_subdirectories(target) if others == "carry" else []
     staging = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.new-"))
     aside: Path | None = None
     try:
@@ -391,8 +395,48 @@ def atomic_directory(target: str | Path, ours: Iterable[str] = (), others: str =
         if aside is not None:
             shutil.rmtree(aside, ignore_errors=True)
         raise
+    finally:
+        for descriptor in held:
+            os.close(descriptor)
     if aside is not None:
         shutil.rmtree(aside, ignore_errors=True)
+
+
+def _hold_subdirectories(target: Path) -> list[int]:
+    """Take the lock of :func:`claim_output_dir` on every directory below ``target`` (not
+    following symlinks), except those this process claims already, and return their descriptors;
+    :class:`OutputBusyError` naming the first that another running command holds (none is then
+    held)."""
+    try:
+        import fcntl
+    except ImportError:  # no flock (Windows)
+        return []
+    held: list[int] = []
+    if not target.is_dir() or target.is_symlink():
+        return held
+    for root, dirnames, _ in os.walk(target, followlinks=False):
+        for name in dirnames:
+            directory = os.path.join(root, name)
+            if os.path.islink(directory) or os.path.realpath(directory) in _claims:
+                continue
+            try:
+                descriptor = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+            except OSError:
+                continue  # unreadable: nothing can hold it through this process's eyes, and it is carried as is
+            try:
+                fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as error:
+                os.close(descriptor)
+                if error.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    continue  # no locks on this file system: claim_output_dir refuses those outputs itself
+                for other in held:
+                    os.close(other)
+                raise OutputBusyError(
+                    f"{directory} is in use by another running command, and {target} would be replaced around "
+                    f"it: wait for that command to end, or write elsewhere"
+                ) from error
+            held.append(descriptor)
+    return held
 
 
 def _recover_from_a_killed_swap(target: Path) -> None:

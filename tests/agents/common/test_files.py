@@ -299,3 +299,44 @@ def test_a_lock_that_fails_for_another_reason_than_a_holder_is_not_reported_as_b
     assert "--out" in str(raised.value)
     if not busy:
         assert "cannot be locked" in str(raised.value) and "local file system" in str(raised.value)
+
+
+HOLD_A_RUN = """
+import sys, time
+from agents.common.files import claim_output_dir
+claim_output_dir(sys.argv[1])
+print("claimed", flush=True)
+time.sleep(60)
+"""
+
+
+def test_a_directory_save_is_refused_around_a_directory_another_command_holds(tmp_path: Path) -> None:
+    """A conversion whose DST was the parent of a running training's run directory swapped the
+    parent: the training kept its lock on the old run directory (removed after the swap), and a
+    second training could claim the new one. Directories carried into the new one are held for
+    the swap, and one another command holds is refused before the writer runs."""
+    runs = tmp_path / "runs"
+    (runs / "TetherChain-v0" / "ppo_seed0").mkdir(parents=True)
+    (runs / "TetherChain-v0" / "ppo_seed0" / "config.yml").write_text("seed: 0\n")
+    root = Path(__file__).resolve().parents[3]
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD_A_RUN, str(runs / "TetherChain-v0" / "ppo_seed0")],
+        cwd=root,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "claimed"
+        wrote = []
+        with pytest.raises(OutputBusyError, match=r"ppo_seed0 is in use by another running command, and .*runs would"):
+            with atomic_directory(runs) as staging:
+                wrote.append(staging)
+        assert not wrote  # refused before the writer ran
+        assert (runs / "TetherChain-v0" / "ppo_seed0" / "config.yml").read_text() == "seed: 0\n"
+    finally:
+        holder.kill()
+        holder.wait()
+    with atomic_directory(runs) as staging:  # the holder gone, the save carries the run over
+        (staging / "policy.json").write_text("{}")
+    assert (runs / "TetherChain-v0" / "ppo_seed0" / "config.yml").read_text() == "seed: 0\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]
