@@ -389,8 +389,18 @@ class BatchVecEnv(VecEnv):
                 (the batch is left as it was, and the seeds and options stay scheduled).
         """
         self._check_open("reset")
-        options = self._batch_options()
-        observations = self._reset_batch(list(self._seeds), options)
+        try:
+            options = self._batch_options()
+            observations = self._reset_batch(list(self._seeds), options)
+        except EnvArgumentError as error:
+            if not any(self._options):
+                raise
+            # The refused options stay scheduled (the caller may want to inspect or mend them), so
+            # every later reset would fail the same way: say how to get out.
+            raise EnvArgumentError(
+                f"{error} (the refused reset options stay scheduled: call set_options(...) with corrected "
+                "options, or set_options(None) to drop them)"
+            ) from error
         self._reset_seeds()
         self._reset_options()
         self._actions = None

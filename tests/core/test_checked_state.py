@@ -214,3 +214,11 @@ def test_a_refused_task_restore_changes_nothing_in_the_simulator_or_the_task() -
         task.restore(dataclasses.replace(state, simulator=bad_simulator))
     assert task_bits(task) == before
     task.restore(state)
+
+
+def test_a_selection_larger_than_any_batch_is_refused() -> None:
+    from tether_gym.simulator import MAX_BATCH, checked_indices
+
+    with pytest.raises(ValueError, match=f"at most {MAX_BATCH}"):
+        checked_indices("rows", np.zeros(MAX_BATCH + 1, dtype=np.int64), 1)
+    assert checked_indices("rows", np.zeros(3, dtype=np.int64), 1).tolist() == [0, 0, 0]

@@ -110,9 +110,17 @@ def test_the_guard_can_be_turned_off_and_changes_no_bit_of_what_it_does_not_stop
     assert (np.abs(report.residual) > ENERGY_RUNAWAY_TOLERANCE * report.initial).any()
     guarded, loose = run(0.1), run(0.1, energy_tolerance=math.inf)
     assert guarded.node_table.tobytes() == loose.node_table.tobytes()
-    for bad in (math.nan, 0.0, -1.0, "0.25"):
+    for bad in (math.nan, 0.0, 1e-300, 9.9e-4, -1.0, "0.25"):
         with pytest.raises(ValueError, match="energy_tolerance"):
             tg.BatchSimulator(tg.make_cluster("triangle"), energy_tolerance=bad)
+    # The smallest accepted tolerance still leaves a triangle settling under its pretension, at rest
+    # and in a damped drift, unflagged.
+    tight = tg.BatchSimulator(tg.make_cluster("triangle"), 2, energy_tolerance=1e-3)
+    drift = np.broadcast_to([3.0, -1.0, 0.5], tight.positions.shape)
+    tight.reset(tight.positions, np.stack([np.zeros(tight.positions.shape[1:]), drift[1]]))
+    for _ in range(50):
+        tight.advance(0.2)
+    assert (tight.status == 0).all()
 
 
 def test_healthy_clusters_are_never_flagged_at_the_default_factor() -> None:

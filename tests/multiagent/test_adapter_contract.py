@@ -524,3 +524,18 @@ def test_reset_options_give_both_adapters_the_same_clusters() -> None:
     for row, info in enumerate(envs["AgentVecEnv"].reset_infos):
         expected = envs["SB3VecEnv"].reset_infos[row // agents]
         assert info.keys() == expected.keys() and info["vibration_energy"] == expected["vibration_energy"]
+
+
+@pytest.mark.parametrize("adapter", list(ADAPTERS))
+def test_refused_reset_options_say_how_to_drop_them(adapter: str) -> None:
+    env = ADAPTERS[adapter]()
+    env.reset()
+    nominal = nominal_states(env)
+    env.set_options({"positions": np.full_like(nominal, np.nan)})
+    for _ in range(2):  # they stay scheduled, so a second reset is refused the same way
+        with pytest.raises(EnvArgumentError, match=r"stay scheduled: .*set_options\(None\) to drop them"):
+            env.reset()
+    env.set_options(None)
+    observations = env.reset()
+    assert np.isfinite(observations).all()
+    env.close()
