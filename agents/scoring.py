@@ -39,7 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("benchmark_json", type=cli.existing_file, help="the benchmark.json of the run")
     parser.add_argument("--commit", required=True, help="the git commit the benchmark ran at")
-    parser.add_argument("--out", default=str(REFERENCE_FILE), help=f"where to write (default {REFERENCE_FILE})")
+    parser.add_argument(
+        "--out", type=cli.path_argument, default=str(REFERENCE_FILE), help=f"where to write (default {REFERENCE_FILE})"
+    )
     parser.add_argument("--date", help="when the benchmark ran, ISO 8601 (default: benchmark.json's time, UTC)")
     parser.add_argument("--machine", help="the machine it ran on (default: this machine's CPU, cores and OS)")
     parser.add_argument("--force", action="store_true", help="replace an existing file at --out")

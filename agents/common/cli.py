@@ -91,11 +91,26 @@ def float_between(low: float, high: float) -> Callable[[str], float]:
     return parse
 
 
+def path_argument(text: str) -> str:
+    """An argparse ``type`` for a path the command reads or writes: an empty or blank one (an
+    unset shell variable, ``--out "$OUT"``) named the current directory, so a command wrote its
+    outputs there, or read it as a checkpoint; a NUL character raised a bare ``ValueError`` from
+    the operating system's path functions. Both are reported under the option's name."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(
+            f"must be a path; got {text!r} (an empty path would mean the current directory)"
+        )
+    if "\x00" in text:
+        raise argparse.ArgumentTypeError(f"must be a path without NUL characters; got {text!r}")
+    return text
+
+
 def existing_file(text: str) -> str:
     """An argparse ``type`` for a file that must exist (a YAML or JSON file the command reads):
     a missing one is reported by argparse under the option's name, before any work."""
     import os.path
 
+    text = path_argument(text)
     if not os.path.isfile(text):
         what = "is a directory, not a file" if os.path.isdir(text) else "does not exist"
         raise argparse.ArgumentTypeError(f"{text!r} {what}: pass an existing file")
@@ -169,7 +184,10 @@ def _training_arguments(parser: argparse.ArgumentParser, algo: str) -> None:
         f"hyperparameters from {_hyperparams(f'{algo}_multiagent.yml')} unless --hyperparams is given",
     )
     parser.add_argument(
-        "--out", default="runs", help=f"parent of the run directory <out>/<env>/{algo}_seed<seed> (default runs)"
+        "--out",
+        type=path_argument,
+        default="runs",
+        help=f"parent of the run directory <out>/<env>/{algo}_seed<seed> (default runs)",
     )
 
 
@@ -198,7 +216,11 @@ def train_parser() -> argparse.ArgumentParser:
         help=f"YAML file instead of {_hyperparams('<algo>.yml')}, or a run's "
         "config.yml (reproduces that run's hyperparameters)",
     )
-    parser.add_argument("--resume", help="checkpoint directory (or run directory, or best/) to continue training from")
+    parser.add_argument(
+        "--resume",
+        type=path_argument,
+        help="checkpoint directory (or run directory, or best/) to continue training from",
+    )
     parser.add_argument(
         "--trust-pickle",
         action="store_true",
@@ -268,7 +290,11 @@ def train_rllib_parser() -> argparse.ArgumentParser:
         type=existing_file,
         help=f"YAML file instead of {_hyperparams(f'{RLLIB_ALGO}.yml')}, or a run's config.yml",
     )
-    parser.add_argument("--resume", help="RLlib checkpoint (<run>/checkpoints/iter_<n>) or run directory (its latest)")
+    parser.add_argument(
+        "--resume",
+        type=path_argument,
+        help="RLlib checkpoint (<run>/checkpoints/iter_<n>) or run directory (its latest)",
+    )
     parser.add_argument(
         "--trust-pickle",
         action="store_true",
@@ -304,7 +330,10 @@ def ars_parser() -> argparse.ArgumentParser:
         help="the run's seed, 0..999: it draws the perturbations and picks the training episodes (default 1)",
     )
     parser.add_argument(
-        "--out", default="runs", help="parent of the run directory <out>/<env>/ars_seed<seed> (default runs)"
+        "--out",
+        type=path_argument,
+        default="runs",
+        help="parent of the run directory <out>/<env>/ars_seed<seed> (default runs)",
     )
     parser.add_argument(
         "--hyperparams",
@@ -352,7 +381,7 @@ def compare_parser() -> argparse.ArgumentParser:
 def _add_report_arguments(parser: argparse.ArgumentParser, report: str, out: str) -> None:
     """The options compare and benchmark share: where the ``report`` goes, whether it replaces an
     earlier one and has plots, and which models of ``--controllers`` may load."""
-    parser.add_argument("--out", default=out, help=f"output directory (default {out})")
+    parser.add_argument("--out", type=path_argument, default=out, help=f"output directory (default {out})")
     parser.add_argument("--no-plots", action="store_true", help="write the tables only, no PNG plots (no matplotlib)")
     parser.add_argument("--force", action="store_true", help=f"replace an earlier {report} in --out")
     parser.add_argument(
@@ -421,11 +450,13 @@ def ship_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "runs",
         nargs="+",
+        type=path_argument,
         metavar="RUN",
         help=f"run directories of {program('train')} or {program('ars')}, or policy directories",
     )
     parser.add_argument(
         "--out",
+        type=path_argument,
         default="agents/models",
         help="where shipped models go (default agents/models: the checkout's, when run from its root)",
     )
@@ -439,8 +470,13 @@ def convert_parser() -> argparse.ArgumentParser:
     parser = _parser(
         "convert", epilog="Converting unpickles SRC: a crafted SRC runs arbitrary code. Convert only files you trust."
     )
-    parser.add_argument("source", metavar="SRC", help="SB3 run directory or model .zip")
-    parser.add_argument("destination", metavar="DST", help="directory for the safe format (may be SRC's directory)")
+    parser.add_argument("source", metavar="SRC", type=path_argument, help="SB3 run directory or model .zip")
+    parser.add_argument(
+        "destination",
+        metavar="DST",
+        type=path_argument,
+        help="directory for the safe format (may be SRC's directory)",
+    )
     parser.add_argument(
         "--trust-pickle", action="store_true", help="required: SRC is unpickled, which runs any code it contains"
     )

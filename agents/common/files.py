@@ -69,6 +69,11 @@ def prepare_output_dir(
     Raises :class:`OutputError`, naming ``argument``, if ``path`` (or a component below ``root``)
     is a symlink, an existing file, inside a file, or cannot be created or written, and
     :class:`OutputBusyError` if another running command holds it."""
+    if isinstance(path, str) and not path.strip():
+        # Path("") is the current directory: an unset variable would have written the outputs there.
+        raise OutputError(f"{argument} is empty ({path!r}): pass a directory path")
+    if "\x00" in str(path):
+        raise OutputError(f"{argument} {str(path)!r} holds a NUL character, which no path can: pass a directory path")
     path = Path(path)
     if root is not None:
         check_no_symlinks_between(root, path, argument)

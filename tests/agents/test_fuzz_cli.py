@@ -169,6 +169,46 @@ def test_a_training_seed_beyond_numpy_s_seeding_is_refused_by_the_parser(command
         assert "--seed" in stderr.getvalue() and f"must be at most {MAX_TRAINING_SEED}" in stderr.getvalue()
 
 
+#: The settings that are paths a command reads or writes.
+PATH_DESTS = {"out", "resume", "runs", "source", "destination", "hyperparams", "benchmark_json"}
+
+
+@pytest.mark.parametrize("command", sorted(PARSERS))
+def test_an_empty_or_nul_path_is_refused_under_its_option_s_name(command: str) -> None:
+    """``--out ""`` (an unset variable) named the current directory: the command wrote its outputs
+    there, or read it as a checkpoint; a NUL raised a bare ValueError. Every path option refuses
+    both, by name, and every path option has a path type (a new one too)."""
+    from agents.common.cli import existing_file, path_argument
+
+    parser = PARSERS[command]()
+    paths = [action for action in parser._actions if action.dest in PATH_DESTS]
+    assert paths, f"{command} has no path argument"
+    for action in paths:
+        assert action.type in (path_argument, existing_file), f"{command}: {action.dest} has no path type"
+        name = action.option_strings[0] if action.option_strings else (action.metavar or action.dest)
+        for bad in ("", "  ", "a\x00b"):
+            stderr = io.StringIO()
+            with contextlib.redirect_stderr(stderr), pytest.raises(SystemExit) as exit_:
+                parser.parse_args(_arguments_with(parser, action, bad))
+            assert exit_.value.code == 2 and str(name) in stderr.getvalue(), stderr.getvalue()
+
+
+def _arguments_with(parser: argparse.ArgumentParser, target: argparse.Action, value: str) -> list[str]:
+    """A command line giving ``target`` the value ``value`` and every other positional a plausible path."""
+    tokens: list[str] = []
+    for action in parser._actions:
+        if action.option_strings:
+            if action is target:
+                tokens += [action.option_strings[0], value]
+            elif action.required:
+                tokens += [action.option_strings[0], "x"]
+        elif action is not target and action.dest != "help":
+            tokens.append("some/path")
+        elif action is target:
+            tokens.append(value)
+    return tokens
+
+
 def test_every_command_is_fuzzed() -> None:
     """A command added to agents.common.commands is fuzzed from the day it lands: it needs a
     parser, an ``ERRORS`` tuple and an entry in :data:`WORK` naming its work function."""
@@ -187,6 +227,8 @@ plausible_values = st.one_of(
     st.integers(0, 10**7).map(str),
     st.sampled_from(["nan", "inf", "-inf", "0.5", "1.5", "1e6", "mcp", "lqr", "mpc", "passive", "TetherChain-v0"]),
     st.sampled_from(["out", "out/sub", "/dev/null", "policy_dir", "benchmark.json", "."]),
+    # Paths that name nothing: empty or blank (an unset shell variable), or with a NUL.
+    st.sampled_from(["", " ", "out\x00dir"]),
     # Seeds at the edge of what numpy's legacy generator (SB3's and RLlib's seeding) takes.
     st.sampled_from(["2147483647", "2147483648", "4294967295", "4294967296", str(2**64)]),
 )

@@ -340,3 +340,15 @@ def test_a_directory_save_is_refused_around_a_directory_another_command_holds(tm
         (staging / "policy.json").write_text("{}")
     assert (runs / "TetherChain-v0" / "ppo_seed0" / "config.yml").read_text() == "seed: 0\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]
+
+
+@pytest.mark.parametrize(("path", "message"), [("", "is empty"), ("   ", "is empty"), ("out\x00dir", "NUL character")])
+def test_an_empty_or_nul_output_path_is_refused_by_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, path: str, message: str
+) -> None:
+    """Path("") is the current directory: out="" (an unset variable) wrote a command's outputs there;
+    a NUL raised a bare ValueError from the path functions."""
+    monkeypatch.chdir(tmp_path)
+    with holding_output_claims(), pytest.raises(OutputError, match=f"--out .*{message}"):
+        prepare_output_dir(path)
+    assert not list(tmp_path.iterdir())
