@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike
 from tether_gym.cluster import Cluster, ClusterError
 from tether_gym.frames import LEO_ORBIT_RATE, Frame, FrameError
 from tether_gym.limits import is_real_number, is_whole_number, short_repr, to_float
+from tether_gym.tethers import Tether, TetherError, build_cluster
 
 __all__ = ["MAX_SATELLITES", "PRESETS", "TetherSpec", "make_cluster", "preset_names"]
 
@@ -102,12 +103,23 @@ class TetherSpec:
     breaking_load: ArrayLike
     """Cable breaking tension, N (a scalar, or one per cable)."""
 
+    tether_mass: float = 0.0
+    """Mass of each tether, kg (0: massless cables, the paper's model)."""
+    segments: int = 1
+    """Segments each tether is split into (``segments - 1`` beads carry its mass; 1: no beads)."""
+
     def cluster(
         self, name: str, positions: ArrayLike, cables: ArrayLike, masses: float | np.ndarray, **options: Any
     ) -> Cluster:
         """The preset's :class:`Cluster`: satellites at ``positions`` ((n, 3), m) of ``masses`` (kg,
         a scalar or (n,)) joined by ``cables`` ((m, 2) satellite indices) of this spec;
-        ``options`` are further :class:`Cluster` fields (``axial_damping``, ``frame``)."""
+        ``options`` are further :class:`Cluster` fields (``axial_damping``, ``frame``).  With a
+        ``tether_mass`` > 0 every cable is a :class:`~tether_gym.tethers.Tether` of that mass in
+        ``segments`` segments, expanded by :func:`~tether_gym.tethers.build_cluster` (the
+        satellites' diagonal damping stays ``damping_rate`` times their own masses, before the
+        tethers' lumped mass is added)."""
+        if self.tether_mass != 0.0 or self.segments != 1:
+            return self._beaded_cluster(name, positions, cables, masses, **options)
         return Cluster(
             positions=positions,
             masses=masses,
@@ -120,6 +132,53 @@ class TetherSpec:
             **options,
         )
 
+    def _beaded_cluster(
+        self, name: str, positions: ArrayLike, cables: ArrayLike, masses: float | np.ndarray, **options: Any
+    ) -> Cluster:
+        """The cluster with every cable a tether of ``tether_mass`` kg in ``segments`` segments."""
+        mass = to_float(self.tether_mass)
+        if not mass >= 0.0:
+            raise ClusterError(f"tether_mass must be >= 0 kg (the mass of each tether); got {short_repr(mass)}")
+        if mass == 0.0:
+            raise ClusterError(
+                f"segments={self.segments} needs tether_mass > 0 kg (its beads carry the tether's mass); give "
+                "tether_mass, or leave segments=1 for massless cables"
+            )
+        ends = np.asarray(cables, dtype=np.int64).reshape(-1, 2)
+        count = ends.shape[0]
+        sat_positions = np.asarray(positions, dtype=np.float64)
+        sat_masses = np.broadcast_to(np.asarray(masses, dtype=np.float64), (sat_positions.shape[0],))
+        per_cable = {
+            key: np.broadcast_to(np.asarray(value, dtype=np.float64), (count,))
+            for key, value in (
+                ("EA", self.EA),
+                ("N0", self.N0),
+                ("breaking_load", self.breaking_load),
+                ("axial_damping", options.pop("axial_damping", 0.0)),
+            )
+        }
+        frame = options.pop("frame", None)
+        if options:
+            raise TypeError(f"unexpected cluster options {sorted(options)}")
+        try:
+            tethers = [
+                Tether(
+                    ends=(int(a), int(b)),
+                    EA=float(per_cable["EA"][c]),
+                    segments=self.segments,
+                    mass=mass,
+                    N0=float(per_cable["N0"][c]),
+                    axial_damping=float(per_cable["axial_damping"][c]),
+                    breaking_load=float(per_cable["breaking_load"][c]),
+                )
+                for c, (a, b) in enumerate(ends)
+            ]
+            return build_cluster(
+                sat_positions, sat_masses, tethers, damping=self.damping_rate * sat_masses, frame=frame, name=name
+            )
+        except TetherError as error:
+            raise ClusterError(f"tether_mass={short_repr(mass)}, segments={self.segments}: {error}") from None
+
 
 @_preset
 def tetrahedron(
@@ -129,6 +188,8 @@ def tetrahedron(
     N0: float = 0.2,
     damping_rate: float = 0.1,
     breaking_load: float = 1500.0,
+    tether_mass: float = 0.0,
+    segments: int = 1,
 ) -> Cluster:
     """The paper's example: four satellites at the corners of a regular tetrahedron, six cables.
 
@@ -139,6 +200,9 @@ def tetrahedron(
         N0: pretension, N (pulls each satellite toward the centroid with sqrt(6) N0).
         damping_rate: diagonal damping per unit mass, 1/s (C = damping_rate * M).
         breaking_load: cable breaking tension, N.
+        tether_mass: mass of each tether, kg (0: massless cables; > 0: every cable becomes a
+            :class:`~tether_gym.tethers.Tether` of this mass whose beads and lumped end mass carry it).
+        segments: segments of each tether with mass (``segments - 1`` beads each; 1: no beads).
     """
     base = edge / math.sqrt(3.0)
     height = edge * math.sqrt(2.0 / 3.0)
@@ -152,9 +216,9 @@ def tetrahedron(
     )
     positions -= positions.mean(axis=0)
     cables = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    return TetherSpec(EA=EA, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
-        "tetrahedron", positions, cables, mass
-    )
+    return TetherSpec(
+        EA=EA, tether_mass=tether_mass, segments=segments, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load
+    ).cluster("tetrahedron", positions, cables, mass)
 
 
 @_preset
@@ -166,6 +230,8 @@ def chain(
     N0: float = 0.1,
     damping_rate: float = 0.1,
     breaking_load: float = 1000.0,
+    tether_mass: float = 0.0,
+    segments: int = 1,
 ) -> Cluster:
     """``n`` satellites in a straight line along x, each tethered to the next.
 
@@ -177,15 +243,18 @@ def chain(
         N0: pretension, N.
         damping_rate: diagonal damping per unit mass, 1/s (C = damping_rate * M).
         breaking_load: cable breaking tension, N.
+        tether_mass: mass of each tether, kg (0: massless cables; > 0: every cable becomes a
+            :class:`~tether_gym.tethers.Tether` of this mass whose beads and lumped end mass carry it).
+        segments: segments of each tether with mass (``segments - 1`` beads each; 1: no beads).
     """
     if not isinstance(n, (int, np.integer)) or n < 2:
         raise ClusterError(f"chain needs n >= 2 satellites (an integer); got n={n!r}")
     positions = np.zeros((n, 3))
     positions[:, 0] = spacing * (np.arange(n) - (n - 1) / 2.0)
     cables = [(i, i + 1) for i in range(n - 1)]
-    return TetherSpec(EA=EA, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
-        "chain", positions, cables, mass
-    )
+    return TetherSpec(
+        EA=EA, tether_mass=tether_mass, segments=segments, N0=N0, damping_rate=damping_rate, breaking_load=breaking_load
+    ).cluster("chain", positions, cables, mass)
 
 
 @_preset
@@ -309,6 +378,8 @@ def radial_chain(
     axial_damping_ratio: float = 0.05,
     damping_rate: float = 0.0,
     breaking_load: float = 1000.0,
+    tether_mass: float = 0.0,
+    segments: int = 1,
 ) -> Cluster:
     """``n`` satellites in a straight line along the local vertical of a circular orbit, in the Hill
     frame, held taut by the gravity gradient alone (no thrust).
@@ -330,6 +401,9 @@ def radial_chain(
             end masses' axial oscillation.
         damping_rate: diagonal damping per unit mass (relative to the Hill frame), 1/s.
         breaking_load: cable breaking tension, N.
+        tether_mass: mass of each tether, kg (0: massless cables; > 0: every cable becomes a
+            :class:`~tether_gym.tethers.Tether` of this mass whose beads and lumped end mass carry it).
+        segments: segments of each tether with mass (``segments - 1`` beads each; 1: no beads).
     """
     if not isinstance(n, (int, np.integer)) or n < 2:
         raise ClusterError(f"radial_chain needs n >= 2 satellites (an integer); got n={n!r}")
@@ -343,7 +417,14 @@ def radial_chain(
     tension = np.array([tidal_force[k + 1 :].sum() for k in range(n - 1)])
     cables = np.array([(k, k + 1) for k in range(n - 1)])
     stiffness = _positive("EA", EA, "N") / spacing
-    return TetherSpec(EA=EA, N0=tension, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
+    return TetherSpec(
+        EA=EA,
+        tether_mass=tether_mass,
+        segments=segments,
+        N0=tension,
+        damping_rate=damping_rate,
+        breaking_load=breaking_load,
+    ).cluster(
         "radial_chain",
         positions,
         cables,
@@ -362,6 +443,8 @@ def spinning_triangle(
     axial_damping_ratio: float = 0.05,
     damping_rate: float = 0.0,
     breaking_load: float = 1500.0,
+    tether_mass: float = 0.0,
+    segments: int = 1,
 ) -> Cluster:
     """Three satellites in an equilateral triangle spinning about its normal (z), seen in the frame
     that spins with it.  Spin holds the cables taut: each satellite, at radius ``edge/sqrt(3)``,
@@ -377,6 +460,9 @@ def spinning_triangle(
             end masses' axial oscillation.
         damping_rate: diagonal damping per unit mass (relative to the spinning frame), 1/s.
         breaking_load: cable breaking tension, N.
+        tether_mass: mass of each tether, kg (0: massless cables; > 0: every cable becomes a
+            :class:`~tether_gym.tethers.Tether` of this mass whose beads and lumped end mass carry it).
+        segments: segments of each tether with mass (``segments - 1`` beads each; 1: no beads).
     """
     edge = _positive("edge", edge, "m")
     mass = _positive("mass", mass, "kg")
@@ -388,7 +474,12 @@ def spinning_triangle(
     masses = np.full(3, mass)
     stiffness = np.full(3, _positive("EA", EA, "N") / edge)
     return TetherSpec(
-        EA=EA, N0=mass * frame.rate**2 * edge / 3.0, damping_rate=damping_rate, breaking_load=breaking_load
+        EA=EA,
+        tether_mass=tether_mass,
+        segments=segments,
+        N0=mass * frame.rate**2 * edge / 3.0,
+        damping_rate=damping_rate,
+        breaking_load=breaking_load,
     ).cluster(
         "spinning_triangle",
         positions,
@@ -411,6 +502,8 @@ def spinning_hub(
     axial_damping_ratio: float = 0.05,
     damping_rate: float = 0.0,
     breaking_load: float = 1500.0,
+    tether_mass: float = 0.0,
+    segments: int = 1,
 ) -> Cluster:
     """A hub satellite (node 0) with ``spokes`` satellites on a wheel around it, spinning about z,
     seen in the frame that spins with it.  Each outer satellite needs the centripetal force
@@ -431,6 +524,9 @@ def spinning_hub(
             end masses' axial oscillation.
         damping_rate: diagonal damping per unit mass (relative to the spinning frame), 1/s.
         breaking_load: cable breaking tension, N.
+        tether_mass: mass of each tether, kg (0: massless cables; > 0: every cable becomes a
+            :class:`~tether_gym.tethers.Tether` of this mass whose beads and lumped end mass carry it).
+        segments: segments of each tether with mass (``segments - 1`` beads each; 1: no beads).
     """
     if not isinstance(spokes, (int, np.integer)) or spokes < 3:
         raise ClusterError(f"spinning_hub needs spokes >= 3 (an integer); got spokes={spokes!r}")
@@ -447,7 +543,14 @@ def spinning_hub(
     rim_tension = rim_share * centripetal / (2.0 * math.sin(math.pi / spokes))
     tension = np.concatenate([np.full(spokes, (1.0 - rim_share) * centripetal), np.full(spokes, rim_tension)])
     lengths = np.linalg.norm(positions[cables[:, 1]] - positions[cables[:, 0]], axis=1)
-    return TetherSpec(EA=EA, N0=tension, damping_rate=damping_rate, breaking_load=breaking_load).cluster(
+    return TetherSpec(
+        EA=EA,
+        tether_mass=tether_mass,
+        segments=segments,
+        N0=tension,
+        damping_rate=damping_rate,
+        breaking_load=breaking_load,
+    ).cluster(
         "spinning_hub",
         positions,
         cables,
