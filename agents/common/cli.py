@@ -22,7 +22,7 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
-from .checks import MAX_TRAINING_SEED
+from .checks import MAX_NUM_ENVS, MAX_TRAINING_SEED
 from .commands import PACKAGE, description, program
 from .data import PACKAGE_DIR
 
@@ -209,7 +209,9 @@ def train_parser() -> argparse.ArgumentParser:
         help="env steps to train for, instead of the file's n_timesteps; rounded up to whole rollouts "
         "(PPO: n_steps x n_envs), with a message when it is",
     )
-    parser.add_argument("--n-envs", type=int_at_least(1), help="parallel envs, instead of the file's n_envs")
+    parser.add_argument(
+        "--n-envs", type=int_at_least(1, MAX_NUM_ENVS), help="parallel envs, instead of the file's n_envs"
+    )
     parser.add_argument(
         "--hyperparams",
         type=existing_file,
@@ -280,7 +282,9 @@ def train_rllib_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--num-env-runners", type=int_at_least(0), default=0, help="env runner processes (0: sample in the driver)"
     )
-    parser.add_argument("--envs-per-runner", type=int_at_least(1), help="override num_envs_per_env_runner")
+    parser.add_argument(
+        "--envs-per-runner", type=int_at_least(1, MAX_NUM_ENVS), help="override num_envs_per_env_runner"
+    )
     parser.add_argument(
         "--address", help="join the Ray cluster at HOST:PORT (or 'auto'); default: start a local Ray instance"
     )
@@ -366,7 +370,10 @@ def compare_parser() -> argparse.ArgumentParser:
         "(default: every baseline and every shipped model of the id)",
     )
     parser.add_argument(
-        "--episodes", type=int_at_least(2), default=64, help="held-out episodes per controller (default 64)"
+        "--episodes",
+        type=int_at_least(2, MAX_NUM_ENVS),
+        default=64,
+        help="held-out episodes per controller (default 64)",
     )
     parser.add_argument(
         "--seed", type=int_at_least(0), default=HELD_OUT_SEED, help=f"first held-out seed (default {HELD_OUT_SEED})"
@@ -420,7 +427,10 @@ def benchmark_parser() -> argparse.ArgumentParser:
         "default: every baseline, mpc and every shipped model of each id; passive is always added)",
     )
     parser.add_argument(
-        "--episodes", type=int_at_least(2), default=64, help="held-out episodes per controller and id (default 64)"
+        "--episodes",
+        type=int_at_least(2, MAX_NUM_ENVS),
+        default=64,
+        help="held-out episodes per controller and id (default 64)",
     )
     parser.add_argument(
         "--seed",
@@ -460,7 +470,9 @@ def ship_parser() -> argparse.ArgumentParser:
         default="agents/models",
         help="where shipped models go (default agents/models: the checkout's, when run from its root)",
     )
-    parser.add_argument("--episodes", type=int_at_least(2), default=64, help="evaluation episodes (default 64)")
+    parser.add_argument(
+        "--episodes", type=int_at_least(2, MAX_NUM_ENVS), default=64, help="evaluation episodes (default 64)"
+    )
     parser.add_argument("--force", action="store_true", help="replace shipped models")
     return parser
 

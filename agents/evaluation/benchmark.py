@@ -86,7 +86,7 @@ import numpy as np
 
 from tether_gym.registration import ENV_IDS
 
-from ..common.checks import check_int
+from ..common.checks import MAX_NUM_ENVS, check_int
 from ..common.cli import HELD_OUT_SEED, REFERENCE, did_you_mean
 from ..common.files import holds_output_claims, prepare_table_outputs
 from ..common.versions import BENCHMARK_PACKAGES, package_versions
@@ -172,7 +172,9 @@ class BenchmarkConfig:
         controllers = _check_names("controllers", self.controllers)
         object.__setattr__(self, "env_ids", None if env_ids is None else tuple(env_ids))
         object.__setattr__(self, "controllers", None if controllers is None else tuple(controllers))
-        object.__setattr__(self, "episodes", check_int("episodes", self.episodes, 2))  # two at least, for an interval
+        object.__setattr__(
+            self, "episodes", check_int("episodes", self.episodes, 2, MAX_NUM_ENVS)
+        )  # two at least, for an interval
         object.__setattr__(self, "seed", check_int("seed", self.seed, 0))
         object.__setattr__(self, "bootstrap_reps", check_int("bootstrap_reps", self.bootstrap_reps, 100))
         reference = self.reference

@@ -20,7 +20,7 @@ from typing import Any
 
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from ..common.checks import check_int
+from ..common.checks import MAX_NUM_ENVS, check_int
 from ..common.cli import HELD_OUT_SEED
 from ..common.files import holds_output_claims, prepare_table_outputs
 from ..controllers.registry import BASELINES
@@ -69,7 +69,7 @@ class CompareConfig:
     def __post_init__(self) -> None:
         if self.env_id not in ENV_IDS:
             raise ValueError(f"unknown env id {self.env_id!r}; tether-gym ids are {list(ENV_IDS)}")
-        object.__setattr__(self, "episodes", check_int("episodes", self.episodes, 2))
+        object.__setattr__(self, "episodes", check_int("episodes", self.episodes, 2, MAX_NUM_ENVS))
         object.__setattr__(self, "seed", check_int("seed", self.seed, 0))
         object.__setattr__(self, "satellite", check_int("satellite", self.satellite, 0))
         controllers = self.controllers

@@ -11,7 +11,7 @@ from typing import Any
 
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
-from ..common.checks import MAX_TRAINING_SEED, check_int
+from ..common.checks import MAX_NUM_ENVS, MAX_TRAINING_SEED, check_int
 from ..policies.format import ALGORITHMS
 
 __all__ = ["TrainConfig"]
@@ -90,4 +90,6 @@ class TrainConfig:
             object.__setattr__(self, name, check_int(name, getattr(self, name), minimum, maximum))
         for name in ("timesteps", "num_envs"):
             if getattr(self, name) is not None:
-                object.__setattr__(self, name, check_int(name, getattr(self, name), 1))
+                object.__setattr__(
+                    self, name, check_int(name, getattr(self, name), 1, MAX_NUM_ENVS if name == "num_envs" else None)
+                )

@@ -19,7 +19,7 @@ from typing import Any
 
 from tether_gym._optional import needs_extra
 
-from ..common.checks import is_count
+from ..common.checks import MAX_NUM_ENVS, is_count
 from ..common.commands import program
 from ..common.data import HYPERPARAMS_DIR
 from ..common.reading import read_yaml
@@ -351,7 +351,13 @@ def validate_hyperparameters(algo: str, entry: Mapping[str, Any], where: str = "
 def _check_run_key(algo: str, key: str, value: Any, where: str) -> Any:
     """One of :data:`RUN_KEYS` (what agents.train itself reads, not the algorithm) checked and converted."""
     if key in ("n_timesteps", "n_envs"):
-        return check_value(key, value, int, where)
+        checked = check_value(key, value, int, where)
+        # The envs are one vector env: tether_gym refuses more than MAX_NUM_ENVS, after the run began.
+        high = MAX_NUM_ENVS if key == "n_envs" else None
+        if checked < 1 or (high is not None and checked > high):
+            bound = f"in 1..{high}" if high is not None else ">= 1"
+            raise HyperparameterError(f"{where}: '{key}' must be {bound}; got {checked}")
+        return checked
     if key == "policy":
         return value  # validate_hyperparameters checked it against the algorithm's policies
     if key == "normalize":

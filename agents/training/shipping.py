@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ..common.checks import MAX_NUM_ENVS, check_int
 from ..common.cli import REFERENCE_FILE
 from ..common.commands import program
 from ..common.files import (
@@ -397,6 +398,8 @@ def ship(
     there that ship does not write, and no shipped model unless ``force``). An existing shipped
     model is replaced only with ``force``; to keep it in the running, pass its directory among
     ``runs``. A model is installed as a whole (a new directory renamed into place)."""
+    # The episodes run as one batch: more than the largest vector env failed after the checks.
+    episodes = check_int("episodes", episodes, 2, MAX_NUM_ENVS)
     shipped_at = str(out)
     root = Path(out)
     out = prepare_output_dir(out, argument="--out")

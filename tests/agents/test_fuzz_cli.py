@@ -169,6 +169,24 @@ def test_a_training_seed_beyond_numpy_s_seeding_is_refused_by_the_parser(command
         assert "--seed" in stderr.getvalue() and f"must be at most {MAX_TRAINING_SEED}" in stderr.getvalue()
 
 
+@pytest.mark.parametrize("command", sorted(PARSERS))
+def test_a_count_that_becomes_a_vector_env_is_bounded_by_the_largest_one(command: str) -> None:
+    """--n-envs, --envs-per-runner and --episodes (which run as one batch) become a vector env,
+    which tether_gym refuses above MAX_NUM_ENVS: that failed after the work began (the run
+    directory made, the controllers loaded). The parser refuses it under the option's name."""
+    from agents.common.checks import MAX_NUM_ENVS
+
+    parser = PARSERS[command]()
+    options = [o for o in ("--n-envs", "--envs-per-runner", "--episodes") if o in options_of(parser)]
+    for option in options:
+        action = next(a for a in parser._actions if option in a.option_strings)
+        assert action.type is not None and action.type(str(MAX_NUM_ENVS)) == MAX_NUM_ENVS
+        stderr = io.StringIO()
+        with contextlib.redirect_stderr(stderr), pytest.raises(SystemExit):
+            parser.parse_args([option, str(MAX_NUM_ENVS + 1)])
+        assert option in stderr.getvalue() and f"must be at most {MAX_NUM_ENVS}" in stderr.getvalue()
+
+
 #: The settings that are paths a command reads or writes.
 PATH_DESTS = {"out", "resume", "runs", "source", "destination", "hyperparams", "benchmark_json"}
 
@@ -317,3 +335,24 @@ def test_any_command_line_reaches_the_work_or_is_refused_by_name(command: str, d
             )
             return
     pytest.fail(f"agents.{command} {tokens} returned without reaching its work")
+
+
+def test_the_configs_bound_their_vector_env_counts_as_the_parsers_do(tmp_path: Any) -> None:
+    """The same bound for callers from Python: each config (and ship) refuses the count by name."""
+    from agents.common.checks import MAX_NUM_ENVS
+    from agents.evaluation.benchmark import BenchmarkConfig
+    from agents.evaluation.comparison import CompareConfig
+    from agents.training.config import TrainConfig
+    from agents.training.shipping import ship
+
+    for make, name in (
+        (lambda n: CompareConfig("TetherChain-v0", episodes=n), "episodes"),
+        (lambda n: BenchmarkConfig(episodes=n), "episodes"),
+        (lambda n: TrainConfig(num_envs=n), "num_envs"),
+        (lambda n: ship([], tmp_path / "models", episodes=n), "episodes"),
+    ):
+        with pytest.raises(
+            ValueError, match=rf"{name} must be an integer in \d+..{MAX_NUM_ENVS}; got {MAX_NUM_ENVS + 1}"
+        ):
+            make(MAX_NUM_ENVS + 1)
+    assert not (tmp_path / "models").exists()  # ship refused before it made --out

@@ -26,7 +26,8 @@ from agents.training.config import TrainConfig
         ({"checkpoint_freq": "10"}, "checkpoint_freq must be an integer >= 1; got '10'"),
         ({"verbose": -1}, "verbose must be an integer >= 0; got -1"),
         ({"timesteps": 0}, "timesteps must be an integer >= 1; got 0"),
-        ({"num_envs": 0}, "num_envs must be an integer >= 1; got 0"),
+        ({"num_envs": 0}, "num_envs must be an integer in 1..100000; got 0"),
+        ({"num_envs": 100_001}, "num_envs must be an integer in 1..100000; got 100001"),
     ],
 )
 def test_a_bad_field_is_refused_by_name(fields: dict[str, object], message: str) -> None:

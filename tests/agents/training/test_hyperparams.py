@@ -49,6 +49,9 @@ def test_hyperparameter_files_cover_every_id() -> None:
             "unknown key 'netarch' .did you mean 'net_arch'",
         ),
         ("default: {n_timesteps: 1000, normalize: {clip_ob: 5}}", "unknown key 'clip_ob'"),
+        ("default: {n_timesteps: 1000, n_envs: 0}", "'n_envs' must be in 1..100000; got 0"),
+        ("default: {n_timesteps: 1000, n_envs: 100001}", "'n_envs' must be in 1..100000; got 100001"),
+        ("default: {n_timesteps: 0}", "'n_timesteps' must be >= 1; got 0"),
         # VecNormalize keeps no observation statistics without norm_obs: the first save failed.
         ("default: {n_timesteps: 1000, normalize: {norm_obs: false}}", "'normalize.norm_obs' must be true"),
         ("default: {n_timesteps: 1000, curriculum: {start: 0.2}}", "'curriculum' must be a mapping with exactly"),
