@@ -10,12 +10,16 @@ from typing import Any
 from tether_gym.envs.arguments import MAX_NUM_ENVS
 from tether_gym.limits import is_whole_number
 
-__all__ = ["MAX_NUM_ENVS", "MAX_TRAINING_SEED", "check_int", "is_count"]
+__all__ = ["MAX_CHECK_OBSERVATIONS", "MAX_NUM_ENVS", "MAX_TRAINING_SEED", "check_int", "is_count"]
 
 #: The largest seed a training run takes: SB3 and RLlib seed numpy's legacy generator with it
 #: (``np.random.seed``: below 2**32), RLlib with the seed plus a runner's offset; 2**31 - 1 leaves
 #: those offsets room. A larger one failed after the run directory was made, in numpy's words.
 MAX_TRAINING_SEED = 2**31 - 1
+#: The most observations a conversion checks (and keeps in reference_actions.safetensors): at 100
+#: 000 the largest id's file is 30 MB, well under the 128 MiB a policy directory's safetensors file
+#: may have; 10**9 allocated hundreds of GB before the first check.
+MAX_CHECK_OBSERVATIONS = 100_000
 # MAX_NUM_ENVS (tether_gym's largest vector env) also bounds the counts that become one: a
 # trainer's envs, and the episodes of an evaluation, which run as one batch.
 

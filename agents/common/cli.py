@@ -22,7 +22,7 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
-from .checks import MAX_NUM_ENVS, MAX_TRAINING_SEED
+from .checks import MAX_CHECK_OBSERVATIONS, MAX_NUM_ENVS, MAX_TRAINING_SEED
 from .commands import PACKAGE, description, program
 from .data import PACKAGE_DIR
 
@@ -505,7 +505,7 @@ def convert_parser() -> argparse.ArgumentParser:
     parser.add_argument("--training-state", action="store_true", help="keep the optimizer states (for --resume)")
     parser.add_argument(
         "--check-observations",
-        type=int_at_least(16),
+        type=int_at_least(16, MAX_CHECK_OBSERVATIONS),
         default=512,
         help="observations on which the actions must be bit-identical (default 512)",
     )

@@ -19,7 +19,7 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 
-from ..common.checks import check_int
+from ..common.checks import MAX_CHECK_OBSERVATIONS, check_int
 from ..common.cli import REFERENCE_FILE
 from ..common.files import (
     atomic_directory,
@@ -69,7 +69,11 @@ class ConvertConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "source", Path(self.source))
         object.__setattr__(self, "destination", Path(self.destination))
-        object.__setattr__(self, "check_observations", check_int("check_observations", self.check_observations, 16))
+        object.__setattr__(
+            self,
+            "check_observations",
+            check_int("check_observations", self.check_observations, 16, MAX_CHECK_OBSERVATIONS),
+        )
 
 
 @holds_output_claims

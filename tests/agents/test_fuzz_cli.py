@@ -337,6 +337,22 @@ def test_any_command_line_reaches_the_work_or_is_refused_by_name(command: str, d
     pytest.fail(f"agents.{command} {tokens} returned without reaching its work")
 
 
+def test_a_conversion_checks_at_most_what_its_reference_file_can_hold() -> None:
+    """--check-observations 10**9 allocated hundreds of GB before the first check, and a large
+    count wrote a reference file above the 128 MiB its reader accepts."""
+    from agents.common.checks import MAX_CHECK_OBSERVATIONS
+    from agents.policies.conversion import ConvertConfig
+
+    parser = PARSERS["convert"]()
+    assert parser.parse_args(["a", "b", "--check-observations", str(MAX_CHECK_OBSERVATIONS)]).check_observations
+    stderr = io.StringIO()
+    with contextlib.redirect_stderr(stderr), pytest.raises(SystemExit):
+        parser.parse_args(["a", "b", "--check-observations", str(MAX_CHECK_OBSERVATIONS + 1)])
+    assert "--check-observations" in stderr.getvalue()
+    with pytest.raises(ValueError, match=f"check_observations must be an integer in 16..{MAX_CHECK_OBSERVATIONS}"):
+        ConvertConfig("a", "b", check_observations=10**9)
+
+
 def test_the_configs_bound_their_vector_env_counts_as_the_parsers_do(tmp_path: Any) -> None:
     """The same bound for callers from Python: each config (and ship) refuses the count by name."""
     from agents.common.checks import MAX_NUM_ENVS
