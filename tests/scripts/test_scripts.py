@@ -44,6 +44,16 @@ def test_benchmarks_run_in_quick_mode(script: str, tmp_path: Path) -> None:
     assert "substeps/s" in out or "drift" in out or "largest relative residual at 0.1" in out
 
 
+@pytest.mark.parametrize(
+    ("script", "last_row"),
+    [("benchmarks/tether_snaps.py", "  16   0.200  sagging   KV"), ("benchmarks/tether_cost.py", "   16    16")],
+)
+def test_tether_benchmarks_run_in_quick_mode(script: str, last_row: str) -> None:
+    out = run(script, "--quick")
+    assert last_row in out  # every case of the quick grid ran and printed its row
+    assert "nan" not in out.lower()
+
+
 def test_env_benchmark_runs() -> None:
     result = subprocess.run(
         [sys.executable, "-m", "tether_gym.bench", "--steps", "300", "--repeats", "1"],
