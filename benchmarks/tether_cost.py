@@ -19,7 +19,7 @@ compiles the kernels; the best of ``--repeats`` is shown (the machine is shared)
 
 Usage::
 
-    python benchmarks/tether_cost.py            # about a minute on two shared cores
+    python benchmarks/tether_cost.py            # about 30 s on two shared cores
     python benchmarks/tether_cost.py --quick    # N up to 16, batches 1 and 16
 """
 

@@ -28,7 +28,7 @@ opt-in, 0.3 and 0.5: the runaways), one ``BatchSimulator`` runs all cases of tha
 
 Usage::
 
-    python benchmarks/tether_snaps.py            # about 2 minutes on two shared cores
+    python benchmarks/tether_snaps.py            # about 30 s on two shared cores
     python benchmarks/tether_snaps.py --quick    # N up to 16, two factors, 2 s
 """
 
