@@ -117,12 +117,22 @@ class Controller:
 
     #: Short name used in tables and on the command line.
     name = "controller"
+    #: Whether the law runs on clusters whose tethers have mass (beads): it then sees the
+    #: satellites only, and no per-segment elongations.
+    supports_beads = False
 
     def __init__(self, env: Any) -> None:
         task = task_of(env)
         self.task = task
         self.cluster = task.cluster
-        n = self.cluster.num_nodes
+        if self.cluster.num_beads and not self.supports_beads:
+            raise ValueError(
+                f"{type(self).__name__} models every node and cable of the cluster, but this env's tethers have "
+                f"mass ({self.cluster.num_beads} beads, observed per tether); it does not run on tethers with mass "
+                "yet. Use a massless cluster (tether_mass=0) or a controller that supports beads (passive)"
+            )
+        # The observation holds the satellites only (the leading nodes); beads are not decoded.
+        n = self.cluster.num_satellites
         if task.observed.size != n:
             raise ValueError(
                 f"{type(self).__name__} needs every satellite observed; this env observes "
@@ -131,10 +141,9 @@ class Controller:
         self.num_nodes = n
         self.thrusters = task.thrusters
         self.max_thrust = task.max_thrust
-        self.masses = self.cluster.masses
-        self.nominal_relative = (
-            self.cluster.positions - (self.masses[:, None] * self.cluster.positions).sum(axis=0) / self.masses.sum()
-        )
+        self.masses = self.cluster.masses[:n]
+        satellites = self.cluster.positions[:n]
+        self.nominal_relative = satellites - (self.masses[:, None] * satellites).sum(axis=0) / self.masses.sum()
         self.control_interval = task.config.control_interval
         self.action_size = task.action_size
         self.observation_size = task.observation_size

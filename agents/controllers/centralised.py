@@ -38,6 +38,7 @@ class PassiveController(Controller):
     nominal shape)."""
 
     name = "passive"
+    supports_beads = True
 
     def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
         return np.zeros((positions.shape[0], self.thrusters.size, 3))

@@ -95,7 +95,12 @@ DISPLACEMENT_AT = 10
 VELOCITY_AT = 11
 ELONGATION_AT = 12
 TENSION_RATIO_AT = 13  # -1 when the tension ratios are not observed
-TASK_SETTINGS = 14
+# The leading nodes that are satellites (the rest are tether beads): only a satellite beyond the
+# deviation limit loses the formation, since a bead's whip is the vibration being damped.
+SATELLITES = 14
+# The leading cables observed one by one (the rest are tether segments, observed per tether).
+OBSERVED_CABLES = 15
+TASK_SETTINGS = 16
 
 #: Observations are clipped to +-this (it is reached only far beyond a lost formation).
 OBSERVATION_LIMIT = 1e4
@@ -246,10 +251,16 @@ def _deviation(
 
 @njit(inline="always", error_model="numpy")
 def _node_energies(
-    task_nodes: np.ndarray, nodes: np.ndarray, cluster: np.ndarray, motion: np.ndarray, centre: np.ndarray
+    task_nodes: np.ndarray,
+    nodes: np.ndarray,
+    cluster: np.ndarray,
+    motion: np.ndarray,
+    centre: np.ndarray,
+    satellites: int,
 ) -> tuple[float, float, float, float, float, float]:
     """``(kinetic_deformation, kinetic, bias_potential, frame_potential, shape_potential,
-    worst_deviation)`` of one cluster, J (the last in m): see :func:`evaluate_serial`."""
+    worst_deviation)`` of one cluster, J (the last in m, over the first ``satellites`` nodes;
+    the energies sum every node, beads included): see :func:`evaluate_serial`."""
     kinetic_deformation = 0.0
     kinetic = 0.0
     bias_potential = 0.0
@@ -283,7 +294,7 @@ def _node_energies(
             deviation = _deviation(task_nodes, nodes, motion, centre, i, d)
             deviation2 += deviation * deviation
         deviation_norm = math.sqrt(deviation2)
-        if deviation_norm > worst or not math.isfinite(deviation_norm):
+        if i < satellites and (deviation_norm > worst or not math.isfinite(deviation_norm)):
             worst = deviation_norm
     return kinetic_deformation, kinetic, bias_potential, frame_potential, shape_potential, worst
 
@@ -326,6 +337,7 @@ def _cable_terms(
     terminate_on_break = settings[TERMINATE_ON_BREAK] != 0.0
     elongation_at = np.int64(settings[ELONGATION_AT])
     tension_ratio_at = np.int64(settings[TENSION_RATIO_AT])
+    observed_cables = np.int64(settings[OBSERVED_CABLES])
     for c in range(topology.shape[0]):
         cable = cables[c]
         i, j = topology[c, 0], topology[c, 1]
@@ -333,7 +345,8 @@ def _cable_terms(
         dy = nodes[j, POSITION + 1] - nodes[i, POSITION + 1]
         dz = nodes[j, POSITION + 2] - nodes[i, POSITION + 2]
         elongation = math.sqrt(dx * dx + dy * dy + dz * dz) - cable[REST_LENGTH]
-        observation[elongation_at + c] = _bounded(elongation / settings[LENGTH_SCALE])
+        if c < observed_cables:
+            observation[elongation_at + c] = _bounded(elongation / settings[LENGTH_SCALE])
         elastic = cable[PRETENSION] + cable[STIFFNESS] * elongation
         if cable[INTACT] != 0.0 and elastic > 0.0:
             strain += 0.5 * elastic * elastic / cable[STIFFNESS]
@@ -341,7 +354,7 @@ def _cable_terms(
             slack += 1
         if terminate_on_break and cable[PEAK_TENSION] > cable[BREAKING_LOAD]:
             broken = True
-        if tension_ratio_at >= 0:
+        if tension_ratio_at >= 0 and c < observed_cables:
             observation[tension_ratio_at + c] = _bounded(cable[TENSION] / cable[BREAKING_LOAD])
     return strain, slack, broken
 
@@ -428,7 +441,7 @@ def _evaluate_cluster(
     _rigid_motion(nodes[:, POSITION : POSITION + 3], nodes[:, VELOCITY : VELOCITY + 3], nodes[:, MASS], motion)
     _nominal_centre(task_nodes, nodes, centre)
     kinetic_deformation, kinetic, bias_potential, frame_potential, shape_potential, worst = _node_energies(
-        task_nodes, nodes, cluster, motion, centre
+        task_nodes, nodes, cluster, motion, centre, np.int64(settings[SATELLITES])
     )
     observation = row[OBSERVATION_COLUMNS:]
     _observe_satellites(settings, observed, task_nodes, nodes, motion, centre, observation)

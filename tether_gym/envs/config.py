@@ -82,7 +82,8 @@ class ClusterScales:
     """The scales of a cluster that bound the task settings (SI units).
 
     Attributes:
-        shortest_cable, longest_cable: reference lengths L0 of the shortest and longest cable, m.
+        shortest_cable, longest_cable: reference lengths L0 of the shortest and longest cable, m
+            (a tether with beads counts as one cable of its whole length).
         critical_step: the simulator's estimated critical step at the nominal state at rest, s.
         damping_step: ``2 m / c`` of the most heavily damped satellite, s (inf without diagonal
             damping); the sub-step also respects it.
@@ -105,9 +106,14 @@ class ClusterScales:
         damping_step = math.inf
         if damped.any():
             damping_step = float((2.0 * cluster.masses[damped] / cluster.damping[damped]).min())
+        # A tether with beads counts as one line of its whole length, not as its segments.
+        lines = cluster.L0
+        if cluster.tethers:
+            plain = cluster.L0[: cluster.num_cables - sum(spec.segments for spec in cluster.tethers)]
+            lines = np.concatenate([plain, [float(spec.L0 or 0.0) for spec in cluster.tethers]])
         return cls(
-            shortest_cable=float(cluster.L0.min()),
-            longest_cable=float(cluster.L0.max()),
+            shortest_cable=float(lines.min()),
+            longest_cable=float(lines.max()),
             critical_step=float(probe.critical_time_step()[0]),
             damping_step=damping_step,
             max_substeps=probe.max_substeps,
@@ -417,14 +423,20 @@ class TaskConfig:
         """
         if not isinstance(cluster, Cluster):
             raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
-        n = cluster.num_nodes
+        n, S = cluster.num_nodes, cluster.num_satellites
         for name, indices in (("thrusters", self.thrusters), ("observed_satellites", self.observed_satellites)):
-            bad = [i for i in indices or () if i >= n]
+            bad = [i for i in indices or () if i >= S]
+            if bad and S < n:
+                named = ", ".join(cluster.node_label(i) if i < n else f"node {i} (beyond the cluster)" for i in bad)
+                raise EnvArgumentError(
+                    f"{name} {bad} are not satellites of this {S}-satellite cluster ({named}); thrusters and "
+                    f"observations sit on satellites only (valid: 0..{S - 1})"
+                )
             if bad:
                 raise EnvArgumentError(
                     f"{name} {bad} are not satellites of this {n}-satellite cluster (valid: 0..{n - 1})"
                 )
-        count = n if self.thrusters is None else len(self.thrusters)
+        count = S if self.thrusters is None else len(self.thrusters)
         if isinstance(self.max_thrust, tuple) and len(self.max_thrust) != count:
             raise EnvArgumentError(
                 f"max_thrust must be a scalar or one value per thruster ({count}); got {len(self.max_thrust)} values"

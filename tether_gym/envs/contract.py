@@ -25,6 +25,8 @@ __all__ = [
     "END_REASONS",
     "OBSERVATION_BLOCKS",
     "SCALARS",
+    "TETHER_FEATURES",
+    "TETHER_MODES",
     "EndReason",
     "ObservationBlock",
     "ObservationLayout",
@@ -135,7 +137,26 @@ class ObservationBlock:
         return 3 * satellites if self.per == "satellite" else cables
 
 
+#: Transverse sine modes of each tether with beads that the reset noise excites and the
+#: observation reports.
+TETHER_MODES = 3
+
+#: The entries of each tether's observation block (clusters with tethers only), in order, with
+#: their units: the tether's elongation (length along its beads minus its ``L0``, D), the tension
+#: of its first and last segment (in units of its pretension ``N0``), the fraction of its segments
+#: that are slack (1), and the magnitudes of its first ``TETHER_MODES`` transverse modal
+#: amplitudes ``(2/N) |sum_j u_j sin(k pi j / N)|``, ``u_j`` bead j's offset across the chord (D).
+TETHER_FEATURES: tuple[str, ...] = (
+    "elongation",
+    "tension_start",
+    "tension_end",
+    "slack_fraction",
+    *(f"mode_{k}" for k in range(1, TETHER_MODES + 1)),
+)
+
 #: The observation vector, in order.  The last block is present only with ``observe_tensions``.
+#: Clusters with tethers (beads) add, after these, ``len(TETHER_FEATURES)`` entries per tether
+#: (:attr:`ObservationLayout.tether`); their segments are not among the ``cable`` entries.
 OBSERVATION_BLOCKS: tuple[ObservationBlock, ...] = (
     ObservationBlock(
         "displacement", "satellite", "displacement of each observed satellite from its nominal place", "D"
@@ -156,21 +177,27 @@ class ObservationLayout:
 
     Attributes:
         satellites: s, the number of observed satellites.
-        cables: c, the number of cables.
+        cables: c, the number of cables observed one by one (a cluster's plain cables: a
+            tether's segments are observed per tether).
         tensions: whether the tension ratios are observed.
+        tethers: t, the number of tethers with a spec (0: none, and no tether block).
         displacement, velocity: slices of 3 s entries each, satellite k's x, y, z at 3 k + d.
         elongation: slice of c entries, one per cable.
         tension_ratio: slice of c entries, or an empty slice at the end without tensions.
+        tether: slice of ``len(TETHER_FEATURES)`` t entries at the end, tether k's feature f at
+            ``len(TETHER_FEATURES) k + f`` (empty without tethers).
         size: the observation's length.
     """
 
     satellites: int
     cables: int
     tensions: bool
+    tethers: int = 0
     displacement: slice = dataclasses.field(init=False)
     velocity: slice = dataclasses.field(init=False)
     elongation: slice = dataclasses.field(init=False)
     tension_ratio: slice = dataclasses.field(init=False)
+    tether: slice = dataclasses.field(init=False)
     size: int = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
@@ -180,7 +207,9 @@ class ObservationLayout:
             stop = start + (block.width(self.satellites, self.cables) if present else 0)
             object.__setattr__(self, block.name, slice(start, stop))
             start = stop
-        object.__setattr__(self, "size", start)
+        stop = start + len(TETHER_FEATURES) * self.tethers
+        object.__setattr__(self, "tether", slice(start, stop))
+        object.__setattr__(self, "size", stop)
 
     def satellite_values(self, observation: np.ndarray, block: str) -> np.ndarray:
         """The ``"displacement"`` or ``"velocity"`` entries of (..., size) observations, as

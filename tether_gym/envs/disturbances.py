@@ -144,10 +144,12 @@ class Disturbances:
     Args:
         disturbances, faults: the settings.
         num_clusters: B.
-        num_nodes: n, the satellites per cluster.
+        num_nodes: n, the nodes per cluster.
         thrusters: (k,) the satellites that carry a thruster.
         max_thrust: (k,) each thruster's largest force, N.
         control_interval: s.
+        num_satellites: S, the leading nodes that are satellites (default n): periodic forces and
+            impulses act on them only, never on a tether's beads.
 
     Attributes (the episodes' state, (B, ...) arrays):
         disturbance: (B, n, 3) the external disturbance force of the last interval, N.
@@ -183,6 +185,7 @@ class Disturbances:
         thrusters: np.ndarray,
         max_thrust: np.ndarray,
         control_interval: float,
+        num_satellites: int | None = None,
     ) -> None:
         self.config = disturbances
         self.faults = faults
@@ -194,8 +197,10 @@ class Disturbances:
         self.thruster_ok = np.ones((B, k), dtype=np.bool_)
         self.failure_time = np.full(B, np.inf)
         self.failing_thruster = np.zeros(B, dtype=np.int64)
-        self.periodic_direction = np.zeros((B, n, 3))
-        self.periodic_phase = np.zeros((B, n))
+        # External forces act on the satellites (the leading nodes), not on a tether's beads.
+        S = n if num_satellites is None else num_satellites
+        self.periodic_direction = np.zeros((B, S, 3))
+        self.periodic_phase = np.zeros((B, S))
         self.action_queue = np.zeros((B, disturbances.thrust_delay, 3 * k))
         self.draws = bool(
             disturbances.impulse_magnitude
@@ -268,12 +273,16 @@ class Disturbances:
         if config.periodic_amplitude:
             midpoint = time[clusters] + 0.5 * interval
             wave = np.sin(2.0 * math.pi * midpoint[:, None] / config.periodic_period + self.periodic_phase[clusters])
-            disturbance += difficulty * config.periodic_amplitude * wave[:, :, None] * self.periodic_direction[clusters]
+            S = self.periodic_phase.shape[1]
+            disturbance[:, :S] += (
+                difficulty * config.periodic_amplitude * wave[:, :, None] * self.periodic_direction[clusters]
+            )
         if config.impulse_magnitude:
             # Per cluster: whether a kick comes, which satellite, and a direction uniform on the sphere.
             draws = np.array([rngs[int(b)].random(4) for b in clusters]).reshape(-1, 4)
             kicked = np.flatnonzero(draws[:, 0] < 1.0 - math.exp(-config.impulse_rate * interval))
-            node = np.minimum((draws[kicked, 1] * n).astype(np.int64), n - 1)
+            S = self.periodic_phase.shape[1]
+            node = np.minimum((draws[kicked, 1] * S).astype(np.int64), S - 1)
             z = 2.0 * draws[kicked, 2] - 1.0
             azimuth = 2.0 * math.pi * draws[kicked, 3]
             radius = np.sqrt(1.0 - z * z)

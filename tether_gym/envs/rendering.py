@@ -27,6 +27,9 @@ ARROW_HEAD_FRACTION = 0.3
 ARROW_HEAD_ANGLE = math.radians(15.0)
 
 TAUT_COLOUR, SLACK_COLOUR, BROKEN_COLOUR, THRUST_COLOUR = "tab:blue", "tab:orange", "0.3", "tab:red"
+#: Marker size (points^2) and colour of a tether's beads.
+BEAD_SIZE = 4.0
+BEAD_COLOUR = "grey"
 
 #: The second line of the title, the key to the colours.
 KEY = "blue: taut, orange dashed: slack, grey dotted: broken, red: thrust"
@@ -126,10 +129,16 @@ class ClusterRenderer:
         self._broken = lines(colors=BROKEN_COLOUR, linewidths=1.5, linestyles=":")
         self._thrust = lines(colors=THRUST_COLOUR, linewidths=1.5)
         start = self.centre + self.nominal
+        # Satellites are sized by their mass ratio among the satellites; a tether's beads are
+        # small grey points along its line, so that heavy satellites do not hide the figure.
+        satellite_masses = cluster.masses[: cluster.num_satellites]
+        sizes = np.full(cluster.num_nodes, BEAD_SIZE)
+        sizes[: cluster.num_satellites] = 20.0 * satellite_masses / satellite_masses.min() + 20.0
+        colours: Any = "black" if not cluster.num_beads else np.where(cluster.is_bead, BEAD_COLOUR, "black").tolist()
         self._satellites: Any = ax.scatter(
             *start.T,
-            s=20.0 * cluster.masses / cluster.masses.min() + 20.0,
-            color="black",
+            s=sizes,
+            color=colours,
             depthshade=False,
             animated=animated,
         )

@@ -78,6 +78,7 @@ from tether_gym.envs.contract import (
     Scalar,
 )
 from tether_gym.envs.disturbances import Disturbances
+from tether_gym.envs.tethered import nominal_cluster, tether_features, tether_modes_noise
 from tether_gym.limits import MAX_COORDINATE, MAX_FORCE, MAX_SPEED, short_repr
 from tether_gym.simulator import (
     PARALLEL_MIN_BATCH,
@@ -391,8 +392,10 @@ class DampingTask:
         if not isinstance(config, TaskConfig):
             raise TypeError(f"config must be a TaskConfig; got {type(config).__name__}")
         num_clusters = check_whole("num_clusters", num_clusters, 1, MAX_NUM_ENVS)
+        cluster = nominal_cluster(cluster)
         self.scales = config.validate(cluster)
-        action_size = 3 * (cluster.num_nodes if config.thrusters is None else len(config.thrusters))
+        S = cluster.num_satellites
+        action_size = 3 * (S if config.thrusters is None else len(config.thrusters))
         delay_line = num_clusters * config.thrust_delay * action_size
         if delay_line > MAX_DELAY_LINE:
             raise EnvArgumentError(
@@ -405,19 +408,23 @@ class DampingTask:
         self.num_clusters = B = num_clusters
         n, m = cluster.num_nodes, cluster.num_cables
         self.sim = env_simulator(cluster, B, config.safety_factor, config.allow_unstable_safety_factor)
-        self.thrusters = np.arange(n) if config.thrusters is None else np.array(config.thrusters, dtype=np.int64)
-        self.observed = np.arange(n) if config.observed_satellites is None else np.array(config.observed_satellites)
+        self.thrusters = np.arange(S) if config.thrusters is None else np.array(config.thrusters, dtype=np.int64)
+        self.observed = np.arange(S) if config.observed_satellites is None else np.array(config.observed_satellites)
         self.max_thrust = np.broadcast_to(np.asarray(config.max_thrust, dtype=float), self.thrusters.shape).copy()
         self.action_size = 3 * self.thrusters.size
         self.max_deviation = (
-            0.3 * float(cluster.L0.min()) if config.max_deviation is None else float(config.max_deviation)
+            0.3 * self.scales.shortest_cable if config.max_deviation is None else float(config.max_deviation)
         )
         # Observation scales: displacements and elongations in units of the initial displacement,
         # velocities in units of the initial velocity; a zero scale (exact resets only) falls back
-        # to 0.1 % of the shortest cable and 1 mm/s.
-        self.length_scale = config.initial_displacement or 1e-3 * float(cluster.L0.min())
+        # to 0.1 % of the shortest cable (or tether) and 1 mm/s.
+        self.length_scale = config.initial_displacement or 1e-3 * self.scales.shortest_cable
         self.speed_scale = config.initial_velocity or 1e-3
-        self.observation_layout = layout = ObservationLayout(self.observed.size, m, config.observe_tensions)
+        # A tether's segments are observed per tether (the last block), not one by one.
+        self.observed_cables = m - sum(spec.segments for spec in cluster.tethers)
+        self.observation_layout = layout = ObservationLayout(
+            self.observed.size, self.observed_cables, config.observe_tensions, cluster.num_tethers
+        )
         self.observation_size = layout.size
         tk = _task_kernels
         self.task_node_table = np.zeros((B, n, tk.TASK_NODE_COLUMNS))
@@ -446,6 +453,8 @@ class DampingTask:
             (tk.VELOCITY_AT, layout.velocity.start),
             (tk.ELONGATION_AT, layout.elongation.start),
             (tk.TENSION_RATIO_AT, layout.tension_ratio.start if layout.tensions else -1),
+            (tk.SATELLITES, S),
+            (tk.OBSERVED_CABLES, self.observed_cables),
         ):
             self.task_settings[column] = value
         self.energy_scale = self._energy_scale()
@@ -454,7 +463,7 @@ class DampingTask:
         self.propellant = np.zeros(B)
         # Disturbances and faults: what each cluster's episode holds, drawn at its reset.
         self.disturbances = Disturbances(
-            config.disturbances, config.faults, B, n, self.thrusters, self.max_thrust, config.control_interval
+            config.disturbances, config.faults, B, n, self.thrusters, self.max_thrust, config.control_interval, S
         )
         self.end_reason = np.zeros(B, dtype=np.int64)
         self._all = np.ones(B, dtype=np.bool_)
@@ -467,7 +476,10 @@ class DampingTask:
         """Cluster ``index`` gets ``cluster``'s parameters, and the bias thrust holding its shape
         at rest in its frame (zero, to round-off, for shapes held by spin or gravity gradient)."""
         self.sim.set_cluster(index, cluster, reset=False)
-        self.bias[index] = self.sim.equilibrium_force(cluster.positions[None], indices=[index])[0]
+        bias = self.sim.equilibrium_force(cluster.positions[None], indices=[index])[0]
+        # Beads carry no thrusters: at the nominal (equilibrium) shape their force is round-off.
+        bias[cluster.num_satellites :] = 0.0
+        self.bias[index] = bias
         tension = np.maximum(cluster.N0, 0.0)
         self.nominal_strain_energy[index] = float((0.5 * tension**2 / cluster.stiffness).sum())
 
@@ -523,6 +535,17 @@ class DampingTask:
             self.end_reason,
             parallel=self.num_clusters >= PARALLEL_MIN_BATCH,
         )
+        if self.observation_layout.tethers:
+            self._observe_tethers()
+
+    def _observe_tethers(self) -> None:
+        """Write each tether's observation block (see :data:`~tether_gym.envs.contract.TETHER_FEATURES`)
+        into the observation of every cluster, from the simulator's current state."""
+        sim, cluster = self.sim, self.cluster
+        features = tether_features(cluster, sim.positions, sim.tension, sim.broken, self.length_scale)
+        start = _task_kernels.OBSERVATION_COLUMNS + self.observation_layout.tether.start
+        block = np.clip(features.reshape(self.num_clusters, -1), -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
+        self.task_cluster_table[:, start : start + block.shape[1]] = block
 
     #: The name :meth:`evaluate` had before it was public (kept for existing callers).
     _evaluate = evaluate
@@ -633,8 +656,17 @@ class DampingTask:
         n = self.cluster.num_nodes
         shape = (count, n, 3)
         scale = self.difficulty if difficulty is None else difficulty
-        displacement = scale * self.config.initial_displacement * rng.standard_normal(shape)
-        velocity = scale * self.config.initial_velocity * rng.standard_normal(shape)
+        if self.cluster.num_beads:
+            displacement, velocity = tether_modes_noise(
+                self.cluster,
+                rng,
+                count,
+                scale * self.config.initial_displacement,
+                scale * self.config.initial_velocity,
+            )
+        else:
+            displacement = scale * self.config.initial_displacement * rng.standard_normal(shape)
+            velocity = scale * self.config.initial_velocity * rng.standard_normal(shape)
         masses = self.cluster.masses[None, :, None]
         displacement -= (masses * displacement).sum(axis=1, keepdims=True) / masses.sum(axis=1, keepdims=True)
         x0 = self.cluster.positions[None] + displacement
@@ -693,10 +725,13 @@ class DampingTask:
                     f"got {float(np.abs(values).max()):.3g} {unit}"
                 )
         if positions is not None:
-            deviation = float(np.linalg.norm(positions - self.cluster.positions, axis=-1).max())
+            distances = np.linalg.norm(positions - self.cluster.positions, axis=-1)
+            deviation = float(distances.max())
             if not deviation <= scales.deviation_limit:
+                node = int(np.nanargmax(np.where(np.isnan(distances), np.inf, distances)) % n)
+                what = "a satellite" if not self.cluster.num_beads else self.cluster.node_label(node)
                 raise EnvArgumentError(
-                    f"reset option 'positions' puts a satellite {deviation:.3g} m from its nominal place; the "
+                    f"reset option 'positions' puts {what} {deviation:.3g} m from its nominal place; the "
                     f"limit is {scales.deviation_limit:.3g} m ({MAX_RESET_DEVIATION_CABLES:g} lengths of the "
                     "longest cable).  Positions are in the cluster's frame, m; the nominal shape is "
                     "env.unwrapped.cluster.positions"
@@ -707,7 +742,8 @@ class DampingTask:
             if short.any():
                 c = int(np.argwhere(short)[0, 1])
                 raise EnvArgumentError(
-                    f"reset option 'positions' puts satellites {tuple(cables[c].tolist())}, the ends of cable "
+                    f"reset option 'positions' puts {' and '.join(map(self.cluster.node_label, cables[c].tolist()))}, "
+                    f"the ends of cable "
                     f"{c}, on top of each other ({float(lengths[short][0]):.3g} m apart); a cable's direction, and "
                     "so its force, needs distinct end positions"
                 )
@@ -800,6 +836,8 @@ class DampingTask:
                 (self.task_node_table, self.task_cluster_table, self.propellant, self.end_reason),
                 self._no_record,
             )
+            if self.observation_layout.tethers:
+                self._observe_tethers()
             return
         if rngs is None:
             raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")

@@ -189,7 +189,10 @@ class AgentGraph:
             neighbours[a, : mine.size] = np.where(ends[mine, 0] == i, ends[mine, 1], ends[mine, 0])
         heard: list[list[int]] = [[] for _ in nodes]
         if communication.hops is not None:
-            hops = _hop_counts(cluster.num_nodes, ends)
+            # A tether with beads is one hop between its satellites, not one per segment.
+            plain = ends[: cluster.num_cables - sum(spec.segments for spec in cluster.tethers)]
+            lines = np.array([spec.ends for spec in cluster.tethers], dtype=np.int64).reshape(-1, 2)
+            hops = _hop_counts(cluster.num_nodes, np.concatenate([plain, lines]) if cluster.tethers else ends)
             heard = [
                 [b for b, j in enumerate(nodes) if b != a and hops[i, j] <= communication.hops]
                 for a, i in enumerate(nodes)
