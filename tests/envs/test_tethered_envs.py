@@ -256,3 +256,17 @@ def test_fuzz_beaded_envs_keep_the_satellite_roles(preset: str, segments: int, t
         obs, reward, terminated, truncated, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert np.isfinite(obs).all() and np.isfinite(reward)
         assert not terminated, info
+
+
+def test_scripted_controllers_on_beads() -> None:
+    # The passive law runs on the satellites; a law that models every node and cable refuses
+    # a beaded cluster by name instead of failing inside numpy.
+    from agents.controllers.centralised import LQRController, PassiveController
+
+    env = _beaded()
+    observation, _ = env.reset(seed=0)
+    passive = PassiveController(env)
+    action, _ = passive.predict(observation)
+    assert action.shape == env.action_space.shape and not action.any()
+    with pytest.raises(ValueError, match="LQRController.*tethers have mass"):
+        LQRController(env)
