@@ -270,3 +270,23 @@ def test_scripted_controllers_on_beads() -> None:
     assert action.shape == env.action_space.shape and not action.any()
     with pytest.raises(ValueError, match="LQRController.*tethers have mass"):
         LQRController(env)
+
+
+def test_only_a_satellite_beyond_max_deviation_loses_the_formation() -> None:
+    env = _beaded("TetherChain-v0", segments=4, max_deviation=0.5)
+    cluster = env.unwrapped.task.cluster
+    S = cluster.num_satellites
+    zero = np.zeros(env.action_space.shape, dtype=np.float32)
+    # A bead bowed 1 m across its line (beyond max_deviation) is vibration, not a lost formation.
+    bowed = cluster.positions.copy()
+    bowed[cluster.tether_beads(0)[1], 1] += 1.0
+    env.reset(seed=0, options={"positions": bowed})
+    _, _, terminated, _, info = env.step(zero)
+    assert not terminated and info["max_deviation"] < 0.5, info
+    # The same 1 m on a satellite loses it.
+    moved = cluster.positions.copy()
+    moved[S - 1, 1] += 1.0
+    moved[cluster.tether_beads(cluster.num_tethers - 1), 1] += np.arange(1, 4) / 4  # keep its line straight
+    env.reset(seed=0, options={"positions": moved})
+    _, _, terminated, _, info = env.step(zero)
+    assert terminated and info["end_reason"] == "formation_lost"
