@@ -246,7 +246,7 @@ def train_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--eval-episodes",
-        type=int_at_least(2),
+        type=int_at_least(2, MAX_NUM_ENVS),
         default=32,
         help="evaluation episodes, the same seeds (1 000 000 up) at every evaluation (default 32; at least 2, "
         "for the interval of the paired difference)",
@@ -310,7 +310,7 @@ def train_rllib_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--eval-episodes",
-        type=int_at_least(2),
+        type=int_at_least(2, MAX_NUM_ENVS),
         default=32,
         help="evaluation episodes (seeds 1 000 000 up; default 32; at least 2, for the paired difference's interval)",
     )

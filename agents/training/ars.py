@@ -46,7 +46,7 @@ import numpy as np
 
 from tether_gym._optional import needs_extra, require
 
-from ..common.checks import check_int
+from ..common.checks import MAX_NUM_ENVS, check_int
 from ..common.commands import command_line
 from ..common.data import HYPERPARAMS_DIR
 from ..common.files import atomic_directory, atomic_write_text, holds_output_claims
@@ -123,7 +123,9 @@ class ARSSettings:
         for name in (*names, "eval_episodes", "normalization_episodes"):
             least = 1 if name in names else 2  # 2: a spread, an interval
             # Stored as a plain int (a numpy integer passes the check), so that config.yml can hold it.
-            object.__setattr__(self, name, check_int(f"ars setting {name}", getattr(self, name), least))
+            # The evaluation and normalisation episodes run as one vector env: at most MAX_NUM_ENVS.
+            most = None if name in names else MAX_NUM_ENVS
+            object.__setattr__(self, name, check_int(f"ars setting {name}", getattr(self, name), least, most))
         if self.top > self.directions:
             raise ValueError(f"ars setting top ({self.top}) must be <= directions ({self.directions})")
         for name in ("exploration", "step_size"):

@@ -86,7 +86,7 @@ class TrainConfig:
         # Two evaluation episodes at least: each evaluation's paired difference has a t interval.
         minimums = {"seed": 0, "eval_freq": 1, "eval_episodes": 2, "checkpoint_freq": 1, "verbose": 0}
         for name, minimum in minimums.items():
-            maximum = MAX_TRAINING_SEED if name == "seed" else None
+            maximum = {"seed": MAX_TRAINING_SEED, "eval_episodes": MAX_NUM_ENVS}.get(name)
             object.__setattr__(self, name, check_int(name, getattr(self, name), minimum, maximum))
         for name in ("timesteps", "num_envs"):
             if getattr(self, name) is not None:

@@ -625,7 +625,7 @@ class RLlibConfig:
         ):
             if name not in optional or getattr(self, name) is not None:
                 # Stored as a plain int (a numpy integer passes the check), so that config.yml can hold it.
-                maximum = MAX_TRAINING_SEED if name == "seed" else None
+                maximum = {"seed": MAX_TRAINING_SEED, "eval_episodes": MAX_NUM_ENVS}.get(name)
                 object.__setattr__(self, name, check_int(name, getattr(self, name), minimum, maximum))
         if self.num_cpus is not None and self.address is not None:
             raise ValueError(

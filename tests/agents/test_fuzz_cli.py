@@ -177,7 +177,7 @@ def test_a_count_that_becomes_a_vector_env_is_bounded_by_the_largest_one(command
     from agents.common.checks import MAX_NUM_ENVS
 
     parser = PARSERS[command]()
-    options = [o for o in ("--n-envs", "--envs-per-runner", "--episodes") if o in options_of(parser)]
+    options = [o for o in ("--n-envs", "--envs-per-runner", "--episodes", "--eval-episodes") if o in options_of(parser)]
     for option in options:
         action = next(a for a in parser._actions if option in a.option_strings)
         assert action.type is not None and action.type(str(MAX_NUM_ENVS)) == MAX_NUM_ENVS

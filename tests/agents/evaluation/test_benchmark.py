@@ -158,7 +158,7 @@ def test_the_config_keeps_checked_values_and_is_frozen() -> None:
     for settings, message in [
         ({"env_ids": ["Nope-v0"]}, r"env_ids \(--envs\): unknown \['Nope-v0'\]"),
         ({"controllers": ["lqr", "lqr"]}, r"controllers lists \['lqr'\] more than once"),
-        ({"episodes": 1}, "episodes must be an integer >= 2; got 1"),
+        ({"episodes": 1}, "episodes must be an integer in 2..100000; got 1"),
         ({"bootstrap_reps": 99}, "bootstrap_reps must be an integer >= 100; got 99"),
     ]:
         with pytest.raises(ValueError, match=message):

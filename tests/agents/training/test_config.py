@@ -21,8 +21,8 @@ from agents.training.config import TrainConfig
         # numpy's legacy seeding (SB3's) takes seeds below 2**32: this failed after the run directory was made.
         ({"seed": 2**32}, "seed must be an integer in 0..2147483647; got 4294967296"),
         ({"eval_freq": 0}, "eval_freq must be an integer >= 1; got 0"),
-        ({"eval_episodes": 1.5}, "eval_episodes must be an integer >= 2; got 1.5"),
-        ({"eval_episodes": 1}, "eval_episodes must be an integer >= 2; got 1"),
+        ({"eval_episodes": 1.5}, "eval_episodes must be an integer in 2..100000; got 1.5"),
+        ({"eval_episodes": 1}, "eval_episodes must be an integer in 2..100000; got 1"),
         ({"checkpoint_freq": "10"}, "checkpoint_freq must be an integer >= 1; got '10'"),
         ({"verbose": -1}, "verbose must be an integer >= 0; got -1"),
         ({"timesteps": 0}, "timesteps must be an integer >= 1; got 0"),

@@ -25,7 +25,7 @@ ENV_ID = "TetherTetrahedron-v0"
         ({"seed": 2**32}, "seed must be an integer in 0..2147483647; got 4294967296"),
         ({"num_env_runners": -1}, "num_env_runners must be an integer >= 0"),
         ({"eval_freq": 0}, "eval_freq must be an integer >= 1"),
-        ({"eval_episodes": 2.0}, "eval_episodes must be an integer >= 2; got 2.0"),
+        ({"eval_episodes": 2.0}, "eval_episodes must be an integer in 2..100000; got 2.0"),
         ({"checkpoint_freq": True}, "checkpoint_freq must be an integer >= 1; got True"),
         ({"timesteps": 0}, "timesteps must be an integer >= 1"),
         ({"envs_per_runner": 0}, "envs_per_runner must be an integer >= 1"),
