@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike
 from tether_gym.cluster import Cluster, ClusterError
 from tether_gym.frames import LEO_ORBIT_RATE, Frame, FrameError
 from tether_gym.limits import is_real_number, is_whole_number, short_repr, to_float
-from tether_gym.tethers import Tether, TetherError, build_cluster
+from tether_gym.tethers import Tether, TetherError, build_cluster, frame_held
 
 __all__ = ["MAX_SATELLITES", "PRESETS", "TetherSpec", "make_cluster", "preset_names"]
 
@@ -173,9 +173,14 @@ class TetherSpec:
                 )
                 for c, (a, b) in enumerate(ends)
             ]
-            return build_cluster(
-                sat_positions, sat_masses, tethers, damping=self.damping_rate * sat_masses, frame=frame, name=name
+            cluster = build_cluster(
+                sat_positions, sat_masses, tethers, damping=self.damping_rate * sat_masses, name=name
             )
+            if frame is None or frame.is_inertial:
+                return cluster
+            # In a turning frame the frame's load alone holds the formation, its lines included: the
+            # lines hang on the funicular of their own load, tensioned so that the bias thrust is 0.
+            return frame_held(cluster.replace(frame=frame))
         except TetherError as error:
             raise ClusterError(f"tether_mass={short_repr(mass)}, segments={self.segments}: {error}") from None
 

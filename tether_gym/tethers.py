@@ -57,6 +57,7 @@ __all__ = [
     "StaticEquilibrium",
     "TetherResults",
     "build_cluster",
+    "frame_held",
     "static_equilibrium",
     "tether_results",
 ]
@@ -547,3 +548,155 @@ def static_equilibrium(
         f"static_equilibrium did not converge in {max_iterations} iterations: a force of {residual:.3g} N is left "
         "on a bead; a slack tether has no equilibrium (raise its N0), or allow more iterations"
     )
+
+
+def _funicular(
+    t: int, spec: Tether, start: np.ndarray, end: np.ndarray, tidal: np.ndarray, level: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Tether ``t``'s lumped line in equilibrium under the frame's load ``m_b diag(tidal) x`` on
+    its beads, between satellites held at ``start`` and ``end`` (m), with equal segment lengths
+    and mean segment tension ``level`` (N).
+
+    Returns ``(nodes, forces)``: (N + 1, 3) the line's nodes from ``start`` to ``end``, m, and
+    (N, 3) each segment's pull ``T_k e_k`` on its first node, N.  Newton's method on the first
+    segment's pull and the segment length, with a finite-difference Jacobian (4 unknowns).
+    """
+    N, bead_mass = spec.segments, spec.bead_mass
+    chord = end - start
+    length = float(np.linalg.norm(chord))
+
+    def line(unknowns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        nodes, forces = np.empty((N + 1, 3)), np.empty((N, 3))
+        nodes[0], force, step = start, unknowns[:3].copy(), unknowns[3]
+        for k in range(N):
+            forces[k] = force
+            nodes[k + 1] = nodes[k] + step * force / np.linalg.norm(force)
+            force = force - bead_mass * tidal * nodes[k + 1]  # bead k+1: F_k = F_{k-1} - m_b diag(T) x
+        return nodes, forces
+
+    def residual(unknowns: np.ndarray) -> np.ndarray:
+        nodes, forces = line(unknowns)
+        miss = (nodes[-1] - end) / length
+        return np.append(miss, np.linalg.norm(forces, axis=1).mean() / level - 1.0)
+
+    straight = start + (np.arange(1, N) / N)[:, None] * chord
+    load = (bead_mass * tidal * straight).sum(axis=0)
+    unknowns = np.append(level * chord / length + 0.5 * load, length / N)
+    scale = np.array([level, level, level, length / N])
+    for _ in range(60):
+        error = residual(unknowns)
+        if np.abs(error).max() <= 1e-14:
+            break
+        jacobian = np.empty((4, 4))
+        for j in range(4):
+            shifted = unknowns.copy()
+            shifted[j] += 1e-7 * scale[j]
+            jacobian[:, j] = (residual(shifted) - error) / (1e-7 * scale[j])
+        unknowns = unknowns - np.linalg.lstsq(jacobian, error, rcond=None)[0]
+    else:
+        raise TetherError(
+            f"tether {t} ({spec.label}): no equilibrium shape at a mean tension of {level:.4g} N under the frame's "
+            "load on its mass (the line would sag without bound); raise its pretension or lower its mass"
+        )
+    nodes, forces = line(unknowns)
+    nodes[-1] = end
+    return nodes, forces
+
+
+def frame_held(cluster: Any, *, tolerance: float = 1e-12, max_iterations: int = 40) -> Any:
+    """The cluster with its tethers shaped and tensioned so that its frame's load alone holds it.
+
+    In a turning frame (Hill, spinning) the frame's load ``m diag(T) x`` pulls on the satellites
+    and on the tethers' beads.  Each tether is put on the funicular of the load on its own mass
+    (its beads in static equilibrium, segments of equal length; a rim line of a spinning formation
+    bows outward), and each segment's ``L0`` and ``N0`` become its length and tension on that
+    shape, so the nominal shape is in equilibrium at the segments' reference lengths.  A tether's
+    pretension (its spec's ``N0``) is then its mean segment tension along the funicular; the
+    pretensions are the cluster's own ones plus the smallest (least-squares) change that lets the
+    frame's load alone hold every satellite, including the satellites' share of their tethers'
+    load, so the bias thrust ``f_int(nominal)`` of the satellites vanishes to round-off wherever
+    the frame alone can hold the shape.  The satellites stay where they are; plain cables keep
+    their ``N0``.  Without beads or in an inertial frame the cluster is returned unchanged.
+
+    Args:
+        cluster: a :class:`~tether_gym.cluster.Cluster` from :func:`build_cluster`.
+        tolerance: stop when the largest force left on a satellite is below ``tolerance`` times the
+            largest load of the frame on one (N/N).
+        max_iterations: Gauss-Newton iterations on the pretensions.
+
+    Raises:
+        TetherError: no tension level lets a tether hang in the frame's load (naming it), or the
+            frame cannot hold the satellites (the shape needs thrust: not a turning-frame formation).
+    """
+    if not cluster.num_beads or cluster.frame.is_inertial:
+        return cluster
+    tidal = cluster.frame.tidal
+    S, tethers = cluster.num_satellites, cluster.tethers
+    x = cluster.positions
+    masses = cluster.masses[:S]
+    frame_load = masses[:, None] * tidal * x[:S]  # (S, 3) N
+    plain = cluster.num_cables - sum(spec.segments for spec in tethers)
+    for c in range(plain):
+        i, j = cluster.cables[c]
+        pull = cluster.N0[c] * (x[j] - x[i]) / np.linalg.norm(x[j] - x[i])
+        frame_load[i] += pull
+        frame_load[j] -= pull
+    scale = max(float(np.abs(masses[:, None] * tidal * x[:S]).max()), 1e-300)
+
+    def end_forces(t: int, level: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        a, b = tethers[t].ends
+        nodes, forces = _funicular(t, tethers[t], x[a], x[b], tidal, level)
+        return nodes, forces, np.stack([forces[0], -forces[-1]])
+
+    levels = np.array([spec.N0 for spec in tethers], dtype=np.float64)
+    for t, spec in enumerate(tethers):
+        if levels[t] <= 0.0:  # a line without pretension still needs some tension to hang in the load
+            beads = x[a := spec.ends[0]] + (np.arange(1, spec.segments) / spec.segments)[:, None] * (
+                x[spec.ends[1]] - x[a]
+            )
+            own_load = float(np.linalg.norm((spec.bead_mass * tidal * beads).sum(axis=0)))
+            levels[t] = max(own_load, 1e-6 * max(float(levels.max()), 1e-300))
+    weights = levels.copy()  # changes are measured relative to each line's own pretension
+    for iteration in range(max_iterations + 1):
+        net = frame_load.copy()
+        slopes = np.zeros((3 * S, len(tethers)))
+        for t, spec in enumerate(tethers):
+            a, b = spec.ends
+            pulls = end_forces(t, levels[t])[2]
+            net[a] += pulls[0]
+            net[b] += pulls[1]
+            if iteration < max_iterations:
+                h = 1e-7 * max(levels[t], 1e-3)
+                slope = (end_forces(t, levels[t] + h)[2] - pulls) / h
+                slopes[3 * a : 3 * a + 3, t] = slope[0]
+                slopes[3 * b : 3 * b + 3, t] = slope[1]
+        if np.abs(net).max() <= tolerance * scale:
+            break
+        if iteration == max_iterations:
+            raise TetherError(
+                f"the frame's load cannot hold the satellites of cluster {cluster.name!r} on their tethers alone: "
+                f"a force of {np.abs(net).max():.3g} N is left on a satellite after {max_iterations} iterations "
+                "(a shape the frame does not hold needs thrust)"
+            )
+        levels = levels - weights * np.linalg.lstsq(slopes * weights, net.ravel(), rcond=None)[0]
+        if not (levels > 0.0).all():
+            raise TetherError(
+                f"the frame's load would leave tether {int(np.argmin(levels))} of cluster {cluster.name!r} without "
+                "tension: the satellites cannot be held by the frame alone on these tethers"
+            )
+    positions = x.copy()
+    L0, N0 = cluster.L0.copy(), cluster.N0.copy()
+    specs = []
+    for t, spec in enumerate(tethers):
+        nodes, forces, _ = end_forces(t, levels[t])
+        positions[cluster.tether_beads(t)] = nodes[1:-1]
+        segments = cluster.tether_cables(t)
+        L0[segments] = np.linalg.norm(np.diff(nodes, axis=0), axis=1)
+        N0[segments] = np.linalg.norm(forces, axis=1)
+        if N0[segments].max() >= spec.EA:
+            raise TetherError(
+                f"tether {t} ({spec.label}): holding its satellites in the frame needs {N0[segments].max():.4g} N, "
+                f"not below its EA={spec.EA:g} N; raise EA or lower the load"
+            )
+        specs.append(dataclasses.replace(spec, N0=float(levels[t]), L0=float(L0[segments].sum())))
+    return cluster.replace(positions=positions, L0=L0, N0=N0, tethers=tuple(specs))
