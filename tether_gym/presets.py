@@ -117,7 +117,9 @@ class TetherSpec:
         ``tether_mass`` > 0 every cable is a :class:`~tether_gym.tethers.Tether` of that mass in
         ``segments`` segments, expanded by :func:`~tether_gym.tethers.build_cluster` (the
         satellites' diagonal damping stays ``damping_rate`` times their own masses, before the
-        tethers' lumped mass is added)."""
+        tethers' lumped mass is added).  In a turning frame the tethers are then put on the
+        funicular of the frame's load and tensioned so that the frame alone holds the satellites
+        (:func:`~tether_gym.tethers.frame_held`)."""
         if self.tether_mass != 0.0 or self.segments != 1:
             return self._beaded_cluster(name, positions, cables, masses, **options)
         return Cluster(
@@ -396,6 +398,11 @@ def radial_chain(
     The defaults (50 kg satellites 500 m apart in 400 km LEO) give about 0.1 N: such tethers are
     barely taut, and slack easily.
 
+    With ``tether_mass > 0`` the lines hang on the funicular of the frame's load on their own
+    mass and their pretensions are set so that the frame alone still holds the satellites
+    (:func:`~tether_gym.tethers.frame_held`: zero bias thrust, a line's pretension being its
+    mean segment tension).
+
     Args:
         n: number of satellites, >= 2.
         spacing: cable length, m.
@@ -456,6 +463,11 @@ def spinning_triangle(
     needs the centripetal force ``m W^2 edge / sqrt(3)``, which its two cables supply with the
     tension ``N = m W^2 edge / 3`` (1.2 N by default, a 105 s spin period).
 
+    With ``tether_mass > 0`` the lines hang on the funicular of the frame's load on their own
+    mass and their pretensions are set so that the frame alone still holds the satellites
+    (:func:`~tether_gym.tethers.frame_held`: zero bias thrust, a line's pretension being its
+    mean segment tension).
+
     Args:
         edge: cable length, m.
         mass: mass of each satellite, kg.
@@ -515,6 +527,11 @@ def spinning_hub(
     ``m W^2 R``; a share ``rim_share`` of it comes from the two rim cables to its neighbours
     (tension ``rim_share m W^2 R / (2 sin(pi / spokes))``), the rest from its spoke.  With the
     defaults the spokes carry 1.9 N and the rim cables 0.6 N; the spin period is 126 s.
+
+    With ``tether_mass > 0`` the lines hang on the funicular of the frame's load on their own
+    mass and their pretensions are set so that the frame alone still holds the satellites
+    (:func:`~tether_gym.tethers.frame_held`: zero bias thrust, a line's pretension being its
+    mean segment tension).
 
     Args:
         spokes: number of outer satellites, >= 3.

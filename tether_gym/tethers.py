@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal
 
 import numpy as np
@@ -592,7 +592,16 @@ def _funicular(
             shifted = unknowns.copy()
             shifted[j] += 1e-7 * scale[j]
             jacobian[:, j] = (residual(shifted) - error) / (1e-7 * scale[j])
-        unknowns = unknowns - np.linalg.lstsq(jacobian, error, rcond=None)[0]
+        step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
+        # Backtrack: far from the solution a full step can fold the line past its funicular.
+        for _ in range(30):
+            trial = unknowns - step
+            if np.abs(trial[:3]).max() > 0.0 and trial[3] > 0.0:
+                trial_error = residual(trial)
+                if np.isfinite(trial_error).all() and np.abs(trial_error).max() < np.abs(error).max():
+                    break
+            step = 0.5 * step
+        unknowns = trial
     else:
         raise TetherError(
             f"tether {t} ({spec.label}): no equilibrium shape at a mean tension of {level:.4g} N under the frame's "
@@ -601,6 +610,41 @@ def _funicular(
     nodes, forces = line(unknowns)
     nodes[-1] = end
     return nodes, forces
+
+
+def _starting_levels(tethers: Sequence[Tether], x: np.ndarray, tidal: np.ndarray) -> np.ndarray:
+    """(T,) the tethers' pretensions, N, where :func:`frame_held` starts: each spec's ``N0``, or
+    for a line without pretension the frame's load on its own mass (it needs some tension to hang)."""
+    levels = np.array([spec.N0 for spec in tethers], dtype=np.float64)
+    for t, spec in enumerate(tethers):
+        if levels[t] <= 0.0:
+            a, b = spec.ends
+            beads = x[a] + (np.arange(1, spec.segments) / spec.segments)[:, None] * (x[b] - x[a])
+            own_load = float(np.linalg.norm((spec.bead_mass * tidal * beads).sum(axis=0)))
+            levels[t] = max(own_load, 1e-6 * max(float(levels.max()), 1e-300))
+    return levels
+
+
+def _damped_step(
+    name: str, count: int, levels: np.ndarray, change: np.ndarray, hang: Callable[[int, float], Any]
+) -> np.ndarray:
+    """``levels - change`` (N), the change halved until every one of the ``count`` lines has a
+    funicular (``hang(t, level)`` raises :class:`TetherError` for a line too slack for its own
+    load) and keeps some tension."""
+    for _ in range(30):
+        trial = levels - change
+        if (trial > 0.0).all():
+            try:
+                for t in range(count):
+                    hang(t, trial[t])
+                return trial
+            except TetherError:
+                pass
+        change = 0.5 * change
+    raise TetherError(
+        f"the frame's load cannot hold the satellites of cluster {name!r} on their tethers alone: no tension "
+        "level lets every line hang in the frame's load (lighter lines or a slower turn)"
+    )
 
 
 def frame_held(cluster: Any, *, tolerance: float = 1e-12, max_iterations: int = 40) -> Any:
@@ -648,15 +692,11 @@ def frame_held(cluster: Any, *, tolerance: float = 1e-12, max_iterations: int = 
         nodes, forces = _funicular(t, tethers[t], x[a], x[b], tidal, level)
         return nodes, forces, np.stack([forces[0], -forces[-1]])
 
-    levels = np.array([spec.N0 for spec in tethers], dtype=np.float64)
-    for t, spec in enumerate(tethers):
-        if levels[t] <= 0.0:  # a line without pretension still needs some tension to hang in the load
-            beads = x[a := spec.ends[0]] + (np.arange(1, spec.segments) / spec.segments)[:, None] * (
-                x[spec.ends[1]] - x[a]
-            )
-            own_load = float(np.linalg.norm((spec.bead_mass * tidal * beads).sum(axis=0)))
-            levels[t] = max(own_load, 1e-6 * max(float(levels.max()), 1e-300))
+    levels = _starting_levels(tethers, x, tidal)
     weights = levels.copy()  # changes are measured relative to each line's own pretension
+    # Each step aims at the least total change from the starting levels (relative to each) that
+    # zeroes the linearised forces: where the formation is statically indeterminate (the spinning
+    # hub's spokes and rim) this picks one answer, independent of the path and of the mesh.
     for iteration in range(max_iterations + 1):
         net = frame_load.copy()
         slopes = np.zeros((3 * S, len(tethers)))
@@ -665,12 +705,16 @@ def frame_held(cluster: Any, *, tolerance: float = 1e-12, max_iterations: int = 
             pulls = end_forces(t, levels[t])[2]
             net[a] += pulls[0]
             net[b] += pulls[1]
-            if iteration < max_iterations:
-                h = 1e-7 * max(levels[t], 1e-3)
-                slope = (end_forces(t, levels[t] + h)[2] - pulls) / h
-                slopes[3 * a : 3 * a + 3, t] = slope[0]
-                slopes[3 * b : 3 * b + 3, t] = slope[1]
-        if np.abs(net).max() <= tolerance * scale:
+            h = 1e-7 * max(levels[t], 1e-3)
+            slope = (end_forces(t, levels[t] + h)[2] - pulls) / h
+            slopes[3 * a : 3 * a + 3, t] = slope[0]
+            slopes[3 * b : 3 * b + 3, t] = slope[1]
+        target = slopes @ (levels - weights) - net.ravel()
+        # rcond: a self-stress of the formation is an exact null direction, which the
+        # finite-difference slopes blur to singular values of about 1e-10 of the largest.
+        deviation = weights * np.linalg.lstsq(slopes * weights, target, rcond=1e-7)[0]
+        change = levels - (weights + deviation)
+        if np.abs(net).max() <= tolerance * scale and np.abs(change / weights).max() <= 1e-9:
             break
         if iteration == max_iterations:
             raise TetherError(
@@ -678,12 +722,7 @@ def frame_held(cluster: Any, *, tolerance: float = 1e-12, max_iterations: int = 
                 f"a force of {np.abs(net).max():.3g} N is left on a satellite after {max_iterations} iterations "
                 "(a shape the frame does not hold needs thrust)"
             )
-        levels = levels - weights * np.linalg.lstsq(slopes * weights, net.ravel(), rcond=None)[0]
-        if not (levels > 0.0).all():
-            raise TetherError(
-                f"the frame's load would leave tether {int(np.argmin(levels))} of cluster {cluster.name!r} without "
-                "tension: the satellites cannot be held by the frame alone on these tethers"
-            )
+        levels = _damped_step(cluster.name, len(tethers), levels, change, end_forces)
     positions = x.copy()
     L0, N0 = cluster.L0.copy(), cluster.N0.copy()
     specs = []

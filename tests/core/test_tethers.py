@@ -22,7 +22,7 @@ from scipy.optimize import brentq
 import tether_gym as tg
 from tether_gym.analysis import max_frequency
 from tether_gym.limits import MIN_BEAD_MASS, MIN_MASS
-from tether_gym.tethers import Tether, TetherError, build_cluster, static_equilibrium, tether_results
+from tether_gym.tethers import Tether, TetherError, build_cluster, frame_held, static_equilibrium, tether_results
 
 LENGTH, SAT_MASS, LINE_MASS, EA, TENSION = 100.0, 50.0, 2.0, 40e3, 5.0
 MU = LINE_MASS / LENGTH  # kg/m
@@ -563,3 +563,67 @@ def test_any_bad_field_is_refused_naming_the_tether_and_the_field(bad: tuple[str
         Tether(**fields)
     message = str(error.value)
     assert message.startswith("tether") and (field in message or field == "name")
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    preset=st.sampled_from(["spinning_triangle", "spinning_hub", "radial_chain"]),
+    tether_mass=st.floats(0.01, 5.0),
+    segments=st.integers(2, 24),
+    rate_factor=st.floats(0.5, 2.0),
+)
+def test_fuzz_the_frame_alone_holds_beaded_turning_frame_presets(
+    preset: str, tether_mass: float, segments: int, rate_factor: float
+) -> None:
+    """Any mass, mesh and rate: no force is left on any node of the nominal shape (the frame's
+    load alone holds satellites and beads), each segment is at its reference length and
+    pretension, and a tether's spec gives its mean tension and its length along the beads."""
+    rate = {"spinning_triangle": ("spin_rate", 0.06), "spinning_hub": ("spin_rate", 0.05)}.get(
+        preset, ("orbit_rate", 0.00113)
+    )
+    cluster = tg.make_cluster(preset, tether_mass=tether_mass, segments=segments, **{rate[0]: rate[1] * rate_factor})
+    S = cluster.num_satellites
+    load = np.abs(cluster.masses[:S, None] * cluster.frame.tidal * cluster.positions[:S]).max()
+    force = tg.BatchSimulator(cluster, 1).equilibrium_force(cluster.positions[None])[0]
+    assert np.abs(force).max() <= 1e-10 * load
+    lengths = np.linalg.norm(np.diff(cluster.positions[cluster.cables], axis=1)[:, 0], axis=1)
+    np.testing.assert_allclose(lengths, cluster.L0, rtol=1e-12)
+    for t, spec in enumerate(cluster.tethers):
+        segments_of_t = cluster.tether_cables(t)
+        assert spec.N0 == pytest.approx(cluster.N0[segments_of_t].mean(), rel=1e-9)
+        assert spec.L0 == pytest.approx(cluster.L0[segments_of_t].sum(), rel=1e-12)
+
+
+def test_frame_held_rim_line_sags_as_the_funicular_and_leaves_free_space_alone() -> None:
+    """A spinning triangle's rim line bows outward by about the parabola's q L^2 / (8 H), with q
+    the centripetal load per length at the chord's radius and H the line's tension; in free space
+    frame_held returns the cluster itself."""
+    cluster = tg.make_cluster("spinning_triangle", tether_mass=1.0, segments=32)
+    spec = cluster.tethers[0]
+    a, b = spec.ends
+    midpoint = 0.5 * (cluster.positions[a] + cluster.positions[b])
+    chord = float(np.linalg.norm(cluster.positions[b] - cluster.positions[a]))
+    q = spec.mass / spec.L0 * cluster.frame.rate**2 * float(np.linalg.norm(midpoint))
+    m = cluster.num_cables
+    sag = float(tether_results(cluster, cluster.positions[None], cluster.N0[None], np.zeros((1, m), bool)).sag[0, 0])
+    middle = cluster.tether_beads(0)[len(cluster.tether_beads(0)) // 2]
+    assert np.linalg.norm(cluster.positions[middle]) > np.linalg.norm(midpoint)  # it bows outward
+    assert sag == pytest.approx(q * chord**2 / (8.0 * spec.N0), rel=0.05)
+    free = tg.make_cluster("chain", tether_mass=1.0, segments=4)
+    assert frame_held(free) is free
+
+
+def test_frame_held_picks_one_answer_for_an_indeterminate_formation() -> None:
+    """The spinning hub's spokes and rim can share the load in many ways; frame_held's choice
+    (the least change from the massless pretensions) converges with the mesh and grows with the
+    lines' mass, instead of wandering along the self-stress with round-off."""
+
+    def levels(mass: float, segments: int) -> np.ndarray:
+        cluster = tg.make_cluster("spinning_hub", tether_mass=mass, segments=segments)
+        return np.array([spec.N0 for spec in cluster.tethers])
+
+    coarse, fine = levels(1.0, 8), levels(1.0, 32)
+    np.testing.assert_allclose(coarse, fine, rtol=2e-3)
+    massless = tg.make_cluster("spinning_hub").N0
+    lighter, heavier = levels(0.2, 8), levels(1.0, 8)
+    assert (massless < lighter).all() and (lighter < heavier).all()
