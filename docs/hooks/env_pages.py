@@ -34,6 +34,7 @@ import numpy as np
 
 import tether_gym
 from tether_gym.envs import TetherClusterEnv
+from tether_gym.envs.contract import TETHER_FEATURE_MEANINGS, TETHER_FEATURES
 from tether_gym.presets import PRESETS
 from tether_gym.registration import ENV_DOCS, ENV_IDS
 
@@ -246,8 +247,10 @@ def observation_rows(facts: EnvFacts) -> list[tuple[str, str, str]]:
     with this id's satellite and cable counts; checked against the observation space's size."""
     settings = facts.settings
     observed = settings["observed_satellites"]
-    satellites = facts.cluster.num_nodes if observed is None else len(observed)
-    cables = facts.cluster.num_cables
+    cluster = facts.cluster
+    satellites = cluster.num_satellites if observed is None else len(observed)
+    # A tether with mass is observed as one block, not segment by segment: c counts plain cables.
+    cables = cluster.num_cables - sum(spec.segments for spec in cluster.tethers)
     displacement = f"D = {number(settings['initial_displacement'])} m"
     blocks = [
         (
@@ -268,6 +271,19 @@ def observation_rows(facts: EnvFacts) -> list[tuple[str, str, str]]:
     for size, what, unit in blocks:
         rows.append((f"{start} .. {start + size - 1}", what, unit))
         start += size
+    width = len(TETHER_FEATURES)
+    for k, spec in enumerate(cluster.tethers):
+        a, b = spec.ends
+        for f, name in enumerate(TETHER_FEATURES):
+            meaning, unit = TETHER_FEATURE_MEANINGS[name]
+            rows.append(
+                (
+                    str(start + width * k + f),
+                    f"tether {k} (satellites {a}-{b}, {spec.segments} segments), `{name}`: {meaning}",
+                    displacement if unit == "D" else unit,
+                )
+            )
+    start += width * cluster.num_tethers
     if start != facts.observation_size:
         raise DocsBuildError(
             f"{facts.env_id}: the observation layout of TetherClusterEnv's docstring gives {start} entries, but "

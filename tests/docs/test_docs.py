@@ -155,3 +155,31 @@ def test_pages_write_lists_as_the_site_renders_them() -> None:
                 assert re.match(r"^ *[-*] ", previous) or previous.startswith(" "), (
                     f"{page.name}:{number}: a list right after a paragraph (leave a blank line before it)"
                 )
+
+
+@pytest.mark.parametrize(("env_id", "observe_tensions"), [("TetherChain-v0", False), ("TetherSpinningHub-v0", True)])
+def test_the_observation_table_lists_the_tether_block_of_a_beaded_cluster(env_id: str, observe_tensions: bool) -> None:
+    """With tethers that have mass, the page's table has a row for every entry of each tether's
+    block, at the indices of ObservationLayout.tether, and covers the whole observation."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    from tether_gym.envs.contract import TETHER_FEATURES
+
+    hook = load_hook()
+    env = gym.make(env_id, preset_kwargs={"tether_mass": 1.0, "segments": 4}, observe_tensions=observe_tensions)
+    layout = env.unwrapped.task.observation_layout
+    facts = dataclasses.replace(
+        hook.env_facts(env_id),
+        observation_size=int(env.observation_space.shape[0]),
+        settings={name: hook.setting(env, name) for name in hook.REPORTED_SETTINGS},
+        cluster=env.unwrapped.cluster,
+    )
+    rows = hook.observation_rows(facts)
+    tether_rows = [row for row in rows if row[1].startswith("tether ")]
+    assert [int(row[0]) for row in tether_rows] == list(range(layout.tether.start, layout.tether.stop))
+    for row, name in zip(tether_rows, TETHER_FEATURES * layout.tethers, strict=True):
+        assert f"`{name}`" in row[1]
+    last = rows[len(rows) - len(tether_rows) - 1][0]
+    assert int(last.split("..")[-1]) == layout.tether.start - 1  # satellites and plain cables before it

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import tether_gym as tg  # noqa: F401  (registers the ids)
 from tether_gym.cluster import ClusterError
 from tether_gym.envs import EnvArgumentError
-from tether_gym.envs.contract import TETHER_FEATURES, ObservationLayout
+from tether_gym.envs.contract import TETHER_DIRECTIONS, TETHER_FEATURES, TETHER_MODES, ObservationLayout
 from tether_gym.envs.tethered import tether_features
 from tether_gym.presets import make_cluster
 
@@ -259,8 +259,8 @@ def test_fuzz_beaded_envs_keep_the_satellite_roles(preset: str, segments: int, t
 
 
 def test_scripted_controllers_on_beads() -> None:
-    # The passive law runs on the satellites; a law that models every node and cable refuses
-    # a beaded cluster by name instead of failing inside numpy.
+    # The scripted laws act on the satellites only (tests/agents/controllers/test_beads.py
+    # checks them against passive).
     from agents.controllers.centralised import LQRController, PassiveController
 
     env = _beaded()
@@ -268,8 +268,8 @@ def test_scripted_controllers_on_beads() -> None:
     passive = PassiveController(env)
     action, _ = passive.predict(observation)
     assert action.shape == env.action_space.shape and not action.any()
-    with pytest.raises(ValueError, match="LQRController.*tethers have mass"):
-        LQRController(env)
+    action, _ = LQRController(env).predict(observation)
+    assert action.shape == env.action_space.shape and action.any()
 
 
 def test_only_a_satellite_beyond_max_deviation_loses_the_formation() -> None:
@@ -290,3 +290,132 @@ def test_only_a_satellite_beyond_max_deviation_loses_the_formation() -> None:
     env.reset(seed=0, options={"positions": moved})
     _, _, terminated, _, info = env.step(zero)
     assert terminated and info["end_reason"] == "formation_lost"
+
+
+TURNING_FRAME_IDS = ["TetherSpinningTriangle-v0", "TetherSpinningHub-v0", "TetherRadialChain-v0"]
+
+
+@pytest.mark.parametrize("env_id", TURNING_FRAME_IDS)
+@pytest.mark.parametrize(("tether_mass", "segments"), [(1.0, 8), (0.3, 3), (4.0, 16)])
+def test_the_frame_alone_holds_beaded_turning_frame_presets(env_id: str, tether_mass: float, segments: int) -> None:
+    """Spin or the gravity gradient holds a formation whose lines have mass, as it holds a
+    massless one: the bias thrust on every satellite is zero to round-off, relative to the
+    frame's load on it."""
+    env = gym.make(env_id, preset_kwargs={"tether_mass": tether_mass, "segments": segments})
+    task = env.unwrapped.task
+    cluster = task.cluster
+    S = cluster.num_satellites
+    frame_load = np.abs(cluster.masses[:S, None] * cluster.frame.tidal * cluster.positions[:S]).max()
+    assert np.abs(task.bias).max() <= 1e-10 * frame_load
+    # The lines hang on the funicular of their own load: the nominal beads feel no net force either.
+    force = task.sim.equilibrium_force(cluster.positions[None])[0]
+    assert np.abs(force).max() <= 1e-10 * frame_load
+
+
+@pytest.mark.parametrize("env_id", TURNING_FRAME_IDS)
+def test_beaded_turning_frame_preset_at_rest_stays_at_rest(env_id: str) -> None:
+    """From the nominal state at rest, with no thrust, nothing moves: no energy appears in 100 steps."""
+    env = gym.make(env_id, preset_kwargs={"tether_mass": 1.0, "segments": 8})
+    cluster = env.unwrapped.task.cluster
+    env.reset(seed=0, options={"positions": cluster.positions, "velocities": np.zeros_like(cluster.positions)})
+    scale = float(np.abs(cluster.N0).max() * np.linalg.norm(np.ptp(cluster.positions, axis=0)))  # J
+    for _ in range(100):
+        _, _, terminated, truncated, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        assert not terminated and info["end_reason"] == "running"
+    assert abs(info["vibration_energy"]) <= 1e-9 * scale
+    assert info["kinetic_energy"] <= 1e-9 * scale
+    assert np.abs(env.unwrapped.task.sim.positions[0] - cluster.positions).max() <= 1e-9 * np.ptp(cluster.positions)
+
+
+@pytest.mark.parametrize("preset", ["spinning_triangle", "spinning_hub", "radial_chain"])
+def test_massless_turning_frame_presets_unchanged(preset: str) -> None:
+    """tether_mass 0 builds the massless preset of before, bit for bit (no funicular solve)."""
+    import hashlib
+    import json
+
+    cluster = make_cluster(preset)
+    assert cluster.num_beads == 0
+    assert make_cluster(preset, tether_mass=0.0, segments=1).to_dict() == cluster.to_dict()
+    digest = hashlib.sha256(json.dumps(cluster.to_dict(), sort_keys=True, default=str).encode()).hexdigest()
+    assert digest == MASSLESS_TURNING_DIGESTS[preset]
+
+
+#: SHA-256 of the massless presets' ``to_dict()`` (JSON, sorted keys), taken from the presets as
+#: they were before tethers with mass were held by the frame: the massless path must not move.
+MASSLESS_TURNING_DIGESTS = {
+    "spinning_triangle": "eeaf87c3e8dd119c919408780caf19159165b2ffc7d4e6806450d689c847ce4a",
+    "spinning_hub": "802e0ae0fb09b739f20c96da55a787f3fe8ce090ca166884770140f3f93d5951",
+    "radial_chain": "336e69b85e76d48db5fb6d956938a508dfac7d7a1a240806e159646bfc420126",
+}
+
+
+def _directions_from_the_contract(chord: np.ndarray, nominal: np.ndarray) -> np.ndarray:
+    """(2, 3) lateral and normal across a chord, written from TETHER_DIRECTIONS' definition."""
+    e = chord / np.linalg.norm(chord)
+    r = (
+        np.array([1.0, 0.0, 0.0])
+        if abs(nominal[2]) / np.linalg.norm(nominal) > np.cos(np.pi / 4)
+        else np.array([0.0, 0, 1])
+    )
+    lateral = np.cross(r, e) / np.linalg.norm(np.cross(r, e))
+    return np.stack([lateral, np.cross(e, lateral)])
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    preset=st.sampled_from(["chain", "tetrahedron", "spinning_triangle"]),
+    segments=st.integers(4, 12),
+    amplitudes=st.lists(
+        st.floats(-0.5, 0.5, allow_subnormal=False), min_size=2 * TETHER_MODES, max_size=2 * TETHER_MODES
+    ),
+)
+def test_fuzz_modal_amplitudes_are_signed_in_the_named_directions(
+    preset: str, segments: int, amplitudes: list[float]
+) -> None:
+    """A line bent into any mix of its low sine modes, lateral and normal, reads back each signed
+    amplitude in its own entry (mode-major, as TETHER_FEATURES names them)."""
+
+    cluster = make_cluster(preset, tether_mass=1.0, segments=segments)
+    x = cluster.positions.copy()
+    coefficients = np.array(amplitudes).reshape(TETHER_MODES, len(TETHER_DIRECTIONS))  # m
+    fractions = np.arange(1, segments) / segments
+    for t, spec in enumerate(cluster.tethers):
+        a, b = spec.ends
+        directions = _directions_from_the_contract(x[b] - x[a], x[b] - x[a])
+        shapes = np.sin(np.pi * np.arange(1, TETHER_MODES + 1)[:, None] * fractions[None, :])  # (K, N-1)
+        straight = x[a] + fractions[:, None] * (x[b] - x[a])
+        x[cluster.tether_beads(t)] = straight + np.einsum("km,ke,ed->md", shapes, coefficients, directions)
+    m = cluster.num_cables
+    features = tether_features(cluster, x[None], np.ones((1, m)), np.zeros((1, m), dtype=bool), 2.0)
+    first_mode = TETHER_FEATURES.index("mode_1_lateral")
+    assert TETHER_FEATURES[first_mode:] == tuple(
+        f"mode_{k}_{d}" for k in range(1, TETHER_MODES + 1) for d in TETHER_DIRECTIONS
+    )
+    for t in range(cluster.num_tethers):
+        np.testing.assert_allclose(features[0, t, first_mode:], coefficients.ravel() / 2.0, atol=1e-12)
+
+
+def test_modal_amplitude_sign_follows_the_bow() -> None:
+    """A chain along x bowed towards +y reads a positive lateral first mode, towards -y a
+    negative one; towards +z a positive normal one."""
+    cluster = make_cluster("chain", n=2, tether_mass=1.0, segments=8)
+    beads, m = cluster.tether_beads(0), cluster.num_cables
+    bow = np.sin(np.pi * np.arange(1, 8) / 8)
+    index = {name: TETHER_FEATURES.index(name) for name in ("mode_1_lateral", "mode_1_normal")}
+    for axis, sign, feature in ((1, 1.0, "mode_1_lateral"), (1, -1.0, "mode_1_lateral"), (2, 1.0, "mode_1_normal")):
+        x = cluster.positions.copy()
+        x[beads, axis] += sign * 0.3 * bow
+        entry = tether_features(cluster, x[None], np.ones((1, m)), np.zeros((1, m), dtype=bool), 1.0)[0, 0]
+        assert entry[index[feature]] == pytest.approx(sign * 0.3, abs=1e-12)
+        other = index["mode_1_normal" if feature == "mode_1_lateral" else "mode_1_lateral"]
+        assert abs(entry[other]) < 1e-12
+
+
+def test_the_env_docstring_lists_the_tether_block() -> None:
+    import tether_gym.envs as envs
+
+    doc = envs.TetherClusterEnv.__doc__ or ""
+    table = ObservationLayout.symbolic_tether_table()
+    assert "\n    ".join(table.splitlines()) in doc and "TETHER_TABLE" not in doc
+    assert len(table.splitlines()) == 2 + len(TETHER_FEATURES)
+    assert all(f"`{name}`" in table for name in TETHER_FEATURES)

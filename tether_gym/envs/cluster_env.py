@@ -55,13 +55,24 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Observation Space
 
-    ``Box(-1e4, 1e4, (6 s + c [+ c],), float32)``, where s is the number of observed satellites
-    and c the number of cables. Everything is in the **cluster frame**: the origin is at the
-    centre of mass, and the axes are those of the simulation frame (inertial, Hill or spinning),
-    in which the nominal shape is at rest. ``D`` is
+    ``Box(-1e4, 1e4, (6 s + c [+ c] [+ f t],), float32)``, where s is the number of observed
+    satellites, c the number of cables and t of tethers with mass (f entries each, below).
+    Everything is in the **cluster frame**: the origin is at the centre of mass, and the axes are
+    those of the simulation frame (inertial, Hill or spinning), in which the nominal shape is at
+    rest. ``D`` is
     ``initial_displacement`` and ``V`` is ``initial_velocity``.
 
     OBSERVATION_TABLE
+
+    A cluster whose tethers have mass (beads, see ``tether_mass`` and ``segments`` of the
+    presets) observes its satellites only, its plain cables only (c counts those), and then one
+    block per tether: with t such tethers and P the entries above, ``len(TETHER_FEATURES) t``
+    more entries (``tether_gym.envs.contract``; ``ObservationLayout.tether``), tether k's
+    feature f at ``P + len(TETHER_FEATURES) k + f``. Modal amplitudes are signed, along
+    ``lateral = r x e / |r x e|`` and ``normal = e x lateral`` (``e`` the unit chord from
+    ``ends[0]`` to ``ends[1]``, ``r`` the z axis, or x for a tether within 45 degrees of z):
+
+    TETHER_TABLE
 
     At reset every entry is of order 1; values are clipped to +-1e4. ``observation_noise`` adds Gaussian noise with that
     standard deviation, in these units.
@@ -283,4 +294,4 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 if TetherClusterEnv.__doc__:
     TetherClusterEnv.__doc__ = TetherClusterEnv.__doc__.replace(
         "OBSERVATION_TABLE", ObservationLayout.symbolic_table().replace("\n", "\n    ")
-    )
+    ).replace("TETHER_TABLE", ObservationLayout.symbolic_tether_table().replace("\n", "\n    "))

@@ -25,7 +25,9 @@ __all__ = [
     "END_REASONS",
     "OBSERVATION_BLOCKS",
     "SCALARS",
+    "TETHER_DIRECTIONS",
     "TETHER_FEATURES",
+    "TETHER_FEATURE_MEANINGS",
     "TETHER_MODES",
     "EndReason",
     "ObservationBlock",
@@ -141,18 +143,40 @@ class ObservationBlock:
 #: observation reports.
 TETHER_MODES = 3
 
+#: The two directions across a tether in which its modal amplitudes are observed (see
+#: :data:`TETHER_FEATURES`): with ``e`` the unit chord from ``ends[0]`` to ``ends[1]`` now, and
+#: ``r`` the z axis (the x axis for a tether whose nominal chord is within 45 degrees of z),
+#: ``lateral = (r x e) / |r x e|`` and ``normal = e x lateral``.  For a chord in the xy plane,
+#: ``lateral`` is the chord turned +90 degrees about z and ``normal`` is +z.
+TETHER_DIRECTIONS: tuple[str, ...] = ("lateral", "normal")
+
 #: The entries of each tether's observation block (clusters with tethers only), in order, with
 #: their units: the tether's elongation (length along its beads minus its ``L0``, D), the tension
 #: of its first and last segment (in units of its pretension ``N0``), the fraction of its segments
-#: that are slack (1), and the magnitudes of its first ``TETHER_MODES`` transverse modal
-#: amplitudes ``(2/N) |sum_j u_j sin(k pi j / N)|``, ``u_j`` bead j's offset across the chord (D).
+#: that are slack (1), and its first ``TETHER_MODES`` transverse modal amplitudes, each signed, in
+#: the two directions of :data:`TETHER_DIRECTIONS` (mode-major: ``mode_1_lateral``,
+#: ``mode_1_normal``, ``mode_2_lateral``, ...): ``(2/N) sum_j (u_j . d) sin(k pi j / N)``, ``u_j``
+#: bead j's offset across the chord and ``d`` the direction (D).
 TETHER_FEATURES: tuple[str, ...] = (
     "elongation",
     "tension_start",
     "tension_end",
     "slack_fraction",
-    *(f"mode_{k}" for k in range(1, TETHER_MODES + 1)),
+    *(f"mode_{k}_{direction}" for k in range(1, TETHER_MODES + 1) for direction in TETHER_DIRECTIONS),
 )
+
+#: Each entry of :data:`TETHER_FEATURES`: (meaning, unit), for the docs' observation tables.
+TETHER_FEATURE_MEANINGS: dict[str, tuple[str, str]] = {
+    "elongation": ("length along its beads minus its ``L0``", "D"),
+    "tension_start": ("tension of its first segment (at ``ends[0]``) / its pretension ``N0``", "1"),
+    "tension_end": ("tension of its last segment (at ``ends[1]``) / its pretension ``N0``", "1"),
+    "slack_fraction": ("fraction of its segments that are slack", "1"),
+    **{
+        f"mode_{k}_{direction}": (f"signed amplitude of its transverse sine mode {k} along ``{direction}``", "D")
+        for k in range(1, TETHER_MODES + 1)
+        for direction in TETHER_DIRECTIONS
+    },
+}
 
 #: The observation vector, in order.  The last block is present only with ``observe_tensions``.
 #: Clusters with tethers (beads) add, after these, ``len(TETHER_FEATURES)`` entries per tether
@@ -230,6 +254,18 @@ class ObservationLayout:
                 f"| {_symbolic(satellites, cables, 0)} .. {_symbolic(*end, -1)} | {block.meaning} | {block.unit} |"
             )
             satellites, cables = end
+        return "\n".join(rows)
+
+    @staticmethod
+    def symbolic_tether_table() -> str:
+        """The tether block as a Markdown table: with ``t`` tethers that have mass, after the
+        ``P`` entries of :meth:`symbolic_table`, tether k's feature f is entry
+        ``P + len(TETHER_FEATURES) k + f``; the env docstrings' table of that block."""
+        width = len(TETHER_FEATURES)
+        rows = ["| index | observation of tether k (k = 0 .. t-1) | unit |", "|---|---|---|"]
+        for f, name in enumerate(TETHER_FEATURES):
+            meaning, unit = TETHER_FEATURE_MEANINGS[name]
+            rows.append(f"| P+{width}k{f'+{f}' if f else ''} | `{name}`: {meaning} | {unit} |")
         return "\n".join(rows)
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from tether_gym.cluster import Cluster
 from tether_gym.envs.arguments import EnvArgumentError
-from tether_gym.envs.contract import TETHER_MODES
+from tether_gym.envs.contract import TETHER_FEATURES, TETHER_MODES
 from tether_gym.tethers import static_equilibrium
 
 __all__ = ["nominal_cluster", "tether_features", "tether_modes_noise"]
@@ -59,6 +59,22 @@ def _across(cluster: Cluster, tether: int, positions: np.ndarray) -> np.ndarray:
     chord = positions[b] - positions[a]
     direction = chord / np.linalg.norm(chord)
     return np.eye(3) - np.outer(direction, direction)
+
+
+def _transverse_directions(cluster: Cluster, tether: int, chord: np.ndarray) -> np.ndarray:
+    """(B, 2, 3) the unit directions ``lateral`` and ``normal`` across tether ``tether`` whose
+    current chords are ``chord`` (B, 3), m (see :data:`~tether_gym.envs.contract.TETHER_DIRECTIONS`):
+    ``lateral = r x e / |r x e|``, ``normal = e x lateral``, with ``r`` the z axis, or the x axis
+    when the nominal chord is within 45 degrees of z (fixed per tether, so that the directions
+    turn smoothly with the line)."""
+    a, b = cluster.tethers[tether].ends
+    nominal = cluster.positions[b] - cluster.positions[a]
+    reference = np.array([1.0, 0.0, 0.0]) if abs(nominal[2]) > np.sqrt(0.5) * np.linalg.norm(nominal) else np.eye(3)[2]
+    unit = chord / np.maximum(np.linalg.norm(chord, axis=1, keepdims=True), 1e-300)
+    lateral = np.cross(reference, unit)
+    # A chord along r (a line bent far from its nominal direction) has no lateral: report 0 there.
+    lateral /= np.maximum(np.linalg.norm(lateral, axis=1, keepdims=True), 1e-300)
+    return np.stack([lateral, np.cross(unit, lateral)], axis=1)
 
 
 def tether_modes_noise(
@@ -108,9 +124,10 @@ def tether_features(
     """(B, T, len(TETHER_FEATURES)) each tether's observation entries (see
     :data:`~tether_gym.envs.contract.TETHER_FEATURES`) from (B, n, 3) positions (m), (B, m)
     cable tensions (N) and (B, m) broken flags; lengths in units of ``length_scale`` (m),
-    tensions in units of the tether's pretension ``N0`` (N; in N when ``N0 = 0``)."""
+    tensions in units of the tether's pretension ``N0`` (N; in N when ``N0 = 0``), signed modal
+    amplitudes in the two directions of :data:`~tether_gym.envs.contract.TETHER_DIRECTIONS`."""
     B = positions.shape[0]
-    features = np.zeros((B, cluster.num_tethers, 4 + TETHER_MODES))
+    features = np.zeros((B, cluster.num_tethers, len(TETHER_FEATURES)))
     modes = np.arange(1, TETHER_MODES + 1)
     for t, spec in enumerate(cluster.tethers):
         segments = cluster.tether_cables(t)
@@ -132,6 +149,8 @@ def tether_features(
             along = (offset * chord).sum(axis=2) / np.maximum((chord * chord).sum(axis=2), 1e-300)
             across = offset - along[:, :, None] * chord  # (B, N-1, 3)
             shapes = np.sin(np.pi * modes[:, None] * _bead_fractions(cluster, t)[None, :])  # (K, N-1)
-            amplitudes = (2.0 / spec.segments) * np.einsum("km,bmd->bkd", shapes, across)
-            features[:, t, 4:] = np.sqrt((amplitudes * amplitudes).sum(axis=2)) / length_scale
+            amplitudes = (2.0 / spec.segments) * np.einsum("km,bmd->bkd", shapes, across)  # (B, K, 3) m
+            directions = _transverse_directions(cluster, t, chord[:, 0, :])  # (B, 2, 3)
+            signed = np.einsum("bkd,bed->bke", amplitudes, directions)  # (B, K, 2): mode-major, as TETHER_FEATURES
+            features[:, t, 4:] = signed.reshape(B, -1) / length_scale
     return features
