@@ -39,9 +39,11 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from tether_gym.cluster import Cluster
+from tether_gym.envs.contract import TETHER_FEATURES
 from tether_gym.envs.task import DampingTask
 
-__all__ = ["Controller", "CountsSaturation", "Policy", "ReadsEnv", "task_of"]
+__all__ = ["Controller", "CountsSaturation", "Policy", "ReadsEnv", "equivalent_cluster", "task_of"]
 
 
 @runtime_checkable
@@ -106,6 +108,54 @@ def task_of(env: Any) -> DampingTask:
     )
 
 
+def equivalent_cluster(cluster: Cluster) -> Cluster:
+    """The massless cluster the scripted laws are designed on when ``cluster``'s tethers have mass.
+
+    Its nodes are ``cluster``'s S satellites and its cables are ``cluster``'s plain cables, then
+    one cable per tether (in tether order) between the tether's satellites, with the tether's
+    ``EA``, its whole reference length (the sum of its segments' ``L0``, m), the mean pretension
+    of its segments (N), their Kelvin-Voigt coefficients in series (N*s/m) and the lowest
+    breaking load of its segments (N). Each bead's mass goes half to each end satellite of its
+    tether, so the total mass, the centre of mass of the nominal straight line and the
+    momentum of a rigid motion are those of ``cluster``.
+
+    What it leaves out: the tethers' own transverse and higher axial modes, the lowest at
+    ``sqrt(N0 / mu) / (2 L)`` Hz. The laws damp them only through the satellites they end on.
+    A cluster without beads is returned as it is.
+    """
+    if not cluster.num_beads:
+        return cluster
+    satellites = cluster.num_satellites
+    masses = cluster.masses[:satellites].copy()
+    plain = cluster.num_cables - sum(spec.segments for spec in cluster.tethers)
+    cables = [tuple(pair) for pair in cluster.cables[:plain].tolist()]
+    columns = {name: list(getattr(cluster, name)[:plain]) for name in ("EA", "N0", "L0", "axial_damping")}
+    breaking = list(cluster.breaking_load[:plain])
+    for t, spec in enumerate(cluster.tethers):
+        a, b = spec.ends
+        bead_mass = float(cluster.masses[cluster.tether_beads(t)].sum())
+        masses[a] += 0.5 * bead_mass
+        masses[b] += 0.5 * bead_mass
+        segments = cluster.tether_cables(t)
+        cables.append((a, b))
+        columns["EA"].append(float(cluster.EA[segments].mean()))
+        columns["N0"].append(float(cluster.N0[segments].mean()))
+        columns["L0"].append(float(cluster.L0[segments].sum()))
+        coefficients = cluster.axial_damping[segments]
+        columns["axial_damping"].append(0.0 if np.any(coefficients == 0.0) else float(1.0 / (1.0 / coefficients).sum()))
+        breaking.append(float(cluster.breaking_load[segments].min()))
+    return Cluster(
+        positions=cluster.positions[:satellites],
+        masses=masses,
+        cables=np.array(cables, dtype=np.int64),
+        damping=cluster.damping[:satellites],
+        breaking_load=np.array(breaking),
+        frame=cluster.frame,
+        name=f"{cluster.name} (tethers as cables)",
+        **{name: np.array(values) for name, values in columns.items()},
+    )
+
+
 class Controller:
     """Base class: observation decoding, the ``predict`` interface and saturation counting.
 
@@ -117,19 +167,22 @@ class Controller:
 
     #: Short name used in tables and on the command line.
     name = "controller"
-    #: Whether the law runs on clusters whose tethers have mass (beads): it then sees the
-    #: satellites only, and no per-segment elongations.
-    supports_beads = False
+    #: Whether the law runs on clusters whose tethers have mass (beads). Every scripted law of
+    #: this package does: it is designed on :func:`equivalent_cluster` (each tether one cable,
+    #: its mass on its ends) and decodes the tethers' observation block as those cables.
+    supports_beads = True
 
     def __init__(self, env: Any) -> None:
         task = task_of(env)
         self.task = task
-        self.cluster = task.cluster
-        if self.cluster.num_beads and not self.supports_beads:
+        #: The cluster the law is designed on: the env's own, or with tethers that have mass,
+        #: :func:`equivalent_cluster` of it (satellites only).
+        self.cluster = equivalent_cluster(task.cluster) if task.cluster.num_beads else task.cluster
+        if task.cluster.num_beads and not self.supports_beads:
             raise ValueError(
                 f"{type(self).__name__} models every node and cable of the cluster, but this env's tethers have "
-                f"mass ({self.cluster.num_beads} beads, observed per tether); it does not run on tethers with mass "
-                "yet. Use a massless cluster (tether_mass=0) or a controller that supports beads (passive)"
+                f"mass ({task.cluster.num_beads} beads, observed per tether); it does not run on tethers with mass. "
+                "Use a massless cluster (tether_mass=0) or a controller that supports beads"
             )
         # The observation holds the satellites only (the leading nodes); beads are not decoded.
         n = self.cluster.num_satellites
@@ -212,6 +265,12 @@ class Controller:
         displacement = layout.satellite_values(observation, "displacement") * task.length_scale
         velocity = layout.satellite_values(observation, "velocity") * task.speed_scale
         elongation = observation[:, layout.elongation] * task.length_scale
+        if layout.tethers:
+            # Each tether is the last cables of :func:`equivalent_cluster`, in tether order: its
+            # elongation is the length along its beads minus its L0 (feature 0 of its block).
+            block = observation[:, layout.tether].reshape(observation.shape[0], layout.tethers, len(TETHER_FEATURES))
+            tether_elongation = block[:, :, TETHER_FEATURES.index("elongation")] * task.length_scale
+            elongation = np.concatenate([elongation, tether_elongation], axis=1)
         return self.nominal_relative[None] + displacement, velocity, elongation
 
     def deformation_velocity(self, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:

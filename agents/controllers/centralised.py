@@ -38,7 +38,6 @@ class PassiveController(Controller):
     nominal shape)."""
 
     name = "passive"
-    supports_beads = True
 
     def thrust(self, positions: np.ndarray, velocities: np.ndarray, elongations: np.ndarray) -> np.ndarray:
         return np.zeros((positions.shape[0], self.thrusters.size, 3))
@@ -68,7 +67,7 @@ class VelocityFeedbackController(Controller):
 
     def __init__(self, env: Any, gain: float | None = None) -> None:
         super().__init__(env)
-        self.model = LinearModel(self.task)
+        self.model = LinearModel(self.task, cluster=self.cluster)
         if gain is None:
             gain = self.best_gain()
         if not (math.isfinite(gain) and gain >= 0):
@@ -200,7 +199,9 @@ class LQRController(Controller):
         self.thrust_weight = float(thrust_weight)
         self.design = design
         #: The linear models with every cable taut and with every cable slack (same coordinates).
-        self.models = {cables: LinearModel(self.task, cables=cables) for cables in ("taut", "slack")}
+        self.models = {
+            cables: LinearModel(self.task, cables=cables, cluster=self.cluster) for cables in ("taut", "slack")
+        }
         self.model = model = self.models[design]
         state_weight = model.energy_weight() / self.task.energy_scale
         force_scale = np.repeat(self.max_thrust, 3)
@@ -250,11 +251,28 @@ class TensionAwareController(Controller):
         env: a tether-gym env.
         gain: velocity-feedback rate ``g`` in 1/s; None applies the velocity-feedback rule.
         strut_stiffness: ``kappa`` in N/m; None uses ``m g^2 / 4`` with the mean thruster mass.
+        tether_strut_stiffness: the strut across a tether with mass, N/m (default 0: none).
+
+    **Tethers with mass.** The law runs on :func:`~agents.controllers.base.equivalent_cluster`:
+    a tether is one cable between its satellites, slack while the length along its beads (its
+    observed elongation) is below the slack point, and its strut pushes the satellites apart
+    along their chord. That strut is off by default. A slack line with mass is re-tensioned
+    by a snap that whips its beads, and a stronger strut snaps it sooner and harder. On the
+    beaded tetrahedron (2 kg tethers, 8 segments, tuning seeds 2000-2005), the mean return was
+    -68.2 with no strut, -61.7 at 4 N/m, -99.0 at 40 N/m and -136.7 at the massless rule's
+    413 N/m (94 % of commands saturated), against -61.2 for ``local_tension_aware``. Plain
+    cables keep their struts.
     """
 
     name = "tension_aware"
 
-    def __init__(self, env: Any, gain: float | None = None, strut_stiffness: float | None = None) -> None:
+    def __init__(
+        self,
+        env: Any,
+        gain: float | None = None,
+        strut_stiffness: float | None = None,
+        tether_strut_stiffness: float = 0.0,
+    ) -> None:
         super().__init__(env)
         self.velocity_feedback = VelocityFeedbackController(env, gain=gain)
         self.gain = self.velocity_feedback.gain
@@ -263,7 +281,16 @@ class TensionAwareController(Controller):
         if not (math.isfinite(strut_stiffness) and strut_stiffness >= 0):
             raise ValueError(f"strut_stiffness must be a finite stiffness >= 0 N/m; got {strut_stiffness!r}")
         self.strut_stiffness = float(strut_stiffness)
+        if not (isinstance(tether_strut_stiffness, (int, float)) and math.isfinite(tether_strut_stiffness)) or (
+            tether_strut_stiffness < 0
+        ):
+            raise ValueError(
+                f"tether_strut_stiffness must be a finite stiffness >= 0 N/m; got {tether_strut_stiffness!r}"
+            )
         cluster = self.cluster
+        #: (c,) N/m, each cable's strut; the last cables of a beaded env's equivalent cluster are its tethers.
+        self.cable_strut_stiffness = np.full(cluster.num_cables, self.strut_stiffness)
+        self.cable_strut_stiffness[cluster.num_cables - self.task.cluster.num_tethers :] = float(tether_strut_stiffness)
         self.cables = cluster.cables
         self.slack_point = -cluster.N0 / cluster.stiffness  # (c,) m, elongation below which a cable is slack
 
@@ -273,7 +300,7 @@ class TensionAwareController(Controller):
         delta = positions[:, j] - positions[:, i]
         direction = delta / np.maximum(np.linalg.norm(delta, axis=2, keepdims=True), 1e-12)
         shortfall = np.where(elongations < self.slack_point[None], -elongations, 0.0)  # (N, c) m, >= 0
-        push = (self.strut_stiffness * shortfall)[:, :, None] * direction
+        push = (self.cable_strut_stiffness * shortfall)[:, :, None] * direction
         force = np.zeros(positions.shape)
         np.add.at(force, (slice(None), i), -push)
         np.add.at(force, (slice(None), j), push)

@@ -35,10 +35,12 @@ single-agent envs, and a batch of observations gives each row what that row alon
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, cast
 
 import numpy as np
 
+from tether_gym.envs.task import DampingTask
 from tether_gym.multiagent.engine import AgentGraph, Communication, LocalLayout, LocalSensors
 
 from .base import Controller, task_of
@@ -66,7 +68,16 @@ class LocalController(Controller):
 
     def __init__(self, env: Any) -> None:
         super().__init__(env)
-        self.graph = graph = AgentGraph.build(self.task, Communication())
+        # With tethers that have mass the law is wired on the equivalent cluster (the base class's
+        # ``cluster``): a tether is one cable to the satellite at its far end, whose elongation is
+        # the tether's (length along its beads minus L0, from the observation's tether block).
+        # AgentGraph reads only the cluster and the thrusters of the task it is given.
+        wiring = (
+            cast(DampingTask, SimpleNamespace(cluster=self.cluster, thrusters=self.task.thrusters))
+            if self.task.cluster.num_beads
+            else self.task
+        )
+        self.graph = graph = AgentGraph.build(wiring, Communication())
         self.present = graph.cables >= 0
         cables = np.where(self.present, graph.cables, 0)
         self._cable = cables
@@ -96,6 +107,14 @@ class LocalController(Controller):
     def act_local(self, observations: np.ndarray) -> np.ndarray:
         """(N, A, 3) float32 commands in [-1, 1] from (N, A, size) local observations of the
         multi-agent env (its own cable slots only; messages are not used)."""
+        if self.task.cluster.num_beads:
+            # The multi-agent env's cable slots of a beaded cluster are the first segments, to a
+            # bead; this law is wired to the satellite at the tether's far end.
+            raise ValueError(
+                f"{type(self).__name__}.act_local reads the multi-agent env's cable slots, which on tethers with "
+                "mass are the first segments of each tether, not the tether this law is designed on; run it on the "
+                "single-agent env (predict) there"
+            )
         obs = np.asarray(observations, dtype=np.float64)
         layout = self.layout
         direction = layout.cable_field(obs, "direction")

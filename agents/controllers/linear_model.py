@@ -16,6 +16,7 @@ import numpy as np
 
 from tether_gym._optional import needs_extra
 from tether_gym.analysis import axial_damping_matrix, frame_stiffness, gyroscopic_matrix, tangent_stiffness
+from tether_gym.cluster import Cluster
 from tether_gym.envs.task import DampingTask
 
 with needs_extra("train", "the linear model of the velocity-feedback and LQR baselines"):
@@ -79,13 +80,17 @@ class LinearModel:
         task: the env's task (its nominal cluster, thrusters and control interval).
         cables: ``"taut"`` (every cable taut, the linearisation about nominal) or ``"slack"``
             (every cable slack).
+        cluster: the cluster to linearise, with ``task``'s satellites as its first nodes
+            (default ``task.cluster``). With tethers that have mass the controllers pass
+            :func:`agents.controllers.base.equivalent_cluster`: each tether one cable, so the
+            model is that of the satellites.
     """
 
-    def __init__(self, task: DampingTask, cables: str = "taut") -> None:
+    def __init__(self, task: DampingTask, cables: str = "taut", cluster: Cluster | None = None) -> None:
         if cables not in ("taut", "slack"):
             raise ValueError(f"cables must be 'taut' or 'slack'; got {cables!r}")
         self.cables = cables
-        cluster = task.cluster
+        cluster = task.cluster if cluster is None else cluster
         n = cluster.num_nodes
         self.omega2, self.modes = elastic_modes(cluster)
         r = self.omega2.size

@@ -122,9 +122,10 @@ def compare(config: CompareConfig) -> tuple[list[EpisodeRecord], list[dict[str, 
     )
     names = list(config.controllers) if config.controllers else (list(BASELINES) + list(shipped_models(env_id)))
     probe = gym.make_vec(env_id, num_envs=1, **dict(config.env_kwargs or {}))
-    num_nodes = probe.unwrapped.task.cluster.num_nodes
-    if satellite >= num_nodes:
-        raise ValueError(f"satellite must be in 0..{num_nodes - 1} for {env_id}; got {satellite}")
+    # Beads of tethers with mass are nodes too, but neither observed nor plotted.
+    num_satellites = probe.unwrapped.task.cluster.num_satellites
+    if satellite >= num_satellites:
+        raise ValueError(f"satellite must be in 0..{num_satellites - 1} for {env_id}; got {satellite}")
     policies = [
         make_controller(name, probe, trust_pickle=config.trust_pickle, allow_other_id=config.allow_other_id)
         for name in names

@@ -97,8 +97,9 @@ def rollout(
     # Same-step autoreset, as the rollout was written against: an ended sub-env runs on unobserved.
     envs = gym.make_vec(env_id, num_envs=count, **{"autoreset_mode": AutoresetMode.SAME_STEP, **dict(env_kwargs or {})})
     task = envs.unwrapped.task
-    if not 0 <= satellite < task.cluster.num_nodes:
-        raise ValueError(f"satellite must be in 0..{task.cluster.num_nodes - 1}; got {satellite}")
+    # Beads of tethers with mass are nodes too, but not observed: only a satellite has a displacement.
+    if not 0 <= satellite < task.cluster.num_satellites:
+        raise ValueError(f"satellite must be in 0..{task.cluster.num_satellites - 1}; got {satellite}")
     steps = envs.unwrapped.max_episode_steps
     if steps is None:
         raise ValueError(f"{env_id} has no max_episode_steps; pass env_kwargs={{'max_episode_steps': ...}}")
