@@ -105,3 +105,29 @@ def test_rollout_checks_the_satellite_against_the_satellites_not_the_nodes() -> 
     S = env.unwrapped.task.cluster.num_satellites
     with pytest.raises(ValueError, match=f"satellite must be in 0..{S - 1}"):
         rollout(make_baseline("passive", env), "TetherTetrahedron-v0", [0], satellite=S, env_kwargs=BEADED)
+
+
+def test_mpc_plans_the_beads_as_the_env_steps_them() -> None:
+    """The planner's rollout of its nominal plan (the prior alone, noise 0) scores exactly the
+    return the env then gives that prior, beads included; and a short mpc beats passive."""
+    from agents.controllers.mpc import MPCController, MPCSettings
+
+    envs = gym.make_vec("TetherTetrahedron-v0", num_envs=2, **BEADED)
+    observation, _ = envs.reset(seed=[7, 8])
+    horizon = 6
+    planner = MPCController(envs, MPCSettings(samples=2, horizon=horizon, knots=1, noise=0.0, prior="lqr"))
+    costs = planner._rollout(planner.task.snapshot().select(planner.rows), planner._candidates(0.0))
+    prior = make_baseline("lqr", envs)
+    total = np.zeros(2)
+    for _ in range(horizon):
+        observation, reward, *_ = envs.step(prior.predict(observation)[0])
+        total += reward
+    assert np.array_equal(-costs[:, 0], total), (costs, total)
+
+    seeds, short = [3000, 3001], {**BEADED, "max_episode_steps": 40}
+    probe = gym.make_vec("TetherTetrahedron-v0", num_envs=1, **BEADED)
+    passive = rollout(make_baseline("passive", probe), "TetherTetrahedron-v0", seeds, env_kwargs=short)
+    settings = MPCSettings(samples=8, horizon=5, knots=2, noise=0.3, terminal_weight=10.0, prior="velocity_feedback")
+    mpc = rollout(MPCController(probe, settings), "TetherTetrahedron-v0", seeds, env_kwargs=short)
+    assert mpc.rewards.sum(axis=1).mean() > passive.rewards.sum(axis=1).mean()
+    assert not mpc.terminated.any()
