@@ -35,7 +35,7 @@ __all__ = ["LQRController", "PassiveController", "TensionAwareController", "Velo
 
 class PassiveController(Controller):
     """Zero thrust: the cluster rings down under its own damping (the bias thrust still holds the
-    nominal shape)."""
+    nominal shape). With tethers that have mass, the beads ring down under the tethers' damping."""
 
     name = "passive"
 
@@ -57,6 +57,10 @@ class VelocityFeedbackController(Controller):
     whose lateral modes are 300 times slower than its axial ones, it gives a 240 times smaller
     gain and 40 times more vibration energy.) The rule ignores the thrust limit. With large
     initial conditions the commands saturate, and the law becomes bang-bang in the saturated axes.
+
+    With tethers that have mass, the satellites' masses, the velocities and the rule's model
+    are those of :func:`~agents.controllers.base.equivalent_cluster` (each tether one cable, its
+    beads' mass on its ends); the beads are damped only through the satellites.
 
     Args:
         env: a tether-gym env.
@@ -177,6 +181,10 @@ class LQRController(Controller):
     On small perturbations, where every cable stays taut, both designs remove over 99 % of the
     energy in 3 s, as velocity feedback does. The thrust is clipped to the limit, and
     :attr:`saturation_fraction` reports how often (1-9 % of commands over the task).
+
+    With tethers that have mass, the design model is that of
+    :func:`~agents.controllers.base.equivalent_cluster` (each tether one cable, its beads' mass
+    on its ends): the tethers' own modes are neither in the state nor in the cost.
 
     Args:
         env: a tether-gym env.

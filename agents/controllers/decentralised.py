@@ -58,6 +58,11 @@ class LocalController(Controller):
     """Base class of the decentralised laws: :meth:`local_force` maps each satellite's cable
     measurements to its thruster's force.
 
+    With tethers that have mass, a tether is one cable slot to the satellite at its far end
+    (:func:`~agents.controllers.base.equivalent_cluster`), slack while its observed elongation
+    (along its beads) is below its slack point; :meth:`act_local` then refuses, since the
+    multi-agent env's slots are the tethers' first segments.
+
     Attributes:
         graph: the agents and their cables (:class:`tether_gym.multiagent.engine.AgentGraph`).
         slack_point: (A, D) elongation below which each cable slot is slack, m (0 for padding).

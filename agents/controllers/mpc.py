@@ -26,7 +26,12 @@ dynamics. At every control step, for each environment of the batch it controls:
 
 It is **privileged**: it reads the environment's true state and model, not the observation. It
 is the "best achievable" anchor of the benchmark, not a deployable controller. Its settings are
-tuned per id in the package's ``hyperparams/mpc.yml``. ``seconds_per_step`` reports its compute per
+tuned per id in the package's ``hyperparams/mpc.yml``.
+
+With tethers that have mass, the snapshot, the planning rollouts and the reward include the
+beads: the planner steps them as the env does. Its cost grows with them (0.33 s per env and
+control step on the beaded tetrahedron at 8 segments, against 0.016 s without beads), and the
+per-id settings were tuned without beads. ``seconds_per_step`` reports its compute per
 environment and control step.
 """
 
