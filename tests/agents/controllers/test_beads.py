@@ -6,6 +6,8 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agents.controllers.base import Controller, equivalent_cluster
 from agents.controllers.registry import BASELINES, make_baseline
@@ -36,11 +38,21 @@ def test_equivalent_cluster_keeps_mass_centre_and_tether_lengths() -> None:
     assert equivalent_cluster(massless) is massless
 
 
-@pytest.mark.parametrize("env_id", ["TetherTetrahedron-v0", "TetherChain-v0"])
-def test_decode_reads_satellites_and_tethers_of_the_observation(env_id: str) -> None:
-    env = beaded_env(env_id)
+@settings(max_examples=12, deadline=None, derandomize=True)
+@given(
+    env_id=st.sampled_from(["TetherTetrahedron-v0", "TetherChain-v0"]),
+    tether_mass=st.floats(0.05, 20.0),
+    segments=st.integers(2, 16),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_decode_reads_satellites_and_tethers_of_the_observation(
+    env_id: str, tether_mass: float, segments: int, seed: int
+) -> None:
+    """Property: whatever the tethers' mass and segment count, the decoded state is the
+    simulator's satellites (not its first nodes by another count) and its tethers' lengths."""
+    env = gym.make(env_id, preset_kwargs={"tether_mass": tether_mass, "segments": segments})
     controller = Controller(env)
-    observation, _ = env.reset(seed=4)
+    observation, _ = env.reset(seed=seed)
     for _ in range(20):  # let the beads move off their line
         observation, *_ = env.step(env.action_space.sample())
     task = env.unwrapped.task
@@ -100,11 +112,15 @@ def test_local_act_refuses_the_multiagent_slots_of_beaded_clusters() -> None:
         controller.act_local(np.zeros((1, 4, controller.layout.size)))  # type: ignore[attr-defined]
 
 
-def test_rollout_checks_the_satellite_against_the_satellites_not_the_nodes() -> None:
-    env = beaded_env()
+@settings(max_examples=10, deadline=None, derandomize=True)
+@given(segments=st.integers(2, 12), beyond=st.integers(0, 200))
+def test_rollout_checks_the_satellite_against_the_satellites_not_the_nodes(segments: int, beyond: int) -> None:
+    """Property: any index past the satellites is refused, however many beads there are."""
+    kwargs = {"preset_kwargs": {"tether_mass": 2.0, "segments": segments}}
+    env = gym.make("TetherTetrahedron-v0", **kwargs)
     S = env.unwrapped.task.cluster.num_satellites
     with pytest.raises(ValueError, match=f"satellite must be in 0..{S - 1}"):
-        rollout(make_baseline("passive", env), "TetherTetrahedron-v0", [0], satellite=S, env_kwargs=BEADED)
+        rollout(make_baseline("passive", env), "TetherTetrahedron-v0", [0], satellite=S + beyond, env_kwargs=kwargs)
 
 
 def test_mpc_plans_the_beads_as_the_env_steps_them() -> None:
