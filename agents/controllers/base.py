@@ -152,7 +152,10 @@ def equivalent_cluster(cluster: Cluster) -> Cluster:
         breaking_load=np.array(breaking),
         frame=cluster.frame,
         name=f"{cluster.name} (tethers as cables)",
-        **{name: np.array(values) for name, values in columns.items()},
+        EA=np.array(columns["EA"]),
+        N0=np.array(columns["N0"]),
+        L0=np.array(columns["L0"]),
+        axial_damping=np.array(columns["axial_damping"]),
     )
 
 
