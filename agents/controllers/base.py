@@ -12,7 +12,9 @@ the observation:
 - satellite positions relative to the centre of mass, ``r_i = X_i - X_com + d_i`` (m), from the
   displacements ``d_i``;
 - velocities relative to the centre of mass ``u_i`` (m/s);
-- cable elongations (m).
+- cable elongations (m); with tethers that have mass, each tether's elongation (the length
+  along its beads minus its ``L0``) from its observation block, as one cable of
+  :func:`equivalent_cluster`, the model every law is then designed on.
 
 Thrust commands beyond the limit are clipped, as the env would do anyway. Each controller counts
 how often that happens (:attr:`Controller.saturation_fraction`): a linear design that saturates
