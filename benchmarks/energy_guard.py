@@ -60,17 +60,7 @@ DISTURBED = dict(
 
 def relative_residual(sim: BatchSimulator) -> np.ndarray:
     """(B,) |energy-balance residual| over the energy scale of the books, now."""
-    report = sim.energy()
-    scale = np.maximum.reduce(
-        [
-            np.abs(report.initial),
-            report.kinetic + report.strain + np.abs(report.frame_potential),
-            np.abs(report.work),
-            report.dissipated,
-        ]
-    )
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(scale > 0, np.abs(report.residual) / scale, 0.0)
+    return sim.energy().relative_residual
 
 
 def quiet_batch(cluster: tg.Cluster, count: int, safety_factor: float) -> BatchSimulator:

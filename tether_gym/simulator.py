@@ -165,6 +165,23 @@ class EnergyReport:
         turning frame)."""
         return self.kinetic + self.strain + self.frame_potential
 
+    @property
+    def relative_residual(self) -> np.ndarray:
+        """``|residual|`` over the books' largest entry (the initial energy, the current kinetic +
+        strain + |frame potential|, ``|work|``, ``dissipated``); 0 where all are 0.  A
+        dimensionless measure of the integration's energy error for tables and studies; the
+        runaway guard uses its own scale (see :meth:`BatchSimulator.advance`)."""
+        scale = np.maximum.reduce(
+            [
+                np.abs(self.initial),
+                self.kinetic + self.strain + np.abs(self.frame_potential),
+                np.abs(self.work),
+                self.dissipated,
+            ]
+        )
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(scale > 0, np.abs(self.residual) / scale, 0.0)
+
 
 #: The state of a cluster in a batch: public name -> BatchSimulator attribute.  Together with the
 #: cluster's parameters these are everything the integration reads, so a cluster restored from

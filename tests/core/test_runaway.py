@@ -260,3 +260,15 @@ def test_the_guard_flags_a_snapping_beaded_line_that_runs_away_and_not_at_the_de
     healthy = crumpled_line_runs(32, tg.simulator.DEFAULT_SAFETY_FACTOR, ENERGY_RUNAWAY_TOLERANCE)
     assert (healthy.status == 0).all()
     assert relative_residual(healthy).max() < 0.05 * ENERGY_RUNAWAY_TOLERANCE
+
+
+def test_the_reports_relative_residual_is_the_residual_over_the_books_largest_entry() -> None:
+    batch = tg.BatchSimulator(tg.make_cluster("tetrahedron"), 3)
+    assert (batch.energy().relative_residual == 0.0).all()  # at rest at the reset: no books, no error
+    positions = batch.positions + np.random.default_rng(0).normal(0.0, 0.5, batch.positions.shape)
+    batch.reset(positions)
+    batch.advance(5.0, force=np.full(batch.positions.shape, 0.01))
+    report = batch.energy()
+    largest = np.max([report.initial, report.kinetic + report.strain, report.work, report.dissipated], axis=0)
+    np.testing.assert_allclose(report.relative_residual, np.abs(report.residual) / largest, rtol=1e-12)
+    assert (report.relative_residual < 0.05).all()
