@@ -30,6 +30,7 @@ __all__ = [
     "read_bounded",
     "MAX_YAML_BYTES",
     "MAX_YAML_NODES",
+    "decode_json",
     "json_depth",
     "json_hooks",
     "read_json",
@@ -140,15 +141,22 @@ MAX_READ_JSON_DEPTH = 64
 MAX_READ_JSON_BYTES = 64 * 2**20
 
 
-def read_json(file: Path, error: type[Exception], fix: str) -> Any:
-    """The strict JSON data of ``file``, or ``error`` naming the file, the problem and ``fix``."""
-    data = read_bounded(file, MAX_READ_JSON_BYTES, error, fix)
-    if json_depth(data, MAX_READ_JSON_DEPTH) > MAX_READ_JSON_DEPTH:
-        raise error(f"{file} nests lists or objects more than {MAX_READ_JSON_DEPTH} deep: {fix}")
+def decode_json(data: bytes, where: Path, error: type[Exception], fix: str, max_depth: int, why: str = "") -> Any:
+    """The strict JSON data of the bytes ``data`` read from ``where``: nested at most ``max_depth``
+    deep (checked before parsing, so that the parser cannot recurse) and parsed with
+    :func:`json_hooks`; otherwise ``error`` naming ``where``, the problem (``why`` added to the
+    depth's) and ``fix``."""
+    if json_depth(data, max_depth) > max_depth:
+        raise error(f"{where} nests lists or objects more than {max_depth} deep{why}: {fix}")
     try:
         return json.loads(data.decode("utf-8"), **json_hooks())
     except (UnicodeDecodeError, ValueError) as problem:
-        raise error(f"{file} is not valid JSON ({problem}): {fix}") from problem
+        raise error(f"{where} is not valid JSON ({problem}): {fix}") from problem
+
+
+def read_json(file: Path, error: type[Exception], fix: str) -> Any:
+    """The strict JSON data of ``file``, or ``error`` naming the file, the problem and ``fix``."""
+    return decode_json(read_bounded(file, MAX_READ_JSON_BYTES, error, fix), file, error, fix, MAX_READ_JSON_DEPTH)
 
 
 # ---------------------------------------------------------------------------------------------

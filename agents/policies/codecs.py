@@ -28,7 +28,7 @@ import numpy as np
 from tether_gym._optional import needs_extra
 
 from ..common.checks import is_count
-from ..common.reading import MAX_JSON_INTEGER, json_depth, json_hooks
+from ..common.reading import MAX_JSON_INTEGER, decode_json, json_depth
 from .layout import PolicyFormatError
 
 with needs_extra("train", "the policy files"):
@@ -106,15 +106,9 @@ def parse_json(data: bytes, where: Path) -> Any:
             f"{where} is {len(data):,} bytes, more than a policy file can be ({MAX_JSON_BYTES:,}): "
             "restore or re-create the file"
         )
-    if json_depth(data, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
-        raise PolicyFormatError(
-            f"{where} nests lists or objects more than {MAX_JSON_DEPTH} deep, which no policy file does: "
-            "restore or re-create the file"
-        )
-    try:
-        return json.loads(data.decode("utf-8"), **json_hooks())
-    except (UnicodeDecodeError, ValueError) as error:
-        raise PolicyFormatError(f"{where} is not valid JSON ({error}): restore or re-create the file") from error
+    return decode_json(
+        data, where, PolicyFormatError, "restore or re-create the file", MAX_JSON_DEPTH, ", which no policy file does"
+    )
 
 
 def dump_json(value: Any) -> str:
