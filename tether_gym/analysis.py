@@ -10,6 +10,8 @@ controllers (LQR) about a nominal state.  The linear analysis uses the exact elo
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -35,6 +37,8 @@ __all__ = [
     "max_frequency",
     "normal_modes",
     "tangent_stiffness",
+    "TetherModeErrors",
+    "tether_mode_errors",
 ]
 
 
@@ -209,3 +213,123 @@ def element_omega2_finite_difference(batch: BatchSimulator, relative_perturbatio
     omega2 = omega2 * (np.sqrt(1.0 + xi * xi) + xi) ** 2
     omega2 = omega2 + np.abs(batch.frame_tidal).max(axis=1)[:, None]
     return np.where(batch.intact, omega2, 0.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class TetherModeErrors:
+    """How far one beaded tether's lowest modes fall from the continuous line's closed forms.
+
+    Attributes:
+        tether: index of the tether in ``cluster.tethers``.
+        segments: its segment count N.
+        length: its reference length L0, m.
+        line_density: its mass per reference length, kg/m.
+        tension: its mean segment pretension, N.
+        transverse_hz: (modes,) the taut string's ``f_k = k / (2 L0) sqrt(N0 / mu)``, Hz (zero
+            without pretension).
+        transverse_error: (modes,) the beaded line's relative error on them, satellites held
+            (NaN without pretension).
+        axial_hz: the first axial mode of a uniform bar between the two satellites' masses, Hz.
+        axial_error: the beaded line's relative error on it, satellites free.
+    """
+
+    tether: int
+    segments: int
+    length: float
+    line_density: float
+    tension: float
+    transverse_hz: np.ndarray
+    transverse_error: np.ndarray
+    axial_hz: float
+    axial_error: float
+
+
+def _bar_with_end_masses_wavenumber(length: float, line_density: float, mass_a: float, mass_b: float) -> float:
+    """The first nonzero wavenumber k, 1/m, of axial vibration of a uniform bar of ``length`` m and
+    ``line_density`` kg/m between free end masses ``mass_a`` and ``mass_b`` kg.
+
+    With ``a = M_a k / mu`` and ``b = M_b k / mu`` the end conditions give
+    ``sin(kL) (a b - 1) = (a + b) cos(kL)``; its first root lies in ``(0, pi / L)``, where the
+    left side minus the right runs from ``-(a + b) < 0`` at ``k -> 0`` to ``a + b > 0`` at
+    ``pi / L``, so bisection finds it to round-off.
+    """
+
+    def residual(k: float) -> float:
+        a, b = mass_a * k / line_density, mass_b * k / line_density
+        return math.sin(k * length) * (a * b - 1.0) - (a + b) * math.cos(k * length)
+
+    low, high = 1e-12 / length, math.pi / length
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        if residual(middle) < 0.0:
+            low = middle
+        else:
+            high = middle
+    return 0.5 * (low + high)
+
+
+def tether_mode_errors(cluster: Cluster, modes: int = 3) -> list[TetherModeErrors]:
+    """The discretisation error of each beaded tether of ``cluster``: its lowest transverse and
+    axial frequencies as the lumped-mass line gives them, against the continuous line's closed forms.
+
+    Each tether is taken alone: a straight line of its ``L0``, mass, ``EA``, mean pretension,
+    segment count and lumping rule between its two satellites, with their own masses (the
+    cluster's less every tether's lumped share), so that the closed forms do not move with N.
+    Its frequencies are the eigenvalues of :func:`tangent_stiffness` over the lumped masses:
+    transverse with the satellites held (the taut string, modes 1..``modes``), axial with them
+    free (the bar between two end masses, mode 1).  Their errors are spatial, from the segment
+    count; the central-difference step adds a phase error of about ``(omega h)^2 / 24``, far
+    smaller at the safety factors in use.
+
+    Args:
+        cluster: a cluster with tethers (see :func:`tether_gym.tethers.build_cluster`).
+        modes: number of transverse modes, >= 1 and < the segment count.
+
+    Returns:
+        One :class:`TetherModeErrors` per tether with beads, in the order of ``cluster.tethers``.
+    """
+    from tether_gym.tethers import Tether, build_cluster
+
+    results = []
+    for t, spec in enumerate(cluster.tethers):
+        if spec.segments < 2:
+            continue
+        if not 1 <= modes < spec.segments:
+            raise ValueError(f"modes must be in 1..{spec.segments - 1} for tether {t}'s {spec.segments} segments")
+        if spec.L0 is None:  # a cluster's tethers carry their L0 (Cluster checks it)
+            raise ValueError(f"tether {t} has no L0")
+        length = float(spec.L0)
+        density = spec.mass / length
+        tension = float(np.mean(cluster.N0[cluster.tether_cables(t)]))
+        ends = [
+            cluster.masses[node] - sum(other.end_mass for other in cluster.tethers if node in other.ends)
+            for node in spec.ends
+        ]
+        line = build_cluster(
+            [[0.0, 0.0, 0.0], [length, 0.0, 0.0]],
+            ends,
+            [Tether((0, 1), EA=spec.EA, segments=spec.segments, mass=spec.mass, N0=tension, lumping=spec.lumping)],
+        )
+        stiffness = tangent_stiffness(line)
+
+        def frequencies(axis: int, held: bool, line: Cluster = line, stiffness: np.ndarray = stiffness) -> np.ndarray:
+            dofs = np.arange(line.num_nodes) * 3 + axis
+            if held:
+                dofs = dofs[line.is_bead]
+            scale = 1.0 / np.sqrt(line.masses[dofs // 3])
+            block = stiffness[np.ix_(dofs, dofs)] * scale[:, None] * scale[None, :]
+            omega2 = np.linalg.eigvalsh(0.5 * (block + block.T))
+            return np.sqrt(np.clip(omega2, 0.0, None)) / (2 * math.pi)
+
+        k = np.arange(1, modes + 1)
+        string = k / (2 * length) * math.sqrt(tension / density)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            transverse_error = np.where(string > 0, frequencies(1, True)[:modes] / string - 1.0, np.nan)
+        wavenumber = _bar_with_end_masses_wavenumber(length, density, ends[0], ends[1])
+        bar = wavenumber * math.sqrt(spec.EA / density) / (2 * math.pi)
+        # Mode 0 of the free line is its rigid translation.
+        axial_error = float(frequencies(0, False)[1] / bar - 1.0)
+        results.append(
+            TetherModeErrors(t, spec.segments, length, density, tension, string, transverse_error, bar, axial_error)
+        )
+    return results

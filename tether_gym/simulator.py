@@ -451,8 +451,8 @@ class BatchSimulator:
     """
 
     # Parameters.
-    masses = _node(_kernels.MASS, "(B, n) satellite masses, kg.")
-    damping = _node(_kernels.DAMPING, "(B, n) diagonal damping of each satellite, N*s/m.")
+    masses = _node(_kernels.MASS, "(B, n) node masses (satellites, then beads), kg.")
+    damping = _node(_kernels.DAMPING, "(B, n) diagonal damping of each node, N*s/m.")
     reference = _node(_kernels.REFERENCE, "(B, n, 3) nominal positions (the linearised elongation's reference), m.", 3)
     stiffness = _cable(_kernels.STIFFNESS, "(B, m) axial stiffness EA / L0 of each cable, N/m.")
     L0 = _cable(_kernels.REST_LENGTH, "(B, m) rest lengths, m.")
@@ -575,8 +575,8 @@ class BatchSimulator:
             raise TypeError(f"cluster must be a tether_gym.Cluster; got {type(cluster).__name__}")
         if cluster.num_nodes != self.num_nodes or not np.array_equal(cluster.cables, self.cables):
             raise ValueError(
-                f"cluster {cluster.name!r} has a different topology ({cluster.num_nodes} satellites, "
-                f"{cluster.num_cables} cables) from the batch's ({self.num_nodes} satellites, "
+                f"cluster {cluster.name!r} has a different topology ({cluster.num_nodes} nodes, "
+                f"{cluster.num_cables} cables) from the batch's ({self.num_nodes} nodes, "
                 f"{self.num_cables} cables, same cable list required)"
             )
         self.clusters[index] = cluster
@@ -658,8 +658,9 @@ class BatchSimulator:
         nodes, cables, clusters, finite = self.evaluate_at(x0, idx, velocities=v0, intact=True)
         if not finite.all():
             raise ValueError(
-                f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable; "
-                "two connected satellites may not occupy the same point"
+                f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable: "
+                f"{self._coincident_cable(x0[int(np.argmin(finite))])}; "
+                "two connected nodes may not occupy the same point"
             )
         k = _kernels
         self.node_table[idx, :, k.POSITION : k.POSITION + 3] = x0
@@ -786,8 +787,9 @@ class BatchSimulator:
         )
         if not finite.all():
             raise ValueError(
-                f"state.arrays['positions'] of cluster(s) {rows[~finite].tolist()} give a zero-length cable; "
-                "two connected satellites may not occupy the same point"
+                f"state.arrays['positions'] of cluster(s) {rows[~finite].tolist()} give a zero-length cable: "
+                f"{self._coincident_cable(self.positions_[rows][int(np.argmin(finite))])}; "
+                "two connected nodes may not occupy the same point"
             )
         tension = cables[:, :, k.TENSION]
         # Forces are compared on the scale of the cluster's tensions: at an equilibrium they
@@ -848,8 +850,8 @@ class BatchSimulator:
             checked.add(id(cluster))
             if cluster.num_nodes != self.num_nodes or not np.array_equal(cluster.cables, self.cables):
                 raise ValueError(
-                    f"state.clusters[{position}] has a different topology ({cluster.num_nodes} satellites, "
-                    f"{cluster.num_cables} cables) from this batch ({self.num_nodes} satellites, "
+                    f"state.clusters[{position}] has a different topology ({cluster.num_nodes} nodes, "
+                    f"{cluster.num_cables} cables) from this batch ({self.num_nodes} nodes, "
                     f"{self.num_cables} cables, same cable list required)"
                 )
         if state.settings != self.settings:
@@ -872,7 +874,7 @@ class BatchSimulator:
                 raise TypeError(f"state.arrays[{name!r}] must be a numpy array of dtype {np.dtype(dtype)}; got {got}")
             if value.shape != full:
                 raise ValueError(
-                    f"state.arrays[{name!r}] must have shape {full} (k={k} clusters, n={n} satellites, m={m} "
+                    f"state.arrays[{name!r}] must have shape {full} (k={k} clusters, n={n} nodes, m={m} "
                     f"cables); got shape {value.shape}"
                 )
         status = arrays["status"]
@@ -941,7 +943,7 @@ class BatchSimulator:
 
         Args:
             duration: interval length, s, > 0.  Each cluster lands exactly on its end.
-            force: (B, n, 3) external force p on each satellite (thrust, bias), N; default zero.
+            force: (B, n, 3) external force p on each node (thrust and bias on satellites), N; default zero.
             active: (B,) bool mask of clusters to integrate (default all); others are left as
                 they are, and so are clusters already flagged as diverged.
             record_steps: record the first R sub-step sizes of each cluster in the result.
@@ -1007,6 +1009,13 @@ class BatchSimulator:
         """
         return self._forces_at(positions, indices)[2]
 
+    def _coincident_cable(self, positions: np.ndarray) -> str:
+        """Which cable of one cluster's (n, 3) ``positions`` has zero length, named by its nodes."""
+        lengths = np.linalg.norm(positions[self.cables[:, 1]] - positions[self.cables[:, 0]], axis=1)
+        cable = int(np.argmin(np.where(np.isfinite(lengths), lengths, 0.0)))
+        i, j = (self.template.node_label(int(node)) for node in self.cables[cable])
+        return f"cable {cable} joins {i} and {j}, which coincide"
+
     def _forces_at(
         self, positions: ArrayLike, indices: Sequence[int] | np.ndarray | None, intact: bool | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -1017,7 +1026,10 @@ class BatchSimulator:
         x = _check_array("positions", positions, (idx.size, self.num_nodes, 3), "m")
         nodes, _, _, finite = self.evaluate_at(x, idx, intact=intact)
         if not finite.all():
-            raise ValueError("positions give a zero-length cable (two connected satellites coincide)")
+            raise ValueError(
+                f"positions of cluster(s) {idx[~finite].tolist()} give a zero-length cable: "
+                f"{self._coincident_cable(x[int(np.argmin(finite))])}; two connected nodes may not coincide"
+            )
         column = _kernels.INTERNAL_FORCE
         return idx, x, nodes[:, :, column : column + 3]
 

@@ -33,6 +33,7 @@ import gymnasium as gym
 import numpy as np
 
 import tether_gym
+from tether_gym.analysis import tether_mode_errors
 from tether_gym.envs import TetherClusterEnv
 from tether_gym.envs.contract import TETHER_FEATURE_MEANINGS, TETHER_FEATURES
 from tether_gym.presets import PRESETS
@@ -237,6 +238,50 @@ def frame_text(cluster: tether_gym.Cluster) -> str:
     return "inertial (free space)"
 
 
+def cluster_text(cluster: tether_gym.Cluster) -> str:
+    text = f"{cluster.num_satellites} satellites, {cluster.num_cables} cables"
+    if cluster.tethers:
+        text += f" ({cluster.num_tethers} tethers with mass: {cluster.num_beads} beads)"
+    return text
+
+
+def discretisation_text(cluster: tether_gym.Cluster) -> str:
+    """The section on a beaded id's discretisation error against the continuous line's closed
+    forms (empty for a cluster without beads): one row per distinct tether."""
+    errors = tether_mode_errors(cluster)
+    if not errors:
+        return ""
+    rows: dict[tuple[str, ...], list[int]] = {}
+    for e in errors:
+        modes = ", ".join(
+            f"{number(f)} Hz ({100 * err:+.2f} %)" for f, err in zip(e.transverse_hz, e.transverse_error, strict=True)
+        )
+        key = (
+            str(e.segments),
+            f"{number(e.length)} m",
+            f"{number(e.line_density)} kg/m",
+            f"{number(e.tension)} N",
+            modes,
+            f"{number(e.axial_hz)} Hz ({100 * e.axial_error:+.3f} %)",
+        )
+        rows.setdefault(key, []).append(e.tether)
+    return (
+        "\n### Discretisation error\n\n"
+        "Each tether is a lumped-mass line, so its waves are those of its beads, not of the continuous line. "
+        "The table gives, per tether, the continuous line's closed forms and the relative error of the "
+        "beaded line's frequencies on them: the taut string's transverse modes 1-3 "
+        "(`f_k = k / (2 L0) sqrt(N0 / mu)`, satellites held) and the first axial mode of a uniform bar "
+        "between the two satellites' masses. Both errors fall as 1/N² with the segment count N; the time "
+        "step adds a phase error far below them. Computed when the site was built by "
+        "`tether_gym.analysis.tether_mode_errors`, from each tether taken alone between its two satellites; "
+        '`preset_kwargs={"segments": ...}` trades them against cost.\n\n'
+        + table(
+            ("tethers", "segments N", "L0", "mu", "N0", "transverse modes 1-3 (error)", "axial mode 1 (error)"),
+            [(", ".join(map(str, tethers)), *key) for key, tethers in rows.items()],
+        )
+    )
+
+
 def thrust_text(facts: EnvFacts) -> str:
     limit = facts.settings["thrust_limit"]
     return f"{facts.thrusters}, up to {values(facts.settings['max_thrust'], 'N')} each ({limit!s} limit)"
@@ -310,7 +355,7 @@ def env_page(env_id: str) -> str:
         ("Observation Space", f"`{facts.observation_space}`"),
         ("Make", f'`gym.make("tether_gym:{env_id}")`'),
         ("Make a vector env", f'`gym.make_vec("tether_gym:{env_id}", num_envs=N)`'),
-        ("Cluster", f"preset `{facts.preset}`: {cluster.num_nodes} satellites, {cluster.num_cables} cables"),
+        ("Cluster", f"preset `{facts.preset}`: {cluster_text(cluster)}"),
         ("Frame", frame_text(cluster)),
         ("Control interval", f"{interval} s"),
         ("Episode", f"{facts.max_episode_steps} steps ({number(facts.episode_seconds)} s), then truncated"),
@@ -322,8 +367,13 @@ def env_page(env_id: str) -> str:
         ("Render modes", ", ".join(facts.render_modes) + f" ({facts.render_fps} fps)"),
     ]
     magnitudes = [
-        ("satellites", str(cluster.num_nodes)),
-        ("cables", str(cluster.num_cables)),
+        ("satellites", str(cluster.num_satellites)),
+        *(
+            [("tethers with mass", f"{cluster.num_tethers}, with {cluster.num_beads} beads in all")]
+            if cluster.tethers
+            else []
+        ),
+        ("cables", str(cluster.num_cables) + (" (tether segments included)" if cluster.tethers else "")),
         ("masses", values(cluster.masses, "kg")),
         ("cable lengths L0", values(cluster.L0, "m")),
         ("axial stiffness EA", values(cluster.EA, "N")),
@@ -343,6 +393,7 @@ def env_page(env_id: str) -> str:
             + f'\n### The preset\'s parameters\n\n`gym.make("tether_gym:{env_id}", preset_kwargs={{...}})` overrides '
             f"them (defaults from `tether_gym.presets.{facts.preset}`):\n\n"
             + table(("parameter", "default", "meaning"), [(f"`{n}`", f"`{d}`", m) for n, d, m in preset_rows])
+            + discretisation_text(cluster)
             + "\n### The task (every id)\n"
         ),
         "Action Space": (

@@ -8,6 +8,7 @@ independent peer (scipy's DOP853 on bead equations written here) checks trajecto
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 from pathlib import Path
@@ -315,7 +316,12 @@ def test_roles_and_layout_of_a_beaded_cluster() -> None:
         cluster.tether_beads(3)
 
 
-@pytest.mark.parametrize("name", tg.preset_names())
+def _massless_by_default(name: str) -> bool:
+    parameter = inspect.signature(tg.presets.PRESETS[name]).parameters.get("tether_mass")
+    return parameter is None or parameter.default == 0.0
+
+
+@pytest.mark.parametrize("name", [name for name in tg.preset_names() if _massless_by_default(name)])
 def test_clusters_without_beads_are_unchanged(name: str) -> None:
     cluster = tg.make_cluster(name)
     assert "tethers" not in cluster.to_dict()
@@ -627,3 +633,44 @@ def test_frame_held_picks_one_answer_for_an_indeterminate_formation() -> None:
     massless = tg.make_cluster("spinning_hub").N0
     lighter, heavier = levels(0.2, 8), levels(1.0, 8)
     assert (massless < lighter).all() and (lighter < heavier).all()
+
+
+def test_tether_mode_errors_match_the_kernel_frequencies_and_the_closed_forms() -> None:
+    """The ids' pages state these errors: they are the kernel's frequencies (by finite differences,
+    above) against the closed forms written in this file, and fall at second order."""
+    from tether_gym.analysis import tether_mode_errors
+
+    string = np.array([k / (2 * LENGTH) * TRANSVERSE_SPEED for k in (1, 2, 3)])
+    bar = 2 * end_mass_roots(1)[0] / LENGTH * AXIAL_SPEED / (2 * math.pi)
+    previous = None
+    for n in (8, 16):
+        (errors,) = tether_mode_errors(line(n))
+        assert (errors.tether, errors.segments, errors.tension) == (0, n, pytest.approx(TENSION))
+        np.testing.assert_allclose(errors.transverse_hz, string, rtol=1e-12)
+        assert errors.axial_hz == pytest.approx(bar, rel=1e-10)
+        expected = frequencies(line(n), 1, fixed_ends=True)[:3] / string - 1
+        np.testing.assert_allclose(errors.transverse_error, expected, rtol=1e-5)
+        axial = frequencies(line(n), 0, fixed_ends=False)[1] / bar - 1
+        assert errors.axial_error == pytest.approx(axial, rel=1e-5)
+        if previous is not None:
+            ratios = previous / np.abs([*errors.transverse_error, errors.axial_error])
+            assert np.all((3.8 < ratios) & (ratios < 4.2)), ratios
+        previous = np.abs([*errors.transverse_error, errors.axial_error])
+    # Other tethers' lumped shares do not move a tether's end masses: the closed form is the
+    # bare satellites'.
+    beaded = tg.presets.make_cluster("beaded_tetrahedron")
+    axial = [e.axial_hz for e in tether_mode_errors(beaded)]
+    np.testing.assert_allclose(axial, axial[0], rtol=1e-14)
+    assert tether_mode_errors(tg.presets.make_cluster("tetrahedron")) == []
+
+
+def test_simulator_names_the_coincident_nodes_of_a_zero_length_segment() -> None:
+    cluster = tg.presets.make_cluster("beaded_chain")
+    sim = tg.BatchSimulator(cluster, 2)
+    positions = np.repeat(cluster.positions[None], 2, axis=0)
+    positions[1, 6] = positions[1, 5]
+    expected = r"cluster\(s\) \[1\] give a zero-length cable: cable 1 joins bead 0 of tether 0 \(node 5\) and bead 1"
+    with pytest.raises(ValueError, match=expected):
+        sim.reset(positions)
+    with pytest.raises(ValueError, match=expected):
+        sim.internal_forces(positions, np.array([0, 1]))
