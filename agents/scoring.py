@@ -9,6 +9,10 @@ per-episode returns on the way::
 
     python -m agents.scoring outputs/benchmark/benchmark.json --commit 2466a18 --force
 
+A benchmark of new ids alone (``python -m agents.benchmark --envs ...``) is added to the shipped
+file with ``--add-to agents/reference/reference_scores.json --force``: the other ids keep their
+numbers and their run (:func:`agents.evaluation.scoring.merge_reference`).
+
 :func:`score_policy` is importable from here too (``from tether_gym_agents.scoring import
 score_policy``, the documented path of earlier releases); its module is
 :mod:`agents.evaluation.scoring`.
@@ -44,6 +48,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--date", help="when the benchmark ran, ISO 8601 (default: benchmark.json's time, UTC)")
     parser.add_argument("--machine", help="the machine it ran on (default: this machine's CPU, cores and OS)")
+    parser.add_argument(
+        "--add-to",
+        type=cli.existing_file,
+        help="a reference file to add the benchmark's ids to (its other ids, run and aggregate are kept; "
+        "each id then names the run it comes from); usually the same path as --out, with --force",
+    )
     parser.add_argument("--force", action="store_true", help="replace an existing file at --out")
     return parser
 
@@ -52,7 +62,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run the command with ``argv`` (default: the process's arguments); returns the reference
     scores it wrote."""
     args = build_parser().parse_args(argv)
-    data = write_reference(args.benchmark_json, args.commit, args.out, args.date, args.machine, args.force)
+    data = write_reference(
+        args.benchmark_json, args.commit, args.out, args.date, args.machine, args.force, add_to=args.add_to
+    )
     controllers = sum(len(entry["controllers"]) for entry in data["per_id"].values())
     print(
         f"wrote {args.out}: {len(data['per_id'])} ids, {controllers} controllers, {data['episodes']} episodes each "

@@ -76,7 +76,9 @@ __all__ = [
     "Score",
     "load_reference",
     "machine_description",
+    "merge_reference",
     "reference_from_benchmark",
+    "run_of",
     "score_policy",
     "score_returns",
     "write_reference",
@@ -299,7 +301,7 @@ def score_returns(
         normalised_score_low=low,
         normalised_score_high=high,
         score_note=note,
-        reference_commit=data["commit"],
+        reference_commit=run_of(data, env_id)["commit"],
     )
 
 
@@ -542,6 +544,77 @@ def reference_from_benchmark(
     return data
 
 
+#: What must agree between reference scores for one to extend the other: the seeds' count, the
+#: anchors, and every setting the statistics depend on.
+_SHARED_SETTINGS = (
+    "format",
+    "version",
+    "episodes",
+    "zero",
+    "reference",
+    "confidence",
+    "score_bootstrap",
+    "env_kwargs",
+    "aggregate_bootstrap",
+)
+#: Where an id's numbers come from: the benchmark run's provenance.
+_RUN_KEYS = ("commit", "command", "date", "machine", "versions")
+
+
+def run_of(data: dict[str, Any], env_id: str) -> dict[str, Any]:
+    """The provenance (commit, command, date, machine, versions) of the benchmark run that gave
+    ``env_id``'s numbers in the reference scores ``data``: the file's own run, or the run of the
+    addition (see :func:`merge_reference`) that holds the id."""
+    for addition in data.get("additions", []):
+        if env_id in addition["ids"]:
+            return {key: addition[key] for key in _RUN_KEYS}
+    return {key: data.get(key) for key in _RUN_KEYS}
+
+
+def merge_reference(base: dict[str, Any], addition: dict[str, Any]) -> dict[str, Any]:
+    """Reference scores holding ``base``'s ids and ``addition``'s (both reference dicts, as
+    :func:`reference_from_benchmark` makes them).
+
+    A benchmark of new ids need not rerun the old ones: their per-seed returns do not depend on
+    the other ids. The merged file keeps ``base``'s run and its aggregate, which covers only the
+    ids it was computed over (``aggregate_ids``), and lists each addition's run and ids under
+    ``additions``; :func:`run_of` says which run gave an id. An addition's ids replace those of an
+    earlier addition; the ids of the aggregate cannot be replaced this way (rerun the benchmark on
+    every id for that). Raises :class:`ReferenceDataError` when a shared setting differs (the
+    scores would not be comparable) or an addition would replace an id of the aggregate."""
+    for key in _SHARED_SETTINGS:
+        if base.get(key) != addition.get(key):
+            raise ReferenceDataError(
+                f"the addition's {key} is {addition.get(key)!r}, the reference's {base.get(key)!r}: scores of other "
+                "settings are not comparable; run the benchmark with the reference's settings"
+            )
+    if addition.get("additions"):
+        raise ReferenceDataError("the addition is itself a merged file: add the benchmark of each run on its own")
+    aggregate_ids = list(base.get("aggregate_ids", base["per_id"]))
+    replaced = sorted(set(addition["per_id"]) & set(aggregate_ids))
+    if replaced:
+        raise ReferenceDataError(
+            f"{replaced} are ids of the reference's aggregate: an addition cannot replace them; rerun the benchmark "
+            "on every id and write the reference from it"
+        )
+    new_ids = list(addition["per_id"])
+    earlier = []
+    for entry in base.get("additions", []):
+        kept = [env_id for env_id in entry["ids"] if env_id not in new_ids]
+        if kept:
+            earlier.append({**entry, "ids": kept})
+    per_id = {env_id: entry for env_id, entry in base["per_id"].items() if env_id not in new_ids}
+    per_id.update(addition["per_id"])
+    merged = {
+        **base,
+        "aggregate_ids": aggregate_ids,
+        "additions": [*earlier, {"ids": new_ids, **{key: addition[key] for key in _RUN_KEYS}}],
+        "per_id": per_id,
+    }
+    _check_statistics(merged)
+    return merged
+
+
 def load_reference(path: str | Path | None = None) -> dict[str, Any]:
     """The reference scores from ``path`` (default: the shipped :data:`REFERENCE_FILE`).
 
@@ -571,11 +644,13 @@ def write_reference(
     date: str | None = None,
     machine: str | None = None,
     force: bool = False,
+    add_to: str | Path | None = None,
 ) -> dict[str, Any]:
     """Convert ``benchmark_json`` with :func:`reference_from_benchmark` and write the reference
     scores to ``out`` (atomically); returns them. ``date`` defaults to the time
     ``benchmark_json`` was last written (the end of the benchmark run), in UTC. An existing
-    ``out`` is replaced only with ``force``."""
+    ``out`` is replaced only with ``force``. With ``add_to`` (a reference file), the benchmark's
+    ids are added to that file's with :func:`merge_reference` instead."""
     from ..common.files import OutputError, atomic_write_text, check_output_files
 
     source = Path(benchmark_json)
@@ -590,5 +665,7 @@ def write_reference(
         written = datetime.datetime.fromtimestamp(source.stat().st_mtime, tz=datetime.timezone.utc)
         date = written.replace(microsecond=0).isoformat().replace("+00:00", "Z")
     data = reference_from_benchmark(results, commit, date, machine)
+    if add_to is not None:
+        data = merge_reference(load_reference(add_to), data)
     atomic_write_text(target, json.dumps(data, indent=1, allow_nan=False) + "\n")
     return data

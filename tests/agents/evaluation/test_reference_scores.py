@@ -18,7 +18,9 @@ from agents.evaluation.scoring import (
     REFERENCE_FILE,
     load_reference,
     machine_description,
+    merge_reference,
     reference_from_benchmark,
+    run_of,
     score_policy,
 )
 from agents.policies import shipped_models
@@ -37,20 +39,46 @@ def test_the_shipped_reference_holds_every_id_and_controller() -> None:
         assert entry["seeds"] == list(range(HELD_OUT_SEED, HELD_OUT_SEED + 64))
         assert set(entry["controllers"]) == {*BASELINES, "mpc", *shipped_models(env_id)}, env_id
         assert entry["best_baseline"] in BASELINES
-    # Every statistic is what its returns give (the converter's check, on the file as shipped).
-    reference_from_benchmark(
-        {"per_id": data["per_id"], "aggregate": data["aggregate"], "settings": _settings_of(data)},
+    # The file is what the converter gives from its runs' results, each statistic what its
+    # returns give: the aggregate's run, then each addition's ids merged in.
+    aggregate_ids = data.get("aggregate_ids", list(data["per_id"]))
+    rebuilt = reference_from_benchmark(
+        {
+            "per_id": {env_id: data["per_id"][env_id] for env_id in aggregate_ids},
+            "aggregate": data["aggregate"],
+            "settings": _settings_of(data, run_of(data, aggregate_ids[0])),
+        },
         data["commit"],
         data["date"],
         data["machine"],
     )
+    for addition in data.get("additions", []):
+        run = run_of(data, addition["ids"][0])
+        added = reference_from_benchmark(
+            {
+                "per_id": {env_id: data["per_id"][env_id] for env_id in addition["ids"]},
+                "aggregate": {},
+                "settings": _settings_of(data, run),
+            },
+            run["commit"],
+            run["date"],
+            run["machine"],
+        )
+        rebuilt = merge_reference(rebuilt, added)
+    assert rebuilt == data
 
 
-def _settings_of(data: dict[str, Any]) -> dict[str, Any]:
-    """The benchmark settings a reference file was made from, as far as it keeps them."""
+def _settings_of(data: dict[str, Any], run: dict[str, Any]) -> dict[str, Any]:
+    """The benchmark settings of one run of a reference file, as far as the file keeps them."""
     seeds = next(iter(data["per_id"].values()))["seeds"]
-    keys = ("command", "episodes", "reference", "zero", "confidence", "env_kwargs", "versions")
-    return {**{key: data[key] for key in keys}, "seeds": seeds, "bootstrap": data["aggregate_bootstrap"]}
+    keys = ("episodes", "reference", "zero", "confidence", "env_kwargs")
+    return {
+        **{key: data[key] for key in keys},
+        "command": run["command"],
+        "versions": run["versions"],
+        "seeds": seeds,
+        "bootstrap": data["aggregate_bootstrap"],
+    }
 
 
 def test_scoring_lqr_reproduces_the_shipped_numbers() -> None:
@@ -93,7 +121,7 @@ LEARNED_RTOL_OTHER_CPU = 2e-3
 def test_every_baseline_and_shipped_model_reproduces_its_shipped_returns(env_id: str) -> None:
     data = load_reference()
     entry = data["per_id"][env_id]
-    same_machine = data["machine"] == machine_description()
+    same_machine = run_of(data, env_id)["machine"] == machine_description()
     for name in BASELINES:
         score = score_policy(name, env_id)
         assert score.returns.tolist() == entry["controllers"][name]["returns"], f"{env_id} {name}"

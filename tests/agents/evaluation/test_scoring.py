@@ -26,7 +26,9 @@ from agents.evaluation.scoring import (
     FORMAT,
     ReferenceDataError,
     load_reference,
+    merge_reference,
     reference_from_benchmark,
+    run_of,
     score_policy,
     score_returns,
     write_reference,
@@ -237,3 +239,66 @@ def test_a_malformed_reference_file_is_refused_naming_it(tmp_path: Path, text: s
         load_reference(file)
     with pytest.raises(ReferenceDataError, match=f"reference_scores.json .*{message}"):
         write_reference(file, "abc1234", out=tmp_path / "out.json")
+
+
+@pytest.fixture(scope="module")
+def other_id_reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    """A benchmark of another id alone, on the settings of ``small_benchmark``, and its reference."""
+    out = tmp_path_factory.mktemp("benchmark_chain")
+    benchmark(
+        BenchmarkConfig(
+            env_ids=["TetherChain-v0"],
+            controllers=["passive", "lqr", "mpc"],
+            episodes=EPISODES,
+            env_kwargs={"max_episode_steps": 20},
+            bootstrap_reps=100,
+            plots=False,
+            out=out,
+        )
+    )
+    results = json.loads((out / "benchmark.json").read_text())
+    return out / "benchmark.json", reference_from_benchmark(results, "def5678", "2026-02-02T00:00:00Z", "other")
+
+
+def test_a_benchmark_of_new_ids_is_added_with_its_own_run(
+    small_benchmark: Path, small_reference: dict[str, Any], other_id_reference: tuple[Path, dict[str, Any]]
+) -> None:
+    bench, addition = other_id_reference
+    merged = merge_reference(small_reference, addition)
+    assert list(merged["per_id"]) == [ENV_ID, "TetherChain-v0"]
+    assert merged["per_id"]["TetherChain-v0"] == addition["per_id"]["TetherChain-v0"]
+    assert merged["per_id"][ENV_ID] == small_reference["per_id"][ENV_ID]
+    # The aggregate is the base's, over the ids it was computed on.
+    assert (merged["aggregate"], merged["aggregate_ids"]) == (small_reference["aggregate"], [ENV_ID])
+    assert run_of(merged, "TetherChain-v0")["commit"] == "def5678" and run_of(merged, ENV_ID)["commit"] != "def5678"
+    assert run_of(merged, "TetherChain-v0")["machine"] == "other"
+    # A controller of the added id scores to its numbers there, naming the addition's run.
+    score = score_policy("lqr", "TetherChain-v0", reference=merged)
+    assert score.returns.tolist() == addition["per_id"]["TetherChain-v0"]["controllers"]["lqr"]["returns"]
+    assert score.reference_commit == "def5678"
+    # Adding the id again replaces the earlier addition instead of keeping two.
+    again = merge_reference(merged, {**addition, "commit": "0123abc"})
+    assert [entry["ids"] for entry in again["additions"]] == [["TetherChain-v0"]]
+    assert run_of(again, "TetherChain-v0")["commit"] == "0123abc"
+    with pytest.raises(ReferenceDataError, match=r"\['TetherTetrahedron-v0'\] are ids of the reference's aggregate"):
+        merge_reference(merged, small_reference)
+    with pytest.raises(ReferenceDataError, match="the addition's episodes is 4, the reference's 8"):
+        merge_reference(small_reference, {**addition, "episodes": 4})
+    with pytest.raises(ReferenceDataError, match="is itself a merged file"):
+        merge_reference(small_reference, {**merged, "per_id": addition["per_id"], "aggregate_ids": []})
+    # Numbers that the returns do not give are refused on the way in.
+    broken = copy.deepcopy(addition)
+    broken["per_id"]["TetherChain-v0"]["controllers"]["lqr"]["mean_return"] += 1.0
+    with pytest.raises(ReferenceDataError, match="TetherChain-v0 lqr: the statistics of its returns"):
+        merge_reference(small_reference, broken)
+
+
+def test_the_command_adds_a_benchmark_to_a_reference_file(
+    small_benchmark: Path, other_id_reference: tuple[Path, dict[str, Any]], tmp_path: Path
+) -> None:
+    bench, _ = other_id_reference
+    out = tmp_path / "reference.json"
+    base = main([str(small_benchmark), "--commit", "abc1234", "--out", str(out)])
+    merged = main([str(bench), "--commit", "def5678", "--out", str(out), "--add-to", str(out), "--force"])
+    assert load_reference(out) == merged and list(merged["per_id"]) == [ENV_ID, "TetherChain-v0"]
+    assert merged["per_id"][ENV_ID] == base["per_id"][ENV_ID]
