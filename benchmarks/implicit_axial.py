@@ -668,7 +668,7 @@ def energy_table(segments: int, runners: list[Runner], periods: int, geometric_s
                         q[s] = float((masses * shape * (integrator.x[:, 0] - reference)).sum())
                     amplitudes.append(sampled_amplitude(q, dt))
                 results.append(amplitudes[1] / amplitudes[0])
-        print(f"   {runner.label:24s}  {results[0]:48.2e}  {results[1]:24.4f}", flush=True)
+        print(f"   {runner.label:24s}  {results[0]:48.2e}  {results[1]:24.3g}", flush=True)
 
 
 # ---------------------------------------------------------------------------------- 3. snaps
@@ -846,6 +846,7 @@ def main() -> None:
     )
     print(f"CPU: {cpu_model()}")
     project = [Runner("project explicit 0.1", "project"), Runner("project explicit 0.3", "project", safety=0.3)]
+    taut_only = [Runner("project explicit 0.9", "project", safety=0.9)]  # stable while taut; snaps run away
     if args.quick:
         lifts: tuple[float, ...] = (1.0, 8.0)
         counts: tuple[int, ...] = (8,)
@@ -861,13 +862,12 @@ def main() -> None:
     began = time.perf_counter()
     if args.cost:
         cost_lifts = (1.0, 4.0, 32.0) if not args.quick else (4.0,)
-        runners = (
-            project[:1] + control + [Runner(f"IMEX newmark lift {lift:g}", "newmark", lift=lift) for lift in cost_lifts]
-        )
+        runners = project[:1] + taut_only + control
+        runners += [Runner(f"IMEX newmark lift {lift:g}", "newmark", lift=lift) for lift in cost_lifts]
         cost_table((8, 32, 64) if not args.quick else (8,), runners, gs, args.target if not args.quick else 0.1)
     else:
-        modes_table(counts, project + control + imex + euler, gs)
-        energy_table(8, project + control + imex + euler, periods, gs)
+        modes_table(counts, project + taut_only + control + imex + euler, gs)
+        energy_table(8, project + taut_only + control + imex + euler, periods, gs)
         snaps_table(counts[:2] if not args.quick else counts, project + control + imex + guarded + euler, gs)
     print(f"done in {time.perf_counter() - began:.0f} s")
 
