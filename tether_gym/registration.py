@@ -71,7 +71,7 @@ _NEXT_STEP_DEFAULT = (
     '(whose wrappers assume it); same-step, the default before, is `autoreset_mode="same_step"`.'
 )
 _FREE_SPACE_V0 = ("v0: initial release, with the single-cluster environments (commit `f1e1c8d`).", _NEXT_STEP_DEFAULT)
-_BEADED_V0 = ("v0: initial release, with the tethers with mass.",)
+_BEADED_V0 = ("v0: initial release, with the tethers with mass (commit `32d2543`).",)
 _TURNING_FRAME_V0 = ("v0: initial release, with the turning frames (commit `4490cf3`).", _NEXT_STEP_DEFAULT)
 
 #: id -> its documentation beyond the class docstring (see :class:`EnvDoc`); one entry per id of
@@ -167,34 +167,33 @@ ENV_DOCS: dict[str, EnvDoc] = {
     ),
     "TetherBeadedTetrahedron-v0": EnvDoc(
         summary=(
-            "The paper's tetrahedron with tethers of mass: 2 kg lines of 8 segments, whose waves the "
-            "thrusters reach only through the lines."
+            "The paper's tetrahedron with tethers of mass, as lines of beads whose waves the thrusters reach "
+            "only through the lines."
         ),
         description=(
-            "The tetrahedron of `TetherTetrahedron-v0` with each of its six 100 m tethers weighing 2 kg, "
-            "a fifth of a satellite, as a lumped-mass line of 8 segments: 7 beads per tether, 46 nodes "
-            "in all. The thrusters and the satellite observations are on the four satellites only; each "
-            "tether adds a block of its own to the observation (elongation, end tensions, slack, and its "
-            "lowest transverse modal amplitudes). The initial state is drawn on the satellites and the "
-            "lines' low modes, and the reward's vibration energy includes the beads.\n\n"
-            "The lines are slow and heavy: with 0.2 N of pretension their transverse waves travel at "
-            "3.2 m/s, so a line's lowest mode has a period of about 63 s, twice an episode. A slack line "
-            "does not spring back as a massless cable does; it drags, and snaps taut later. The scripted "
-            "laws are designed on the cluster without its beads (see the baselines' page)."
+            "The tetrahedron of the paper's case with each of its six tethers given mass (a fifth of a "
+            "satellite's) and split into segments, with beads carrying the mass. The thrusters and the "
+            "satellite observations are on the four satellites only; each tether adds a block of its own to "
+            "the observation (elongation, end tensions, slack, and its lowest transverse modal amplitudes). "
+            "The initial state is drawn on the satellites and the lines' low modes, and the reward's "
+            "vibration energy includes the beads.\n\n"
+            "The lines are slow and heavy: under their small pretension a line's lowest transverse mode "
+            "(below) has a period of about twice an episode. A slack line does not spring back as a "
+            "massless cable does; it drags, and snaps taut later. The scripted laws are designed on the "
+            "cluster without its beads (see the baselines' page)."
         ),
         version_history=_BEADED_V0,
     ),
     "TetherBeadedChain-v0": EnvDoc(
-        summary="The chain with tethers of mass: 2 kg lines of 8 segments carry a third of its mass.",
+        summary="The chain with tethers of mass, as lines of beads that carry a third of its mass.",
         description=(
-            "The chain of `TetherChain-v0` with each of its four 50 m tethers weighing 2 kg as a "
-            "lumped-mass line of 8 segments: 7 beads per tether, 33 nodes in all, and a third of the "
-            "chain's mass in its lines. Thrusters and satellite observations are on the five satellites "
-            "only, with a block per tether in the observation; the initial state is drawn on the "
-            "satellites and the lines' low modes.\n\n"
-            "Sideways, a massless chain is held only by its pretension; here the lines' own transverse "
-            "waves, at 1.6 m/s, couple into that soft lateral motion, and the satellites reach them "
-            "only through the lines' ends."
+            "The chain of satellites in a line with each tether given mass and split into segments, with "
+            "beads carrying the mass: a third of the chain's mass is in its lines. Thrusters and satellite "
+            "observations are on the satellites only, with a block per tether in the observation; the "
+            "initial state is drawn on the satellites and the lines' low modes.\n\n"
+            "Sideways, a massless chain is held only by its pretension; here the lines' own slow transverse "
+            "waves couple into that soft lateral motion, and the satellites reach them only through the "
+            "lines' ends."
         ),
         version_history=_BEADED_V0,
     ),
