@@ -585,7 +585,7 @@ def spinning_hub(
 #: The line of the beaded ids: 2 kg per tether, 8 segments.  Eight segments put the lowest
 #: transverse mode within 0.7 % of the continuous line and the first axial mode within 0.1 %
 #: (``tether_gym.analysis.tether_mode_errors``), at about 30 times the massless id's cost per
-#: control step; 16 segments would cut those errors fourfold at about four times that cost.
+#: control step; 16 segments would cut those errors fourfold, at a cost that grows as N^2.
 BEADED_TETHER_MASS = 2.0
 BEADED_SEGMENTS = 8
 
