@@ -136,20 +136,24 @@ def _coupling(b: np.ndarray, off: np.ndarray, y: np.ndarray, s: int) -> float:
 
 @njit(cache=True)
 def _complementarity(
-    r: np.ndarray, scale: np.ndarray, b: np.ndarray, diag: np.ndarray, off: np.ndarray, y: np.ndarray
+    r: np.ndarray,
+    scale: np.ndarray,
+    b: np.ndarray,
+    diag: np.ndarray,
+    off: np.ndarray,
+    y: np.ndarray,
+    work: np.ndarray,
+    active: np.ndarray,
 ) -> tuple[int, bool]:
     """The tensions ``y`` (N,) N with ``y = max(0, r + scale (b - diag y + off y_neighbours))``:
     a primal-dual active-set iteration (a tridiagonal solve on the taut segments each), and
     projected Gauss-Seidel from its last iterate if it has not settled in
-    ``MAX_ACTIVE_SET_ITERATIONS``.  Returns ``(iterations, settled)``."""
+    ``MAX_ACTIVE_SET_ITERATIONS``.  Scratch: ``work`` (4, N) float, ``active`` (N,) bool.
+    Returns ``(iterations, settled)``."""
     N = r.shape[0]
-    active = np.empty(N, dtype=np.bool_)
     for s in range(N):
         active[s] = r[s] > 0.0
-    main = np.empty(N)
-    lower = np.empty(N)
-    upper = np.empty(N)
-    rhs = np.empty(N)
+    main, lower, upper, rhs = work[0], work[1], work[2], work[3]
     iterations = 0
     while iterations < MAX_ACTIVE_SET_ITERATIONS:
         iterations += 1
@@ -180,6 +184,82 @@ def _complementarity(
     return iterations, False
 
 
+#: Rows of the kick's workspace (WORK_ROWS, N): the segments' lengths, taut-branch tensions, and
+#: the complementarity problem's terms, then the tridiagonal solve's four rows.
+LENGTH_ROW, TAUT_ROW, R_ROW, SCALE_ROW, B_ROW, DIAG_ROW, OFF_ROW, SOLVE_ROW = 0, 1, 2, 3, 4, 5, 6, 7
+WORK_ROWS = SOLVE_ROW + 4
+
+
+@njit(cache=True)
+def _kick_core(
+    v: np.ndarray,
+    inv_m: np.ndarray,
+    k: np.ndarray,
+    p: np.ndarray,
+    h_mid: float,
+    h: float,
+    c1: float,
+    c2: float,
+    dv: np.ndarray,
+    y: np.ndarray,
+    e: np.ndarray,
+    work: np.ndarray,
+    active: np.ndarray,
+) -> tuple[int, bool]:
+    """:func:`_kick` on the segments' directions ``e`` (N, 3) and the workspace ``work``
+    (WORK_ROWS, N), whose LENGTH_ROW and TAUT_ROW hold the lengths (m) and taut-branch tensions
+    (N) at ``x``; ``active`` (N,) bool is scratch.  Returns ``(iterations, converged)``."""
+    N = k.shape[0]
+    n = N + 1
+    a = work[TAUT_ROW]
+    iterations, converged = 0, True
+    if c2 == 0.0:
+        for s in range(N):
+            y[s] = a[s] if a[s] > 0.0 else 0.0
+    else:
+        r, scale, b, diag, off = work[R_ROW], work[SCALE_ROW], work[B_ROW], work[DIAG_ROW], work[OFF_ROW]
+        for s in range(N):
+            rate = 0.0
+            accel = 0.0
+            for d in range(3):
+                rate += e[s, d] * (v[s + 1, d] - v[s, d])
+                accel += e[s, d] * (p[s + 1, d] * inv_m[s + 1] - p[s, d] * inv_m[s])
+            r[s] = a[s] + c1 * k[s] * h * rate
+            scale[s] = c2 * k[s] * h * h_mid  # the implicit coefficient
+            b[s] = accel
+            diag[s] = inv_m[s] + inv_m[s + 1]
+            # off[s]: the coupling of segments s and s + 1 through their shared node
+            off[s] = (
+                (e[s, 0] * e[s + 1, 0] + e[s, 1] * e[s + 1, 1] + e[s, 2] * e[s + 1, 2]) * inv_m[s + 1]
+                if s + 1 < N
+                else 0.0
+            )
+        iterations, converged = _complementarity(r, scale, b, diag, off, y, work[SOLVE_ROW:], active)
+    for i in range(n):
+        for d in range(3):
+            force = p[i, d]
+            if i < N:
+                force += y[i] * e[i, d]
+            if i > 0:
+                force -= y[i - 1] * e[i - 1, d]
+            dv[i, d] = h_mid * inv_m[i] * force
+    return iterations, converged
+
+
+@njit(cache=True)
+def _measure(x: np.ndarray, k: np.ndarray, L0: np.ndarray, N0: np.ndarray, e: np.ndarray, work: np.ndarray) -> float:
+    """Directions into ``e``, lengths and taut-branch tensions into ``work``'s LENGTH_ROW and
+    TAUT_ROW; returns the largest tension (N, the model's own: 0 if all are slack)."""
+    length, a = work[LENGTH_ROW], work[TAUT_ROW]
+    _segments(x, k, L0, N0, e, length)
+    peak = 0.0
+    for s in range(k.shape[0]):
+        a[s] = N0[s] + k[s] * (length[s] - L0[s])
+        if a[s] > peak:
+            peak = a[s]
+    return peak
+
+
 @njit(cache=True)
 def _kick(
     x: np.ndarray,
@@ -201,47 +281,10 @@ def _kick(
     Returns ``(iterations, converged, peak)``: the active-set iterations, whether the
     complementarity problem was solved, and the largest tension at ``x`` (N, the model's own)."""
     N = k.shape[0]
-    n = N + 1
     e = np.empty((N, 3))
-    length = np.empty(N)
-    _segments(x, k, L0, N0, e, length)
-    a = np.empty(N)
-    peak = 0.0
-    for s in range(N):
-        a[s] = N0[s] + k[s] * (length[s] - L0[s])
-        if a[s] > peak:
-            peak = a[s]
-    iterations, converged = 0, True
-    if c2 == 0.0:
-        for s in range(N):
-            y[s] = a[s] if a[s] > 0.0 else 0.0
-    else:
-        r = np.empty(N)
-        scale = np.empty(N)  # c2 k h h_mid: the implicit coefficient
-        b = np.empty(N)
-        diag = np.empty(N)
-        off = np.zeros(N)  # off[s]: coupling of segments s and s + 1
-        for s in range(N):
-            rate = 0.0
-            accel = 0.0
-            for d in range(3):
-                rate += e[s, d] * (v[s + 1, d] - v[s, d])
-                accel += e[s, d] * (p[s + 1, d] * inv_m[s + 1] - p[s, d] * inv_m[s])
-            r[s] = a[s] + c1 * k[s] * h * rate
-            scale[s] = c2 * k[s] * h * h_mid
-            b[s] = accel
-            diag[s] = inv_m[s] + inv_m[s + 1]
-            if s + 1 < N:
-                off[s] = (e[s, 0] * e[s + 1, 0] + e[s, 1] * e[s + 1, 1] + e[s, 2] * e[s + 1, 2]) * inv_m[s + 1]
-        iterations, converged = _complementarity(r, scale, b, diag, off, y)
-    for i in range(n):
-        for d in range(3):
-            force = p[i, d]
-            if i < N:
-                force += y[i] * e[i, d]
-            if i > 0:
-                force -= y[i - 1] * e[i - 1, d]
-            dv[i, d] = h_mid * inv_m[i] * force
+    work = np.empty((WORK_ROWS, N))
+    peak = _measure(x, k, L0, N0, e, work)
+    iterations, converged = _kick_core(v, inv_m, k, p, h_mid, h, c1, c2, dv, y, e, work, np.empty(N, np.bool_))
     return iterations, converged, peak
 
 
@@ -278,15 +321,17 @@ def advance(
     dv = np.empty((n, 3))
     y = np.zeros(N)
     e = np.empty((N, 3))
-    length = np.empty(N)
+    work = np.empty((WORK_ROWS, N))
+    active = np.empty(N, np.bool_)
+    length, taut = work[LENGTH_ROW], work[TAUT_ROW]
     elapsed, steps, peak, worst_iterations, failures = 0.0, 0, 0.0, 0, 0
     while True:
-        _segments(x, k, L0, N0, e, length)
+        tension_peak = _measure(x, k, L0, N0, e, work)
         omega2 = 0.0
         omega2_axial = 0.0
         slack = False
         for s in range(N):
-            tension = N0[s] + k[s] * (length[s] - L0[s])
+            tension = taut[s]
             slack = slack or tension <= 0.0 or (steps > 0 and y[s] <= 0.0)
             if y[s] > tension:
                 tension = y[s]
@@ -306,7 +351,7 @@ def advance(
         last = steps_left <= 1
         h = remaining if last else remaining / steps_left
         h_mid = 0.5 * h if state[0] == 0.0 else 0.5 * (state[0] + h)
-        iterations, converged, tension_peak = _kick(x, v, inv_m, k, L0, N0, p, h_mid, h, c1, c2, dv, y)
+        iterations, converged = _kick_core(v, inv_m, k, p, h_mid, h, c1, c2, dv, y, e, work, active)
         if tension_peak > peak:
             peak = tension_peak
         if iterations > worst_iterations:
