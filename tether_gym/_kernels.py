@@ -201,11 +201,7 @@ def all_finite(values: np.ndarray) -> bool:
 def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatcher
     """Compile :func:`cable_forces` with the Kelvin-Voigt term (``viscous=True``: the general
     kernel) or without it.  ``viscous`` is frozen into the compiled code: merely having the
-    viscous term in the loop made the common, undamped case 30 % slower, even when skipped.
-
-    The variant without it, the integrator's hot path, also takes the step-limiting frequency
-    from ``omega2_axial`` (see :func:`cable_forces`) instead of computing every cable's: that
-    cut its cable loop by about a tenth (8.0-8.3 ns per cable against 9.2, N = 32 beads)."""
+    viscous term in the loop made the common, undamped case 30 % slower, even when skipped."""
 
     @njit(cache=True, nogil=True, error_model="numpy")
     def cable_forces(
@@ -215,8 +211,7 @@ def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatch
         linearised: bool,
         taut_branch: bool,
         may_break: bool,
-        omega2_axial: float,
-    ) -> tuple[float, bool, float, float, float]:
+    ) -> tuple[float, bool, float, float]:
         """Restoring forces and cable tensions of one cluster, plus its largest element frequency.
 
         Reads the cluster's node table ``nodes`` (n, NODE_COLUMNS) and cable table ``cables``
@@ -228,7 +223,7 @@ def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatch
         ``may_break``, a cable whose tension passes its breaking load is marked broken
         (``INTACT`` 0) and carries nothing from then on.
 
-        Returns ``(omega2_max, finite, viscous_power, released_energy, broken_omega2)``:
+        Returns ``(omega2_max, finite, viscous_power, released_energy)``:
 
         * ``omega2_max``: the largest squared element frequency in (rad/s)^2, taken on the taut branch
           ``max(EA/L0, N_taut/L) * (1/m_i^e + 1/m_j^e)`` so that a slack cable that can snap taut
@@ -240,22 +235,6 @@ def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatch
           meeting is a collision the model cannot represent).
         * ``viscous_power``: power dissipated by the cables' axial damping, W.
         * ``released_energy``: elastic energy of the cables that broke in this call, J.
-        * ``broken_omega2``: -1 when no cable broke in this call, else >= 0: in the undamped
-          variant, the largest element value of the cables that broke, (rad/s)^2.
-
-        Without the viscous term (the variant for clusters whose cables have no axial damping),
-        ``omega2_axial`` must be :func:`_axial_omega2` of the cables intact at the call, in
-        (rad/s)^2: the largest element value on the axial branch ``EA/L0``, which does not change
-        with the positions.  A cable then costs a comparison, ``N/L <= EA/L0``, and only one
-        whose geometric stiffness passes its axial one adds its own value (with the exact
-        elongation never, as ``N0 < EA``; with the linearised one, a cable turned more than a
-        right angle from its reference).  The maximum is the same number as the cable-by-cable
-        one: a float product is monotonic, so such a cable's own value is at least its axial one.
-        A cable whose ``N/L`` is not a number (a state that is not finite) makes ``omega2_max``
-        NaN: :func:`_update_forces` then takes it again cable by cable
-        (:func:`_omega2_cable_by_cable`), leaving that cable out as the general loop does.  (Taken
-        here, after the loop, it cost every call about 12 ns, even when not taken.)  The general
-        kernel takes every cable's value and must be given ``omega2_axial=0.0``.
 
         ``linearised`` measures the elongation as the paper's eq. (11) (end displacements from the
         ``REFERENCE`` positions projected on the current direction).  ``taut_branch=True`` drops
@@ -265,12 +244,11 @@ def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatch
         for i in range(nodes.shape[0]):
             for d in range(3):
                 nodes[i, INTERNAL_FORCE + d] = 0.0
-        omega2_max = omega2_axial  # 0.0 for the general kernel
+        omega2_max = 0.0
         length_sum = 0.0
         shortest = math.inf
         viscous_power = 0.0
         released = 0.0
-        broken_omega2 = -1.0
         for c in range(topology.shape[0]):
             cable = cables[c]
             if cable[INTACT] == 0.0:
@@ -314,14 +292,16 @@ def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatch
                 viscous_power += (n_cable - n_taut) * rate
             geometric = n_cable * inverse_length
             k_max = stiffness if stiffness >= geometric else geometric
-            if viscous:
-                omega2_max = _raised_omega2(omega2_max, k_max, cable[INV_SPLIT_MASS_SUM], damping_c)
-            elif not geometric <= stiffness:  # N/L passes EA/L0, or is NaN
-                omega2_max = _past_axial_omega2(omega2_max, geometric, cable[INV_SPLIT_MASS_SUM], damping_c)
+            omega2 = k_max * cable[INV_SPLIT_MASS_SUM]
+            if damping_c > 0.0:
+                xi = 0.5 * damping_c * cable[INV_SPLIT_MASS_SUM] / math.sqrt(omega2)
+                factor = math.sqrt(1.0 + xi * xi) + xi
+                omega2 *= factor * factor
+            if omega2 > omega2_max:
+                omega2_max = omega2
             if n_cable > cable[PEAK_TENSION]:
                 cable[PEAK_TENSION] = n_cable
             if may_break and n_cable > cable[BREAKING_LOAD]:
-                broken_omega2 = _raised_omega2(max(broken_omega2, 0.0), k_max, cable[INV_SPLIT_MASS_SUM], damping_c)
                 cable[INTACT] = 0.0
                 elastic = n_taut if n_taut > 0.0 else 0.0
                 released += 0.5 * elastic * elastic / stiffness
@@ -338,84 +318,9 @@ def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatch
                 nodes[j, INTERNAL_FORCE + 1] += fy
                 nodes[j, INTERNAL_FORCE + 2] += fz
         finite = math.isfinite(length_sum) and shortest > 0.0
-        return omega2_max, finite, viscous_power, released, broken_omega2
+        return omega2_max, finite, viscous_power, released
 
     return cable_forces
-
-
-@njit(inline="always", error_model="numpy")
-def _element_omega2(k_max: float, inv_split_mass_sum: float, axial_damping: float) -> float:
-    """An element's step-limiting squared frequency, (rad/s)^2, from its stiffness ``k_max`` (N/m),
-    ``1/m_i^e + 1/m_j^e`` (1/kg) and axial damping (N*s/m): see :func:`cable_forces`."""
-    omega2 = k_max * inv_split_mass_sum
-    if axial_damping > 0.0:
-        xi = 0.5 * axial_damping * inv_split_mass_sum / math.sqrt(omega2)
-        factor = math.sqrt(1.0 + xi * xi) + xi
-        omega2 *= factor * factor
-    return omega2
-
-
-@njit(inline="always", error_model="numpy")
-def _raised_omega2(largest: float, k_max: float, inv_split_mass_sum: float, axial_damping: float) -> float:
-    """``largest`` raised to the element value of :func:`_element_omega2` if that is larger (a NaN
-    value leaves it as it is), (rad/s)^2."""
-    omega2 = _element_omega2(k_max, inv_split_mass_sum, axial_damping)
-    return omega2 if omega2 > largest else largest
-
-
-@njit(inline="always", error_model="numpy")
-def _past_axial_omega2(largest: float, geometric: float, inv_split_mass_sum: float, axial_damping: float) -> float:
-    """:func:`_raised_omega2` for a cable whose ``N/L`` (``geometric``, N/m) passes its ``EA/L0``;
-    NaN, for good, when ``geometric`` is NaN (see :func:`cable_forces`)."""
-    if geometric != geometric:
-        return math.nan
-    return _raised_omega2(largest, geometric, inv_split_mass_sum, axial_damping)
-
-
-@njit(error_model="numpy")  # called: once per interval, and again only after a cable breaks
-def _axial_omega2(cables: np.ndarray) -> float:
-    """The largest element value of one cluster's intact cables on the axial branch,
-    ``EA/L0 (1/m_i^e + 1/m_j^e)`` with axial damping's factor, (rad/s)^2 (0 without any): what
-    the undamped :func:`cable_forces` takes as ``omega2_axial``."""
-    largest = 0.0
-    for c in range(cables.shape[0]):
-        cable = cables[c]
-        if cable[INTACT] == 0.0:
-            continue
-        omega2 = _element_omega2(cable[STIFFNESS], cable[INV_SPLIT_MASS_SUM], cable[AXIAL_DAMPING])
-        if omega2 > largest:
-            largest = omega2
-    return largest
-
-
-@njit(error_model="numpy")  # called: only for a state that is not finite
-def _omega2_cable_by_cable(nodes: np.ndarray, cables: np.ndarray, topology: np.ndarray, broken_omega2: float) -> float:
-    """The undamped :func:`cable_forces`'s ``omega2_max`` taken cable by cable, as the general
-    kernel takes it, (rad/s)^2: from the tensions it has just written (the exact elongation or
-    the linearised one alike) and the lengths at the current positions, with ``broken_omega2``
-    (its fifth result) for the cables that broke in the call; a cable whose value is not a
-    number is left out."""
-    largest = 0.0
-    if broken_omega2 > largest:
-        largest = broken_omega2
-    for c in range(topology.shape[0]):
-        cable = cables[c]
-        if cable[INTACT] == 0.0:
-            continue
-        i = topology[c, 0]
-        j = topology[c, 1]
-        dx = nodes[j, POSITION] - nodes[i, POSITION]
-        dy = nodes[j, POSITION + 1] - nodes[i, POSITION + 1]
-        dz = nodes[j, POSITION + 2] - nodes[i, POSITION + 2]
-        length = math.sqrt(dx * dx + dy * dy + dz * dz)
-        inverse_length = 1.0 / length
-        geometric = cable[TENSION] * inverse_length
-        stiffness = cable[STIFFNESS]
-        k_max = stiffness if stiffness >= geometric else geometric
-        omega2 = _element_omega2(k_max, cable[INV_SPLIT_MASS_SUM], cable[AXIAL_DAMPING])
-        if omega2 > largest:
-            largest = omega2
-    return largest
 
 
 #: The general kernel (any axial damping).
@@ -627,18 +532,13 @@ def _synchronise_velocity(nodes: np.ndarray, cluster: np.ndarray, h_last: float)
 
 @njit(inline="always", error_model="numpy")
 def _update_forces(
-    nodes: np.ndarray, cables: np.ndarray, topology: np.ndarray, linearised: bool, viscous: bool, omega2_axial: float
-) -> tuple[float, bool, float, float, float]:
+    nodes: np.ndarray, cables: np.ndarray, topology: np.ndarray, linearised: bool, viscous: bool
+) -> tuple[float, bool, float, float]:
     """:func:`cable_forces` at the new positions, breaking overloaded cables; the undamped variant
-    (with ``omega2_axial``, see there) when no cable of the cluster has axial damping."""
+    when no cable of the cluster has axial damping."""
     if viscous:
-        return cable_forces(nodes, cables, topology, linearised, False, True, 0.0)
-    omega2, finite, viscous_power, released, broken_omega2 = _cable_forces_undamped(
-        nodes, cables, topology, linearised, False, True, omega2_axial
-    )
-    if omega2 != omega2:  # a cable's N/L was not a number: its maximum, cable by cable
-        omega2 = _omega2_cable_by_cable(nodes, cables, topology, broken_omega2)
-    return omega2, finite, viscous_power, released, broken_omega2
+        return cable_forces(nodes, cables, topology, linearised, False, True)
+    return _cable_forces_undamped(nodes, cables, topology, linearised, False, True)
 
 
 @njit(inline="always", error_model="numpy")
@@ -661,9 +561,8 @@ def _begin_advance(
 ) -> tuple:
     """What stays fixed over one cluster's interval, ``(tidal_max, turning, viscous, h_damping,
     omega2, saved)``, and the running values its sub-steps carry, ``(elapsed, count, h_lo, h_hi,
-    work, dissipated, h_last, omega2_axial)`` (the last for the undamped :func:`cable_forces`,
-    taken again when a cable breaks; 0 with axial damping); also starts each cable's
-    ``PEAK_TENSION`` at its tension, and saves what the sub-steps overwrite for :func:`_roll_back`: in ``saved`` (n + m,
+    work, dissipated, h_last)``; also starts each cable's ``PEAK_TENSION`` at its tension, and
+    saves what the sub-steps overwrite for :func:`_roll_back`: in ``saved`` (n + m,
     SAVED_NODE_COLUMNS) each node's columns from POSITION on, then each cable's TENSION and
     INTACT; ``omega2`` in ``fixed``."""
     n = nodes.shape[0]
@@ -680,8 +579,7 @@ def _begin_advance(
             saved[i, column] = nodes[i, POSITION + column]
     h_damping = _damping_step(nodes, settings[SAFETY_FACTOR])
     fixed = (tidal_max, turning, viscous, h_damping, cluster[OMEGA2], saved)
-    omega2_axial = 0.0 if viscous else _axial_omega2(cables)
-    running = (0.0, 0, math.inf, 0.0, cluster[WORK], cluster[DISSIPATED], cluster[LAST_STEP], omega2_axial)
+    running = (0.0, 0, math.inf, 0.0, cluster[WORK], cluster[DISSIPATED], cluster[LAST_STEP])
     return fixed, running
 
 
@@ -709,7 +607,7 @@ def _substep(
     flagged."""
     h, last = step
     tidal_max, turning, viscous, _, _, _ = fixed
-    elapsed, count, h_lo, h_hi, work, dissipated, h_last, omega2_axial = running
+    elapsed, count, h_lo, h_hi, work, dissipated, h_last = running
     if h == 0.0:
         counters[STATUS] = STATUS_TOO_MANY_SUBSTEPS
         return True, running
@@ -728,11 +626,9 @@ def _substep(
     h_last = h
     h_lo = min(h_lo, h)
     h_hi = max(h_hi, h)
-    omega2_cables, finite, viscous_power, released, broken_omega2 = _update_forces(
-        nodes, cables, topology, settings[LINEARISED] != 0.0, viscous, omega2_axial
+    omega2_cables, finite, viscous_power, released = _update_forces(
+        nodes, cables, topology, settings[LINEARISED] != 0.0, viscous
     )
-    if broken_omega2 >= 0.0 and not viscous:  # a cable broke: it no longer limits the step
-        omega2_axial = _axial_omega2(cables)
     cluster[OMEGA2] = omega2_cables + tidal_max
     dissipated += h * viscous_power + released
     done = True
@@ -741,7 +637,7 @@ def _substep(
     elif not last:
         elapsed += h
         done = False
-    return done, (elapsed, count, h_lo, h_hi, work, dissipated, h_last, omega2_axial)
+    return done, (elapsed, count, h_lo, h_hi, work, dissipated, h_last)
 
 
 @njit(error_model="numpy")  # called, not inlined: it runs once per interval, on a refusal only
@@ -880,7 +776,7 @@ def _end_advance(
     for an interval refused for its sub-step budget, put the cluster back at its start.  A
     cluster that stays healthy has ``duration`` added to its ``TIME`` and its energy balance
     checked (:func:`_energy_runaway`)."""
-    _, count, h_lo, h_hi, work, dissipated, h_last, _ = running
+    _, count, h_lo, h_hi, work, dissipated, h_last = running
     if counters[STATUS] == STATUS_TOO_MANY_SUBSTEPS:
         if count > 0:
             _roll_back(nodes, cables, cluster, counters, fixed[5], fixed[4])
@@ -1129,7 +1025,5 @@ def evaluate_forces(
     columns.  (The callers pass scratch copies of the tables: it also raises ``PEAK_TENSION``.)"""
     linearised = settings[LINEARISED] != 0.0
     for b in range(nodes.shape[0]):
-        omega2_cables, finite[b], _, _, _ = cable_forces(
-            nodes[b], cables[b], topology, linearised, taut_branch, False, 0.0
-        )
+        omega2_cables, finite[b], _, _ = cable_forces(nodes[b], cables[b], topology, linearised, taut_branch, False)
         clusters[b, OMEGA2] = omega2_cables + _largest_tidal(clusters[b])
