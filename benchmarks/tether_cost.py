@@ -21,7 +21,7 @@ With ``--profile`` it shows instead where one cluster's sub-step spends its time
 piece of ``tether_gym._kernels`` (each piece looped on its own over the same tables, one thread):
 the velocity and position updates per node, the cable forces per cable (the integrator's
 undamped path), the rest of a sub-step (step size, the pair's bookkeeping, the call), and what
-each 0.1 s interval adds once (the energy books, the damping step, the axial maximum).
+each 0.1 s interval adds once (the energy books and the damping step).
 
 Usage::
 
@@ -101,9 +101,8 @@ def _loop_drift(nodes: np.ndarray, repeats: int) -> float:
 @njit(error_model="numpy")
 def _loop_forces(nodes: np.ndarray, cables: np.ndarray, topology: np.ndarray, repeats: int) -> float:
     total = 0.0
-    omega2_axial = kernels._axial_omega2(cables)
     for _ in range(repeats):
-        total += kernels._update_forces(nodes, cables, topology, False, False, omega2_axial)[0]
+        total += kernels._update_forces(nodes, cables, topology, False, False)[0]
     return total
 
 
@@ -114,7 +113,7 @@ def _loop_interval(
     total = 0.0
     for _ in range(repeats):
         total += kernels._energy_runaway(nodes, cables, cluster, topology, False, False, math.inf)
-        total += kernels._damping_step(nodes, 0.1) + kernels._axial_omega2(cables)
+        total += kernels._damping_step(nodes, 0.1)
     return total
 
 
