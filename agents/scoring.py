@@ -66,6 +66,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         args.benchmark_json, args.commit, args.out, args.date, args.machine, args.force, add_to=args.add_to
     )
     controllers = sum(len(entry["controllers"]) for entry in data["per_id"].values())
+    if args.add_to is not None:
+        added = data["additions"][-1]
+        print(
+            f"wrote {args.out}: added {', '.join(added['ids'])} (commit {added['commit']}, {added['date']}) to the "
+            f"{len(data['per_id']) - len(added['ids'])} other ids; every statistic matches its returns"
+        )
+        return data
     print(
         f"wrote {args.out}: {len(data['per_id'])} ids, {controllers} controllers, {data['episodes']} episodes each "
         f"(commit {data['commit']}, {data['date']}); every statistic matches its returns"

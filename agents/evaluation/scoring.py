@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from tether_gym.limits import is_whole_number
+from tether_gym.registration import ENV_IDS
 
 from ..common.commands import PACKAGE
 from ..common.data import REFERENCE_DIR
@@ -605,6 +606,9 @@ def merge_reference(base: dict[str, Any], addition: dict[str, Any]) -> dict[str,
             earlier.append({**entry, "ids": kept})
     per_id = {env_id: entry for env_id, entry in base["per_id"].items() if env_id not in new_ids}
     per_id.update(addition["per_id"])
+    # In the order of the registry, as a benchmark of every id lists them (ids it does not know last).
+    rank = {env_id: k for k, env_id in enumerate(ENV_IDS)}
+    per_id = dict(sorted(per_id.items(), key=lambda item: rank.get(item[0], len(rank))))
     merged = {
         **base,
         "aggregate_ids": aggregate_ids,
