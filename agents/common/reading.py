@@ -29,6 +29,7 @@ __all__ = [
     "MAX_JSON_INTEGER",
     "read_bounded",
     "MAX_YAML_BYTES",
+    "MAX_YAML_FLOW_DEPTH",
     "MAX_YAML_NODES",
     "decode_json",
     "json_depth",
@@ -170,6 +171,11 @@ MAX_YAML_BYTES = 4 * 2**20
 #: The most nodes a YAML file read may expand to, aliases followed (the project's own files, with
 #: their ``<<: *default`` merges, expand to a few hundred).
 MAX_YAML_NODES = 100_000
+#: The deepest nesting of flow collections (``[ ]`` and ``{ }``) a YAML file may have. PyYAML's
+#: scanner keeps a possible key per open flow level and checks them all at every token, so its
+#: time grows as the square of the depth: 3 000 nested ``[`` took over a second to refuse. The
+#: project's settings files nest two deep.
+MAX_YAML_FLOW_DEPTH = 64
 
 
 @functools.cache
@@ -249,12 +255,31 @@ def _expanded_size(node: Any, sizes: dict[int, int], open_nodes: set[int]) -> in
     return size
 
 
+def _flow_depth(data: bytes) -> int:
+    """The deepest nesting of ``[``/``{`` over ``]``/``}`` in ``data``, counted over the whole
+    text (quoted or not), in one vectorised pass: an upper bound on the flow depth the YAML
+    scanner will see, for files without unmatched brackets in their strings."""
+    import numpy as np
+
+    codes = np.frombuffer(data, dtype=np.uint8)
+    opens = (codes == ord("[")).astype(np.int64) + (codes == ord("{"))
+    closes = (codes == ord("]")).astype(np.int64) + (codes == ord("}"))
+    return int(np.cumsum(opens - closes).max(initial=0))
+
+
 def read_yaml(file: Path, error: type[Exception] = ValueError) -> Any:
     """The data of the YAML ``file`` (nothing in it evaluated), read strictly: at most
     :data:`MAX_YAML_BYTES`, UTF-8, no key twice in a mapping, no alias inside its own anchor, at
-    most :data:`MAX_YAML_NODES` entries with aliases followed, no nesting deeper than the parser's
-    recursion allows. Raises ``error`` naming the file and the problem."""
+    most :data:`MAX_YAML_NODES` entries with aliases followed, flow collections at most
+    :data:`MAX_YAML_FLOW_DEPTH` deep, no nesting deeper than the parser's recursion allows. Raises
+    ``error`` naming the file and the problem."""
     data = read_bounded(file, MAX_YAML_BYTES, error, "pass another file")
+    depth = _flow_depth(data)
+    if depth > MAX_YAML_FLOW_DEPTH:
+        raise error(
+            f"{file} nests [ ] or {{ }} {depth} deep (at most {MAX_YAML_FLOW_DEPTH}, brackets in quotes and "
+            "comments counted too): it is not a settings file"
+        )
     loader = _strict_loader()
     import yaml
 

@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from agents.common.data import HYPERPARAMS_DIR
-from agents.common.reading import MAX_YAML_NODES, read_yaml
+from agents.common.reading import MAX_YAML_FLOW_DEPTH, MAX_YAML_NODES, read_yaml
 
 #: Property-based, with many generated examples per property: the fast suite (-m 'not slow') leaves them out.
 pytestmark = pytest.mark.slow
@@ -163,3 +163,25 @@ def test_a_mapping_of_many_keys_is_read_in_linear_time(tmp_path: Path) -> None:
 
     small, large = min(seconds(4_000), seconds(4_000)), min(seconds(40_000), seconds(40_000))
     assert large < 15 * small, (small, large)  # linear: about 10; the list made it about 25
+
+
+@pytest.mark.parametrize(("opening", "depth"), [(b"[", 3000), (b"{a: ", 3000), (b"[{x: ", 6000)])
+def test_deeply_nested_flow_collections_are_refused_before_the_scanner_runs(
+    tmp_path: Path, opening: bytes, depth: int
+) -> None:
+    """PyYAML's scanner checks every open flow level at every token: 3 000 nested ``[`` took over
+    a second to refuse, on an idle core, where the cap refuses them in well under a millisecond."""
+    file = tmp_path / "deep.yml"
+    file.write_bytes(opening * 3000 + b"\nalgo: ppo\n")
+    began = time.perf_counter()
+    with pytest.raises(
+        FileError, match=rf"deep\.yml nests \[ \] or {{ }} {depth} deep \(at most {MAX_YAML_FLOW_DEPTH}"
+    ):
+        read_yaml(file, FileError)
+    assert time.perf_counter() - began < 0.1
+    # The cap leaves room: the depth it allows still reads.
+    file.write_bytes(b"x: " + b"[" * MAX_YAML_FLOW_DEPTH + b"]" * MAX_YAML_FLOW_DEPTH + b"\n")
+    expected: list[Any] = []
+    for _ in range(MAX_YAML_FLOW_DEPTH - 1):
+        expected = [expected]
+    assert read_yaml(file, FileError) == {"x": expected}
