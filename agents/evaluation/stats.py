@@ -1,5 +1,6 @@
 """The benchmark's statistics: t intervals, paired differences, the best eligible baseline,
-normalised scores with their paired bootstrap intervals, and rliable's aggregates over ids.
+normalised scores with their paired bootstrap intervals, excess costs over a reference ceiling,
+and rliable's aggregates over ids.
 
 Every function takes per-episode returns (undiscounted sums of rewards, reward units) of
 episodes that share their seeds: entry e of every array is the episode reset with the same
@@ -26,9 +27,13 @@ __all__ = [
     "CONFIDENCE",
     "SCORE_BOOTSTRAP_REPS",
     "ZERO",
+    "ExcessCost",
     "PairedDifference",
+    "aggregate_excess_costs",
     "aggregate_scores",
     "best_eligible_baseline",
+    "excess_cost",
+    "excess_costs",
     "normalised_scores",
     "paired_difference",
     "rliable_modules",
@@ -185,6 +190,145 @@ def score_interval(
     return float(low), float(high)
 
 
+@dataclasses.dataclass(frozen=True)
+class ExcessCost:
+    """A controller's excess cost over a reference ceiling on the ceiling's seeds, as fractions
+    (0.044 is 4.4 %; lower is better, 0 is the ceiling's cost, below 0 a cost under it).
+
+    Attributes:
+        mean: mean over episodes of the per-seed excess costs ``(-R[e]) / (-R_ceiling[e]) - 1``
+            (see :func:`excess_costs`).
+        std: their sample standard deviation (E-1 degrees of freedom).
+        half_width: half-width of the two-sided t interval of the mean at :data:`CONFIDENCE`.
+        low, high: the interval's ends, ``mean ∓ half_width``.
+        beats: number of episodes where the controller's cost is below the ceiling's
+            (``R[e] > R_ceiling[e]``, an excess cost below 0).
+        episodes: E.
+    """
+
+    mean: float
+    std: float
+    half_width: float
+    low: float
+    high: float
+    beats: int
+    episodes: int
+
+
+def excess_costs(returns: Any, ceiling_returns: Any) -> np.ndarray:
+    """Per-seed excess costs over the reference ceiling (E,): ``(-R[e]) / (-R_ceiling[e]) - 1``.
+
+    ``returns`` and ``ceiling_returns`` are (E,) undiscounted returns (reward units; tether-gym's
+    rewards are costs, so returns are below 0) of the episodes reset with the same E seeds. The
+    excess cost is dimensionless: 0.1 means the controller spent 10 % more than the ceiling on
+    that seed. Raises ValueError for arrays of different lengths, fewer than 2 episodes,
+    non-finite returns, or a ceiling return that is not below 0 (its cost is the denominator)."""
+    values = _check_returns("returns", returns)
+    ceiling = _check_returns("ceiling_returns", ceiling_returns)
+    if values.shape != ceiling.shape:
+        raise ValueError(
+            f"excess costs need one return per seed on both sides (the ceiling's seeds); got {values.size} and "
+            f"{ceiling.size} episodes: pass the controller's returns on the ceiling's seeds"
+        )
+    free = np.flatnonzero(ceiling >= 0)
+    if free.size:
+        raise ValueError(
+            f"the ceiling's return is {ceiling[free[0]]:.6g} (>= 0) on episode {int(free[0])} ({free.size} of "
+            f"{ceiling.size} episodes): the excess cost (-R) / (-R[ceiling]) - 1 divides by the ceiling's cost, which "
+            "must be above 0. tether-gym's rewards are costs, so these are not returns of the ceiling on an id's "
+            "own rewards: recompute the ceiling data (python -m agents.ceiling), or compare with the normalised "
+            "score instead"
+        )
+    return values / ceiling - 1.0  # (-R) / (-R_ceiling) - 1, the minus signs cancel
+
+
+def excess_cost(returns: Any, ceiling_returns: Any, confidence: float = CONFIDENCE) -> ExcessCost:
+    """The mean excess cost over the ceiling of (E,) ``returns`` against (E,) ``ceiling_returns``
+    on the same seeds, with its t interval (:func:`excess_costs` per seed, :func:`t_interval`
+    of their mean): paired, since both sides of a ratio share their seed. Raises ValueError as
+    :func:`excess_costs` does."""
+    costs = excess_costs(returns, ceiling_returns)
+    mean, std, half_width = t_interval(costs, confidence)
+    return ExcessCost(
+        mean=mean,
+        std=std,
+        half_width=half_width,
+        low=mean - half_width,
+        high=mean + half_width,
+        beats=int(np.sum(costs < 0)),
+        episodes=int(costs.size),
+    )
+
+
+def aggregate_excess_costs(
+    returns: dict[str, dict[str, Any]],
+    ceiling_returns: dict[str, Any],
+    reps: int = 50_000,
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+) -> dict[str, dict[str, Any]]:
+    """rliable's aggregates over ids of the mean excess costs over the ceiling, one entry per row.
+
+    ``returns[row][env_id]`` holds the row's (E,) returns on the ceiling's seeds of an id, and
+    ``ceiling_returns[env_id]`` the ceiling's (E,) returns on them. A row's value on an id is its
+    mean excess cost (:func:`excess_cost`'s ``mean``, a fraction); over the ids where the row ran:
+
+    * ``iqm``: :func:`rliable.metrics.aggregate_iqm` of the (1, ids) matrix of those values, the
+      mean of the middle half of the ids;
+    * ``mean``: :func:`rliable.metrics.aggregate_mean`, their mean;
+    * ``*_low`` / ``*_high``: their stratified percentile-bootstrap interval over seeds within
+      ids (:func:`rliable.library.get_interval_estimates`, ``reps`` replications seeded with
+      ``seed``), as :func:`aggregate_scores` has it: each replication draws E seeds with
+      replacement within every id, the same seeds for the row and the ceiling (the ceiling's
+      own interval is [0, 0]). The percentile interval is the quantiles of the replications'
+      values, whichever way is better, so ``low`` is the lower excess cost (the better end).
+
+    The ids of a row need the same episode count E. Raises ValueError as :func:`excess_costs`
+    does, naming the row and the id."""
+    _, metrics = rliable_modules()
+    results: dict[str, dict[str, Any]] = {}
+    for name, per_id in returns.items():
+        ids = list(per_id)
+        if not ids:
+            raise ValueError(f"row {name!r} has no id to aggregate over")
+        columns = []
+        for env_id in ids:
+            if env_id not in ceiling_returns:
+                raise ValueError(f"row {name!r} has returns on {env_id}, where the ceiling has none")
+            try:
+                columns.append(excess_costs(per_id[env_id], ceiling_returns[env_id]))
+            except ValueError as error:
+                raise ValueError(f"{name!r} on {env_id}: {error}") from None
+        episodes = {column.size for column in columns}
+        if len(episodes) != 1:
+            raise ValueError(
+                f"row {name!r} has different episode counts on its ids: {sorted(episodes)}; the stratified bootstrap "
+                "draws the same number of seeds within every id: give every id the same ceiling seeds' count"
+            )
+        costs = np.stack(columns, axis=1)  # (E, ids)
+
+        def statistics(drawn: np.ndarray, costs: np.ndarray = costs) -> np.ndarray:
+            """IQM and mean over ids of the per-id mean excess costs of the episodes ``drawn`` ((E, ids) indices)."""
+            per_id_means = costs[drawn.astype(np.intp), np.arange(costs.shape[1])].mean(axis=0)[None, :]  # (1, ids)
+            return np.array([metrics.aggregate_iqm(per_id_means), metrics.aggregate_mean(per_id_means)])
+
+        (iqm, mean), (iqm_low, iqm_high, mean_low, mean_high) = _stratified_bootstrap(
+            name, costs.shape[0], len(ids), statistics, reps, seed, confidence
+        )
+        results[name] = {
+            "iqm": iqm,
+            "iqm_low": iqm_low,
+            "iqm_high": iqm_high,
+            "mean": mean,
+            "mean_low": mean_low,
+            "mean_high": mean_high,
+            "ids": len(ids),
+            "env_ids": ids,
+            "episodes": int(costs.shape[0]),
+        }
+    return results
+
+
 def rliable_modules() -> tuple[Any, Any]:
     """rliable's ``library`` and ``metrics`` modules, or an ImportError that says how to get them."""
     library = require("rliable.library", "train", "the benchmark's aggregate over ids (rliable==1.2.0, pandas<3)")
@@ -222,7 +366,7 @@ def aggregate_scores(
 
     The resampling is seeded with ``seed``: the intervals reproduce, and a row's interval does
     not depend on the other rows."""
-    library, metrics = rliable_modules()
+    _, metrics = rliable_modules()
     results: dict[str, dict[str, Any]] = {}
     for name, per_id in returns.items():
         ids = list(per_id)
@@ -255,36 +399,14 @@ def aggregate_scores(
             per_id_scores = (100.0 * gain[picks, columns].mean(axis=0) / denominator)[None, :]  # (1 run, ids)
             return np.array([metrics.aggregate_iqm(per_id_scores), metrics.aggregate_mean(per_id_scores)])
 
-        indices = np.tile(np.arange(gain.shape[0], dtype=np.float64)[:, None], (1, len(ids)))
-        # rliable 1.2.0's StratifiedBootstrap.update_indices draws its resamples from numpy's
-        # global generator (np.random.choice) and ignores ``random_state``: seed the global
-        # generator for the call, and put back its state after it, so that the intervals
-        # reproduce and nobody else's random stream is disturbed.
-        global_state = np.random.get_state()
-        np.random.seed(seed)
-        try:
-            with warnings.catch_warnings():
-                # rliable hands arch the RandomState through arch's deprecated ``random_state``
-                # keyword; arch only warns about the keyword's name.
-                warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)
-                points, intervals = library.get_interval_estimates(
-                    {name: indices},
-                    statistics,
-                    method="percentile",
-                    reps=reps,
-                    confidence_interval_size=confidence,
-                    random_state=np.random.RandomState(seed),
-                )
-        finally:
-            np.random.set_state(global_state)
-        (iqm, mean), ((iqm_low, mean_low), (iqm_high, mean_high)) = points[name], intervals[name]
-        bounds = [iqm_low, iqm_high, mean_low, mean_high]
-        iqm_low, iqm_high, mean_low, mean_high = (None if not np.all(np.isfinite(bounds)) else float(b) for b in bounds)
+        (iqm, mean), (iqm_low, iqm_high, mean_low, mean_high) = _stratified_bootstrap(
+            name, gain.shape[0], len(ids), statistics, reps, seed, confidence
+        )
         results[name] = {
-            "iqm": float(iqm),
+            "iqm": iqm,
             "iqm_low": iqm_low,
             "iqm_high": iqm_high,
-            "mean": float(mean),
+            "mean": mean,
             "mean_low": mean_low,
             "mean_high": mean_high,
             "ids": len(ids),
@@ -292,3 +414,46 @@ def aggregate_scores(
             "episodes": int(gain.shape[0]),
         }
     return results
+
+
+def _stratified_bootstrap(
+    name: str,
+    episodes: int,
+    ids: int,
+    statistics: Any,
+    reps: int,
+    seed: int,
+    confidence: float,
+) -> tuple[tuple[float, float], tuple[float | None, float | None, float | None, float | None]]:
+    """rliable's stratified percentile bootstrap of ``statistics`` (a function of an (E, ids)
+    matrix of drawn episode indices that returns ``[IQM, mean]`` over ids) for one row.
+
+    Returns ``((iqm, mean), (iqm_low, iqm_high, mean_low, mean_high))``; the interval's ends are
+    None when a replication had no value (``statistics`` returned NaN)."""
+    library, _ = rliable_modules()
+    indices = np.tile(np.arange(episodes, dtype=np.float64)[:, None], (1, ids))
+    # rliable 1.2.0's StratifiedBootstrap.update_indices draws its resamples from numpy's
+    # global generator (np.random.choice) and ignores ``random_state``: seed the global
+    # generator for the call, and put back its state after it, so that the intervals
+    # reproduce and nobody else's random stream is disturbed.
+    global_state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        with warnings.catch_warnings():
+            # rliable hands arch the RandomState through arch's deprecated ``random_state``
+            # keyword; arch only warns about the keyword's name.
+            warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)
+            points, intervals = library.get_interval_estimates(
+                {name: indices},
+                statistics,
+                method="percentile",
+                reps=reps,
+                confidence_interval_size=confidence,
+                random_state=np.random.RandomState(seed),
+            )
+    finally:
+        np.random.set_state(global_state)
+    (iqm, mean), ((iqm_low, mean_low), (iqm_high, mean_high)) = points[name], intervals[name]
+    bounds = [iqm_low, iqm_high, mean_low, mean_high]
+    iqm_low, iqm_high, mean_low, mean_high = (None if not np.all(np.isfinite(bounds)) else float(b) for b in bounds)
+    return (float(iqm), float(mean)), (iqm_low, iqm_high, mean_low, mean_high)
