@@ -55,8 +55,9 @@ SCRIPTS: dict[str, str] = {
 }
 
 #: Command modules run only as ``python -m`` (no console script): ``scoring``, the maintainers'
-#: converter that writes the shipped reference scores.
-MODULE_ONLY_COMMANDS = ("scoring",)
+#: converter that writes the shipped reference scores, and ``ceiling``, which computes the shipped
+#: reference ceiling.
+MODULE_ONLY_COMMANDS = ("scoring", "ceiling")
 
 #: The agents package as it is imported now: ``agents`` in a checkout, ``tether_gym_agents`` installed
 #: (this module lives in its ``common`` sub-package).

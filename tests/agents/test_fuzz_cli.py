@@ -42,6 +42,7 @@ PARSERS = {name: module.build_parser for name, module in MODULES.items()}
 WORK = {
     "ars": "train_ars",
     "benchmark": "benchmark",
+    "ceiling": "run_ceiling",
     "compare": "compare",
     "convert": "convert",
     "scoring": "write_reference",
@@ -188,7 +189,7 @@ def test_a_count_that_becomes_a_vector_env_is_bounded_by_the_largest_one(command
 
 
 #: The settings that are paths a command reads or writes.
-PATH_DESTS = {"out", "resume", "runs", "source", "destination", "hyperparams", "benchmark_json"}
+PATH_DESTS = {"out", "resume", "runs", "source", "destination", "hyperparams", "benchmark_json", "file"}
 
 
 @pytest.mark.parametrize("command", sorted(PARSERS))
