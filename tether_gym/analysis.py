@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -22,6 +23,7 @@ from tether_gym.cluster import Cluster
 from tether_gym.limits import check_real
 
 if TYPE_CHECKING:
+    from tether_gym.envs.task import DampingTask
     from tether_gym.simulator import BatchSimulator
 
 #: The topology of a lone cable element: node 0 to node 1 (read-only, like every topology the
@@ -30,7 +32,10 @@ _ELEMENT_TOPOLOGY = np.array([[0, 1]], dtype=np.int64)
 _ELEMENT_TOPOLOGY.flags.writeable = False
 
 __all__ = [
+    "CostBoundScopeError",
+    "CostLowerBound",
     "axial_damping_matrix",
+    "cost_lower_bound",
     "element_omega2_finite_difference",
     "frame_stiffness",
     "gyroscopic_matrix",
@@ -333,3 +338,415 @@ def tether_mode_errors(cluster: Cluster, modes: int = 3) -> list[TetherModeError
             TetherModeErrors(t, spec.segments, length, density, tension, string, transverse_error, bar, axial_error)
         )
     return results
+
+
+# ---------------------------------------------------------------------------------------------
+# A lower bound on the task's cost: how fast can bounded thrust take vibration energy out?
+
+
+class CostBoundScopeError(ValueError):
+    """:func:`cost_lower_bound` was asked about a task outside the scope of its derivation (a
+    turning frame, disturbances, damping that is not proportional to mass, ...); the message
+    says which assumption fails and why the bound would not hold there."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CostLowerBound:
+    """Per-seed lower bounds on the cost (minus the return) of any controller on a task; see
+    :func:`cost_lower_bound` for the derivation.
+
+    Attributes:
+        seeds: (S,) the reset seeds.
+        bounds: (S,) reward units: every controller's return on seed ``seeds[s]`` is at most
+            ``-bounds[s]``.
+        full_episode: (S,) the bound on the cost of an episode that runs to the time limit,
+            ``sum_k w_v E_lb(t_k)`` over its steps.
+        failure: (S,) the bound on the cost of an episode that ends in a failure (the penalty,
+            less what its last step's vibration term can give back); ``bounds = min(full_episode,
+            failure)``.
+        initial_energy: (S,) J, the vibration energy at the reset (exact rigid split), ``E(0)``.
+        times: (N + 1,) s, ``t_k = k * control_interval``, k = 0..N.
+        energy: (S, N + 1) J, the envelope ``E_lb(t_k)`` under which no controller can bring the
+            vibration energy, or None when not asked for (``return_energy=False``).
+        max_episode_steps: N, the episode's time limit in control steps.
+        vibration_weight: per J, the reward's vibration weight over the task's energy scale.
+        failure_penalty: the reward's one-off failure penalty.
+        constants: each (S,): ``thrust_coefficient`` (b, W/sqrt(J): the thrusters remove at most
+            ``b sqrt(E)`` of vibration power), ``dissipation_rate`` (a, 1/s: the damping removes at
+            most ``a E``), ``damping_rate`` (alpha, 1/s), ``axial_rate`` (1/s, the cables' part of
+            a), ``thrust_torque`` (N m, the thrusters' largest torque on the nominal shape),
+            ``bias_coefficient`` (q, N/sqrt(kg): ``sqrt(sum_i |p_i|^2 / m_i)`` of the bias
+            thrust), ``inertia_min`` (kg m^2, the nominal shape's smallest principal moment),
+            ``potential_floor`` (J, the vibration energy's potential part never goes below it).
+    """
+
+    seeds: np.ndarray
+    bounds: np.ndarray
+    full_episode: np.ndarray
+    failure: np.ndarray
+    initial_energy: np.ndarray
+    times: np.ndarray
+    energy: np.ndarray | None
+    max_episode_steps: int
+    vibration_weight: float
+    failure_penalty: float
+    constants: dict[str, np.ndarray]
+
+
+#: Relative tolerance of the scope checks that compare floats (mass-proportional damping, the
+#: bias against the cables' force at the nominal shape).
+_SCOPE_RTOL = 1e-9
+
+
+def _refuse(what: str, why: str) -> CostBoundScopeError:
+    return CostBoundScopeError(
+        f"cost_lower_bound: {what}; the bound's derivation does not cover it ({why}). In scope: free space "
+        "(inertial frame), no disturbances or thrust noise, cable_failure='terminate', diagonal damping "
+        "proportional to mass (C = alpha M, alpha may be 0) and a nominal shape that is not collinear"
+    )
+
+
+def _check_task_scope(task: DampingTask) -> None:
+    """Refuse the task settings outside the bound's derivation (see :func:`cost_lower_bound`)."""
+    config = task.config
+    disturbances = config.disturbances
+    if disturbances.impulse_magnitude > 0.0 or disturbances.periodic_amplitude > 0.0:
+        raise _refuse(
+            "the task has external disturbances (impulse_magnitude or periodic_amplitude > 0)",
+            "they can do work on the vibration in either direction, beyond the thrusters' limit",
+        )
+    if disturbances.thrust_noise > 0.0:
+        raise _refuse(
+            f"thrust_noise={disturbances.thrust_noise:g}",
+            "Gaussian thrust noise is unbounded, so the delivered thrust has no largest value",
+        )
+    if config.cable_failure != "terminate":
+        raise _refuse(
+            f"cable_failure={config.cable_failure!r}",
+            "a broken cable removes its strain energy at once and leaves the bias thrust unbalanced, so "
+            "the vibration energy has no floor after it",
+        )
+    weights = task.reward_weights
+    if not (weights.vibration >= 0.0 and weights.failure >= 0.0):
+        raise _refuse(
+            f"a negative reward weight (vibration {weights.vibration:g} per J, failure {weights.failure:g})",
+            "the bound adds the vibration terms and the penalty as costs",
+        )
+    if task.sim.kernel_settings[_kernels.LINEARISED] != 0.0:
+        raise _refuse(
+            "the simulator uses the paper's linearised elongation",
+            "its cable force is not the gradient of the strain energy the reward measures",
+        )
+
+
+def _seed_constants(task: DampingTask) -> dict[str, float]:
+    """The constants of the bound for cluster 0 of ``task`` in its current (just reset) state:
+    see :func:`cost_lower_bound`.  Raises :class:`CostBoundScopeError` outside the derivation."""
+    sim = task.sim
+    cluster: Cluster = sim.clusters[0]
+    if not cluster.frame.is_inertial:
+        raise _refuse(
+            f"the cluster moves in a turning frame ({cluster.frame.kind})",
+            "the centrifugal and tidal potential of a turning frame is not convex, so the vibration energy "
+            "has no floor at the nominal shape, and the frame exchanges energy with the rigid motion",
+        )
+    masses = np.asarray(sim.masses[0], dtype=np.float64)
+    damping = np.asarray(sim.damping[0], dtype=np.float64)
+    alpha = float(damping[0] / masses[0])
+    if not np.allclose(damping, alpha * masses, rtol=_SCOPE_RTOL, atol=0.0):
+        raise _refuse(
+            "the diagonal damping is not proportional to the masses (e.g. tether beads without damping "
+            "beside damped satellites, or randomised masses or damping)",
+            "non-uniform damping of the rigid motion feeds the vibration at a rate set by the rigid "
+            "velocity, which thrust can make as large as it likes; use damping_rate=0 or C = alpha M",
+        )
+    bias = np.asarray(task.bias[0], dtype=np.float64)
+    nominal = np.asarray(task.nominal[0], dtype=np.float64)
+    x0 = np.asarray(sim.positions[0], dtype=np.float64)
+    v0 = np.asarray(sim.velocities[0], dtype=np.float64)
+    nominal_strain = float(task.nominal_strain_energy[0])
+
+    stiffness = cluster.stiffness
+    ends_i, ends_j = cluster.cables[:, 0], cluster.cables[:, 1]
+
+    def cables_potential(x: np.ndarray) -> tuple[float, np.ndarray]:
+        """(strain energy of the intact cables at x, J; (n, 3) its gradient, N)."""
+        delta = x[ends_j] - x[ends_i]
+        lengths = np.linalg.norm(delta, axis=1)
+        elastic = np.maximum(cluster.N0 + stiffness * (lengths - cluster.L0), 0.0)
+        force = (elastic / lengths)[:, None] * delta
+        gradient = np.zeros_like(x)
+        np.add.at(gradient, ends_j, force)
+        np.subtract.at(gradient, ends_i, force)
+        return float((0.5 * elastic**2 / stiffness).sum()), gradient
+
+    nominal_potential, nominal_gradient = cables_potential(nominal)
+    residual = float(np.abs(nominal_gradient - bias).max())
+    force_scale = max(float(np.abs(nominal_gradient).max()), float(np.abs(bias).max()), 1e-300)
+    if residual > 1e-6 * force_scale + 1e-12:
+        raise _refuse(
+            f"the bias thrust differs from the cables' force at the nominal shape by {residual:.3g} N",
+            "the potential of the vibration energy is then not minimal at the nominal shape",
+        )
+    # The potential part U = V(x) - V_nominal - p.(x - X) is convex (each cable's energy is a
+    # convex, non-decreasing function of its convex length; the bias term is linear) with zero
+    # gradient at X: its minimum is U(X).
+    potential_floor = nominal_potential - nominal_strain
+
+    total = float(masses.sum())
+    centre = (masses[:, None] * x0).sum(axis=0) / total
+    nominal_centre = (masses[:, None] * nominal).sum(axis=0) / total
+    arm = x0 - centre
+    reference_arm = nominal - nominal_centre
+    relative = v0 - (masses[:, None] * v0).sum(axis=0) / total
+
+    def inertia(r: np.ndarray) -> np.ndarray:
+        return np.einsum("i,ij->", masses, r * r) * np.eye(3) - np.einsum("i,ij,ik->jk", masses, r, r)
+
+    reference_inertia = np.linalg.eigvalsh(inertia(reference_arm))
+    inertia_min = float(reference_inertia[0])
+    if not inertia_min > 1e-9 * float(reference_inertia[-1]):
+        raise _refuse(
+            "the nominal shape is collinear (no moment of inertia about its axis)",
+            "the rigid rotation that the vibration energy leaves out can then spin arbitrarily fast about "
+            "that axis, and its exchange with the vibration has no bound",
+        )
+    momentum = np.einsum("i,ij->j", masses, np.cross(arm, relative))
+    rotation = np.linalg.solve(inertia(arm), momentum)
+    kinetic_w = 0.5 * float(np.einsum("i,ij->", masses, relative * relative))
+    kinetic_rel = kinetic_w - 0.5 * float(momentum @ rotation)
+    potential_0 = cables_potential(x0)[0] - nominal_strain - float((bias * (x0 - nominal)).sum())
+
+    thrusters = np.asarray(task.thrusters, dtype=np.int64)
+    per_axis = task.config.thrust_limit == "per_axis"
+    largest = np.asarray(task.max_thrust, dtype=np.float64) * (math.sqrt(3.0) if per_axis else 1.0)
+    # Cables' Kelvin-Voigt damping: sum_c c (dL/dt)^2 <= u^T (L_c x I) u <= lambda_max(M^-1/2 L_c M^-1/2) 2 T_rel.
+    laplacian = np.zeros((cluster.num_nodes, cluster.num_nodes))
+    c_axial = np.broadcast_to(cluster.axial_damping, (cluster.num_cables,))
+    np.add.at(laplacian, (ends_i, ends_i), c_axial)
+    np.add.at(laplacian, (ends_j, ends_j), c_axial)
+    np.subtract.at(laplacian, (ends_i, ends_j), c_axial)
+    np.subtract.at(laplacian, (ends_j, ends_i), c_axial)
+    scale = 1.0 / np.sqrt(masses)
+    axial_rate = float(np.linalg.eigvalsh(laplacian * scale[:, None] * scale[None, :])[-1]) * (1.0 + 1e-9)
+    axial_rate = max(axial_rate, 0.0)
+    return {
+        "initial_energy": kinetic_rel + potential_0,
+        "initial_total": kinetic_w + potential_0,
+        "potential_floor": potential_floor,
+        "nominal_strain_energy": nominal_strain,
+        "deviation_0": math.sqrt(float(np.einsum("i,ij->", masses, (arm - reference_arm) ** 2))),
+        "angular_momentum_0": float(np.linalg.norm(momentum)),
+        "thrust_beta": math.sqrt(float((largest**2 / masses[thrusters]).sum())),
+        "thrust_torque": float((largest * np.linalg.norm(reference_arm[thrusters], axis=1)).sum()),
+        "bias_coefficient": math.sqrt(float(((bias**2).sum(axis=1) / masses).sum())),
+        "damping_rate": alpha,
+        "axial_rate": axial_rate,
+        "inertia_min": inertia_min,
+        "arm_norm": math.sqrt(float(np.einsum("i,ij->", masses, reference_arm**2))),
+    }
+
+
+def _envelope(constants: dict[str, float], times: np.ndarray, substeps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(E_lb(t_k), deviation bound Delta(t_k))`` at ``times`` (N + 1,) s for one seed: the
+    envelope of :func:`cost_lower_bound`, integrated over ``substeps`` pieces per interval with
+    each piece's coefficients at their largest (they grow with time)."""
+    k = constants
+    beta, q, alpha = k["thrust_beta"], k["bias_coefficient"], k["damping_rate"]
+    dissipation = 2.0 * alpha + 2.0 * k["axial_rate"]
+    floor = k["potential_floor"]
+    total_0 = max(k["initial_total"] - floor, 0.0)  # Y(0) = E''(0) - U_min
+    root_inertia = math.sqrt(k["inertia_min"])
+
+    def deviation(t: float) -> float:
+        # Delta' <= sqrt(2 T_w) <= sqrt(2 Y), sqrt(Y(t)) <= sqrt(Y(0)) + beta t / sqrt(2).
+        return k["deviation_0"] + math.sqrt(2.0 * total_0) * t + 0.5 * beta * t * t
+
+    def coefficients(t: float) -> tuple[float, float]:
+        spread = deviation(t)
+        decay = t if alpha == 0.0 else -math.expm1(-alpha * t) / alpha
+        momentum = k["angular_momentum_0"] + (k["thrust_torque"] + (beta + q) * spread) * decay
+        gap = root_inertia - spread
+        if not gap > 0.0:
+            return math.inf, math.inf
+        omega = momentum / (gap * gap)
+        thrust = math.sqrt(2.0) * (beta + omega * omega * (k["arm_norm"] + spread))
+        return thrust, omega * q * spread
+
+    energy = np.empty(times.size)
+    spreads = np.array([deviation(float(t)) for t in times])
+    y = max(k["initial_energy"] - floor, 0.0)
+    energy[0] = floor + y
+    for step in range(1, times.size):
+        t0, t1 = float(times[step - 1]), float(times[step])
+        h = (t1 - t0) / substeps
+        for piece in range(1, substeps + 1):
+            if y <= 0.0:
+                break
+            b, g = coefficients(t0 + piece * h)
+            if not (math.isfinite(b) and math.isfinite(g)):
+                y = 0.0
+                break
+            root = math.sqrt(y)
+            if dissipation > 0.0:
+                root = (root + b / dissipation) * math.exp(-0.5 * dissipation * h) - b / dissipation
+            else:
+                root -= 0.5 * b * h
+            y = max(max(root, 0.0) ** 2 - g * h, 0.0)
+        energy[step] = floor + y
+    return energy, spreads
+
+
+def cost_lower_bound(
+    env: str | Any,
+    seeds: ArrayLike,
+    *,
+    max_episode_steps: int | None = None,
+    substeps: int = 16,
+    return_energy: bool = False,
+    options: Mapping[str, Any] | None = None,
+    **env_kwargs: Any,
+) -> CostLowerBound:
+    """A rigorous lower bound on the cost (minus the return) of every controller on each seed.
+
+    No controller, however it uses its thrusters, can take the vibration energy out faster than
+    their largest force allows; the bound integrates that limit from each seed's own initial state.
+
+    Derivation (free space; details and the argument's fine print in ``docs/benchmark.md``).  Split
+    the velocities ``v_i = v_com + omega x r_i + u_i`` into translation, rigid rotation
+    (``I omega = L``) and deformation ``u``; the reward's ``E = T_rel + U``, with ``T_rel =
+    1/2 sum m |u|^2`` and ``U = V(x) - V_nominal - p.(x - X)`` (cables' strain energy and the
+    bias-thrust potential).  ``U`` is convex with zero gradient at the nominal shape ``X``, so
+    ``U >= U(X)`` (``potential_floor``, 0 to round-off) and ``T_rel <= E - U(X) =: y``.  With
+    damping ``C = alpha M`` and central cable forces, exactly::
+
+        dE/dt = sum_i F_i.u_i - 2 alpha T_rel - D_cables - omega.tau_bias + sum_i m_i (omega x r_i).(omega x u_i)
+
+    * thrust: ``|sum F_i.u_i| <= sum_thrusters Fmax_i |u_i| <= beta sqrt(2 T_rel)``, ``beta =
+      sqrt(sum Fmax_i^2 / m_i)`` (Cauchy-Schwarz; ``Fmax = sqrt(3) max_thrust`` per axis,
+      ``max_thrust`` for the magnitude limit; only the satellites with thrusters count);
+    * damping: ``2 alpha T_rel + D_cables <= a T_rel``, ``a = 2 alpha + 2 lambda_max(M^-1/2 L_c
+      M^-1/2)`` (``L_c`` the cables' Laplacian weighted by their Kelvin-Voigt coefficients);
+    * rotation: ``|omega| <= |L| / lambda_min(I)``, ``|L(t)|`` bounded by the thrusters' and the
+      bias's largest torques, ``lambda_min(I)`` and the arms by the mass-weighted deviation
+      ``Delta(t)`` from the nominal shape, itself bounded through an upper energy bound.
+
+    So ``dy/dt >= -b(t) sqrt(y) - a y - g(t)`` (``b = sqrt(2) (beta + |omega|^2 |r|_m)``, ``g =
+    |omega| q Delta``), integrated piece by piece (exact in ``sqrt(y)`` for ``b``, ``a``; ``g``
+    subtracted), a lower bound by a comparison argument.  The cost of an episode that runs its
+    ``N`` steps is at least ``sum_k w_v E_lb(t_k)`` (propellant and slack terms are >= 0); one
+    that fails pays ``failure_penalty``, less at most what its last step's vibration term can
+    give back (a broken cable's energy leaves the reward's sum).
+
+    Args:
+        env: a registered id (made with ``gymnasium.make(env, **env_kwargs)``) or an env whose
+            ``unwrapped`` is a :class:`~tether_gym.envs.TetherClusterEnv` (``env_kwargs`` must then
+            be empty).
+        seeds: (S,) reset seeds, ints >= 0.
+        max_episode_steps: N, the time limit in control steps; default the env's spec's.
+        substeps: integration pieces per control interval (more: tighter, never looser than
+            rigorous).
+        return_energy: also return the envelope ``E_lb(t_k)`` (S, N + 1), J.
+        options: reset options passed to every reset (an exact initial state, see the env's
+            ``reset``); default None: each seed's random initial state.
+
+    Returns:
+        A :class:`CostLowerBound`; ``bounds`` (S,) in reward units, returns <= ``-bounds``.
+
+    Raises:
+        CostBoundScopeError: a task outside the derivation: a turning frame, disturbances or thrust
+            noise, ``cable_failure="continue"``, damping not proportional to mass (beads without
+            damping beside damped satellites), a collinear nominal shape, the linearised elongation.
+        ValueError: bad ``seeds``, ``substeps`` or ``max_episode_steps``.
+    """
+    import gymnasium as gym
+
+    from tether_gym.envs.cluster_env import TetherClusterEnv
+
+    if isinstance(env, str):
+        made = gym.make(env, **env_kwargs)
+    else:
+        if env_kwargs:
+            raise ValueError(f"env_kwargs {sorted(env_kwargs)} apply only to an env id; got an env object")
+        made = env
+    unwrapped = getattr(made, "unwrapped", None)
+    if not isinstance(unwrapped, TetherClusterEnv):
+        raise TypeError(
+            f"env must be a tether-gym id or a TetherClusterEnv (possibly wrapped); got {type(made).__name__}"
+        )
+    if max_episode_steps is None:
+        spec = getattr(made, "spec", None)
+        max_episode_steps = getattr(spec, "max_episode_steps", None)
+        if max_episode_steps is None:
+            raise ValueError("the env has no time limit in its spec: pass max_episode_steps (control steps)")
+    if (
+        isinstance(max_episode_steps, bool)
+        or not isinstance(max_episode_steps, (int, np.integer))
+        or max_episode_steps < 1
+    ):
+        raise ValueError(f"max_episode_steps must be a whole number >= 1; got {max_episode_steps!r}")
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or not 1 <= substeps <= 10_000:
+        raise ValueError(f"substeps must be a whole number in [1, 10000]; got {substeps!r}")
+    seed_array = np.asarray(seeds)
+    if seed_array.ndim != 1 or seed_array.size == 0 or seed_array.dtype.kind not in "iu" or (seed_array < 0).any():
+        raise ValueError(f"seeds must be a non-empty 1-d sequence of whole numbers >= 0; got {seeds!r:.80}")
+    task = unwrapped.task
+    _check_task_scope(task)
+    steps = int(max_episode_steps)
+    dt = float(task.config.control_interval)
+    times = dt * np.arange(steps + 1)
+    weights = task.reward_weights
+    w_v, penalty = float(weights.vibration), float(weights.failure)
+    keys = (
+        "thrust_coefficient",
+        "dissipation_rate",
+        "damping_rate",
+        "axial_rate",
+        "thrust_torque",
+        "bias_coefficient",
+        "inertia_min",
+        "potential_floor",
+    )
+    constants: dict[str, list[float]] = {key: [] for key in keys}
+    full, failure, initial, energies = [], [], [], []
+    for seed in seed_array.tolist():
+        made.reset(seed=int(seed), options=None if options is None else dict(options))
+        k = _seed_constants(task)
+        energy, spread = _envelope(k, times, int(substeps))
+        vibration_terms = w_v * energy[1:]  # the steps' vibration costs, k = 1..N
+        full.append(float(vibration_terms.sum()))
+        # A failure at step K costs the penalty plus the steps before it plus step K's vibration
+        # term, which is >= min(0, w_v E_lb(t_K)), and after a cable break >= -w_v (V_nominal +
+        # q Delta(t_K)) with Delta grown over one more interval by the unbalanced bias.
+        beta, q = k["thrust_beta"], k["bias_coefficient"]
+        total_0 = max(k["initial_total"] - k["potential_floor"], 0.0)
+        upper = (math.sqrt(total_0) + beta * times[1:] / math.sqrt(2.0)) ** 2
+        start = upper + k["potential_floor"] + k["nominal_strain_energy"] + q * spread[1:]
+        grown = spread[1:] + dt * np.sqrt(2.0 * np.maximum(start, 0.0)) + 0.5 * (beta + q) * dt * dt
+        last = np.minimum(np.minimum(0.0, vibration_terms), -w_v * (k["nominal_strain_energy"] + q * grown))
+        before = np.concatenate(([0.0], np.cumsum(vibration_terms)[:-1]))
+        failure.append(penalty + float((before + last).min()))
+        initial.append(k["initial_energy"])
+        if return_energy:
+            energies.append(energy)
+        values = {
+            "thrust_coefficient": math.sqrt(2.0) * beta,
+            "dissipation_rate": 2.0 * k["damping_rate"] + 2.0 * k["axial_rate"],
+            **{key: k[key] for key in keys[2:]},
+        }
+        for key in keys:
+            constants[key].append(values[key])
+    full_array, failure_array = np.array(full), np.array(failure)
+    return CostLowerBound(
+        seeds=seed_array.astype(np.int64),
+        bounds=np.minimum(full_array, failure_array),
+        full_episode=full_array,
+        failure=failure_array,
+        initial_energy=np.array(initial),
+        times=times,
+        energy=np.array(energies) if return_energy else None,
+        max_episode_steps=steps,
+        vibration_weight=w_v,
+        failure_penalty=penalty,
+        constants={key: np.array(values) for key, values in constants.items()},
+    )
