@@ -97,6 +97,7 @@ def snapping_pairs(count: int, seconds: float) -> None:
 
 def env_ids(count: int, steps: int, safety_factor: float, modes: tuple[str, ...]) -> float:
     overall = 0.0
+    width = max(map(len, ENV_IDS))  # the id column fits the longest id
     for env_id, (preset, _, task) in ENV_IDS.items():
         for mode in modes:
             kwargs = dict(task, safety_factor=safety_factor, allow_unstable_safety_factor=True)
@@ -124,7 +125,7 @@ def env_ids(count: int, steps: int, safety_factor: float, modes: tuple[str, ...]
                 broken += int(sim.broken.any(axis=1).sum())
             overall = max(overall, worst)
             print(
-                f"    {env_id:27s} {mode:19s} worst residual {worst:7.4f}  flagged env-steps {flagged:5d}  "
+                f"    {env_id:{width}s} {mode:19s} worst residual {worst:7.4f}  flagged env-steps {flagged:5d}  "
                 f"env-steps with a broken cable {broken}"
             )
             env.close()

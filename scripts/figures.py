@@ -12,6 +12,7 @@ Run from the repository root::
 
     bash scripts/figures.sh                                  # everything but the benchmark plots
     bash scripts/figures.sh --only compare tutorial          # some entries
+    bash scripts/figures.sh --only env_animations --env-ids TetherChain-v0  # one id's animation
     bash scripts/figures.sh --benchmark-dir outputs/benchmark  # also the benchmark plots
 
 The benchmark plots come from a finished ``python -m agents.benchmark --out DIR`` (about 40
@@ -192,7 +193,9 @@ def make_benchmark(args: argparse.Namespace) -> None:
 
 
 #: The two controllers of the per-id animations: no thrust, and the shipped learned controller
-#: that beats every scripted baseline on every id (docs/benchmark.md).
+#: that beats every scripted baseline on every id that ships one (docs/benchmark.md). An id that
+#: ships no ``ars`` yet (a new id, before its training) shows instead the scripted law its ``ars``
+#: residual is trained on (:func:`animated_controllers`).
 ANIMATED_CONTROLLERS = ("passive", "ars")
 #: Control steps animated, and the animation's frame time (ms): 10 s of the 0.1 s ids in real time.
 ANIMATION_STEPS = 100
@@ -246,6 +249,19 @@ def _episode(env_id: str, controller: str, render: bool, exaggeration: float = 1
         env.close()
 
 
+def animated_controllers(env_id: str) -> tuple[str, str]:
+    """The controllers of ``env_id``'s animation, left and right: :data:`ANIMATED_CONTROLLERS`
+    where the id ships the learned one, else passive and the id's ``residual_on`` law of
+    ``agents/hyperparams/ars.yml``, the baseline its ``ars`` policy will correct."""
+    from agents.policies import shipped_models
+    from agents.training.ars import load_ars_settings
+
+    left, right = ANIMATED_CONTROLLERS
+    if right in shipped_models(env_id):
+        return left, right
+    return left, load_ars_settings(env_id).residual_on
+
+
 def animation_exaggeration(env_id: str) -> float:
     """The displacement exaggeration of ``env_id``'s animation: 1, 2 or 5 times a power of ten, at
     most the env's default of 100, with which the largest deviation from the nominal shape that
@@ -256,7 +272,9 @@ def animation_exaggeration(env_id: str) -> float:
     positions = gym.make(env_id).unwrapped.cluster.positions
     half_size = 0.5 * float(np.ptp(positions, axis=0).max())
     largest = max(
-        info["max_deviation"] for controller in ANIMATED_CONTROLLERS for info in _episode(env_id, controller, False)[1]
+        info["max_deviation"]
+        for controller in animated_controllers(env_id)
+        for info in _episode(env_id, controller, False)[1]
     )
     ceiling = ANIMATION_REACH * half_size / max(largest, 1e-12)
     nice = [m * 10.0**k for k in range(-2, 3) for m in (1, 2, 5) if m * 10.0**k <= min(ceiling, 100.0)]
@@ -276,13 +294,14 @@ def render_controller(env_id: str, controller: str, exaggeration: float) -> tupl
 
 
 def render_animation(env_id: str) -> str:
-    """Write docs/img/envs/<env_id>.gif: passive (left) and ars (right) from the same reset."""
+    """Write docs/img/envs/<env_id>.gif: the two :func:`animated_controllers` (passive left, ars
+    or its law right) from the same reset."""
     from PIL import Image, ImageDraw
 
     demo = _env_demo()
     panels = []
     exaggeration = animation_exaggeration(env_id)
-    for controller in ANIMATED_CONTROLLERS:
+    for controller in animated_controllers(env_id):
         frames, captions = render_controller(env_id, controller, exaggeration)
         frames = demo.crop_margins(frames)
         labelled = []
@@ -303,11 +322,13 @@ def render_animation(env_id: str) -> str:
     return f"wrote docs/img/{env_animation(env_id)} ({path.stat().st_size / 1e3:.0f} kB)"
 
 
-def make_env_animations(_: argparse.Namespace) -> None:
-    """One animation per id, two ids at a time (a 3-D frame takes about 0.1 s to draw)."""
-    workers = min(2, os.cpu_count() or 1)
+def make_env_animations(args: argparse.Namespace) -> None:
+    """One animation per id (``--env-ids``: those only), two ids at a time (a 3-D frame takes
+    about 0.1 s to draw)."""
+    env_ids = getattr(args, "env_ids", None) or list(ENV_IDS)
+    workers = min(2, os.cpu_count() or 1, len(env_ids))
     with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        for line in pool.map(render_animation, ENV_IDS):
+        for line in pool.map(render_animation, env_ids):
             print(line, flush=True)
 
 
@@ -373,6 +394,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--only", nargs="+", choices=list(FIGURES), metavar="ENTRY", help="run only these entries")
     parser.add_argument(
         "--benchmark-dir", help="the --out of a finished `python -m agents.benchmark`, for the benchmark's plots"
+    )
+    parser.add_argument(
+        "--env-ids",
+        nargs="+",
+        choices=list(ENV_IDS),
+        metavar="ID",
+        help="env_animations: draw these ids' animations only (default: every id)",
     )
     args = parser.parse_args(argv)
     for key in args.only or list(FIGURES):

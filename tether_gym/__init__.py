@@ -20,7 +20,7 @@ differences with an element-by-element critical-step estimate.  Main entry point
 from tether_gym.cluster import Cluster, ClusterError, load_cluster, save_cluster
 from tether_gym.frames import LEO_ORBIT_RATE, Frame
 from tether_gym.presets import PRESETS, make_cluster, preset_names
-from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS, register_envs
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS, HARD_TRACK, register_envs
 from tether_gym.simulator import (
     DEFAULT_SAFETY_FACTOR,
     AdvanceStats,
@@ -40,6 +40,7 @@ __all__ = [
     "DEFAULT_ENV_ID",
     "DEFAULT_SAFETY_FACTOR",
     "ENV_IDS",
+    "HARD_TRACK",
     "PRESETS",
     "AdvanceStats",
     "BatchSimulator",

@@ -92,16 +92,18 @@ def main(argv: list[str] | None = None) -> None:
         f"tether-gym {tether_gym.__version__}, gymnasium {gym.__version__}, numpy {np.__version__}, "
         f"python {platform.python_version()}, {os.cpu_count()} cores"
     )
+    env_ids = list(ENV_IDS) if args.all_ids else [DEFAULT_ENV_ID]
+    width = max(len(env_id) for env_id in env_ids) + 2  # the id column fits the longest id
     print(f"single env through gym.make (default wrappers), {args.steps} steps, best of {args.repeats}")
-    print(f"{'id':<24}{'actions':<10}{'steps/s':>12}")
-    for env_id in ENV_IDS if args.all_ids else [DEFAULT_ENV_ID]:
+    print(f"{'id':<{width}}{'actions':<10}{'steps/s':>12}")
+    for env_id in env_ids:
         for policy in ("zero", "random"):
             best = max(single_env_steps_per_second(env_id, args.steps, policy, seed) for seed in range(args.repeats))
-            print(f"{env_id:<24}{policy:<10}{best:>12,.0f}")
+            print(f"{env_id:<{width}}{policy:<10}{best:>12,.0f}")
     print()
     print(f"vector envs, random actions, env steps/s (sub-env steps summed), best of {args.repeats}")
-    print(f"{'id':<24}{'vectorisation':<38}{'N':>6}{'steps/s':>14}")
-    for env_id in ENV_IDS if args.all_ids else [DEFAULT_ENV_ID]:
+    print(f"{'id':<{width}}{'vectorisation':<38}{'N':>6}{'steps/s':>14}")
+    for env_id in env_ids:
         cases: list[tuple[str, int, dict[str, Any]]] = [("native", n, {}) for n in (1, 64, 1024, 4096)]
         cases += [
             ("native, safety_factor 0.2", 1024, {"safety_factor": 0.2}),
@@ -114,7 +116,7 @@ def main(argv: list[str] | None = None) -> None:
                 vector_env_steps_per_second(env_id, n, steps, sync=label == "SyncVectorEnv", **kwargs)
                 for _ in range(args.repeats)
             )
-            print(f"{env_id:<24}{label:<38}{n:>6}{best:>14,.0f}")
+            print(f"{env_id:<{width}}{label:<38}{n:>6}{best:>14,.0f}")
     if not available("stable_baselines3"):
         print(f"\nPPO share: stable-baselines3 is not installed ({install_line('train')})")
         return

@@ -38,7 +38,26 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
     "TetherSpinningHub-v0": ("spinning_hub", 300, {}),
     "TetherBeadedTetrahedron-v0": ("beaded_tetrahedron", 300, {}),
     "TetherBeadedChain-v0": ("beaded_chain", 300, {}),
+    "TetherUnderactuatedTetrahedron-v0": ("tetrahedron", 300, {"thrusters": (0, 1)}),
+    "TetherEndActuatedChain-v0": ("chain", 300, {"thrusters": (0, 4)}),
+    "TetherDelayedTetrahedron-v0": ("tetrahedron", 300, {"thrust_delay": 2}),
 }
+
+#: The hard track: ids where the best scripted law, its gains re-tuned for the id, costs at least
+#: :data:`HARD_TRACK_MIN_EXCESS_COST` more than the reference ceiling on held-out seeds
+#: (agents/evaluation/ceiling.py), so that a learned controller has room to win. Underactuated
+#: formations and actuation as real thrusters have it; the other ids of :data:`ENV_IDS` are the
+#: standard track. Every id here is an id of :data:`ENV_IDS`, in its order.
+HARD_TRACK: tuple[str, ...] = (
+    "TetherUnderactuatedTetrahedron-v0",
+    "TetherEndActuatedChain-v0",
+    "TetherDelayedTetrahedron-v0",
+)
+
+#: The least excess cost over the reference ceiling, ``(-R[law]) / (-R[ceiling]) - 1`` averaged
+#: over the held-out seeds, of the best scripted law (its gains re-tuned for the id on tuning
+#: seeds) for an id to qualify for :data:`HARD_TRACK`: 0.1 is 10 % of the ceiling's cost.
+HARD_TRACK_MIN_EXCESS_COST = 0.10
 
 #: The paper's case, and the default task.
 DEFAULT_ENV_ID = "TetherTetrahedron-v0"
@@ -72,6 +91,7 @@ _NEXT_STEP_DEFAULT = (
 )
 _FREE_SPACE_V0 = ("v0: initial release, with the single-cluster environments (commit `f1e1c8d`).", _NEXT_STEP_DEFAULT)
 _BEADED_V0 = ("v0: initial release, with the tethers with mass (commit `32d2543`).",)
+_HARD_TRACK_V0 = ("v0: initial release, with the hard track.",)
 _TURNING_FRAME_V0 = ("v0: initial release, with the turning frames (commit `4490cf3`).", _NEXT_STEP_DEFAULT)
 
 #: id -> its documentation beyond the class docstring (see :class:`EnvDoc`); one entry per id of
@@ -196,6 +216,47 @@ ENV_DOCS: dict[str, EnvDoc] = {
             "lines' ends."
         ),
         version_history=_BEADED_V0,
+    ),
+    "TetherUnderactuatedTetrahedron-v0": EnvDoc(
+        summary="The paper's tetrahedron with thrusters on two of its four satellites: a hard-track id.",
+        description=(
+            "The tetrahedron of the paper's case, with thrusters on two satellites only: the other two are "
+            "passive, as daughter craft that carry no propulsion of their own. The action "
+            "and the thrust limits cover the two thrusting satellites, in the order of their indices; the "
+            "observation still covers all four satellites and every cable.\n\n"
+            "The passive satellites are reached only through the cables, which pull but never push: while "
+            "the cables to a passive satellite are slack, no thruster can act on it at all. A law that "
+            "damps each satellite where it stands leaves the passive pair to the cables; a controller has "
+            "to move the thrusting pair so that the cables do the work, which is where the reference "
+            "ceiling gains most over the scripted laws (see the benchmark page)."
+        ),
+        version_history=_HARD_TRACK_V0,
+    ),
+    "TetherEndActuatedChain-v0": EnvDoc(
+        summary="The chain with thrusters on its two end satellites only: a hard-track id.",
+        description=(
+            "The chain of satellites in a line, with thrusters on the first and the last satellite only, "
+            "as a formation steered from its ends. The inner satellites are passive: their lateral motion, "
+            "held only by the pretension of their two cables, reaches the ends only as a slow wave along "
+            "the line, and their axial motion only while the cables between are taut.\n\n"
+            "The laws that act on each satellite's own motion do little here; pulling the line straight "
+            "from its ends at the right moments is what damps the inner satellites."
+        ),
+        version_history=_HARD_TRACK_V0,
+    ),
+    "TetherDelayedTetrahedron-v0": EnvDoc(
+        summary="The paper's tetrahedron with each command acting two control steps late: a hard-track id.",
+        description=(
+            "The tetrahedron of the paper's case, with every thrust command acting two control intervals "
+            "after it is given, as thrusters behind a slow valve, a command bus and a flight computer "
+            "do. The observation does not include the commands still in flight: a controller that needs "
+            "them remembers what it sent. An episode's first intervals have no command yet to act, and fly "
+            "with the bias thrust alone.\n\n"
+            "Feedback on the present velocity then pushes against where the satellite was, not where it "
+            "is; a law has to act on a prediction of the state the command will meet, and the cables' "
+            "snaps make that prediction hard."
+        ),
+        version_history=_HARD_TRACK_V0,
     ),
 }
 

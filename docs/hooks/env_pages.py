@@ -7,7 +7,9 @@
   registered spec and a freshly made env (spaces, episode length, control interval, thrust,
   initial conditions, the cluster's magnitudes). A page therefore cannot disagree with the code.
 * On each of them, the id's animation, drawn by ``scripts/figures.py``.
-* The table of ids on ``environments.md``, in place of the marker ``<!-- env-ids-table ... -->``.
+* The table of ids on ``environments.md``, in place of the marker ``<!-- env-ids-table ... -->``,
+  and what the hard track is with its ids, in place of ``<!-- hard-track-table ... -->``; each
+  hard id's page says it is on that track.
 * The home page: ``README.md``, with its ``docs/`` links made relative to the site, in place of
   the placeholder ``docs/index.md``.
 
@@ -37,11 +39,14 @@ from tether_gym.analysis import tether_mode_errors
 from tether_gym.envs import TetherClusterEnv
 from tether_gym.envs.contract import TETHER_FEATURE_MEANINGS, TETHER_FEATURES
 from tether_gym.presets import PRESETS
-from tether_gym.registration import ENV_DOCS, ENV_IDS
+from tether_gym.registration import ENV_DOCS, ENV_IDS, HARD_TRACK, HARD_TRACK_MIN_EXCESS_COST
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV_PAGE_DIR = "envs"
 IDS_TABLE_MARKER = re.compile(r"<!-- env-ids-table\b.*?-->")
+HARD_TRACK_MARKER = re.compile(r"<!-- hard-track-table\b.*?-->")
+#: Where the site explains the tracks, from an env page (``envs/<id>.md``).
+HARD_TRACK_LINK = "../environments.md#the-hard-track"
 NAV_SECTION = "Environments"
 
 #: The task settings a page reports, by their ``gym.make`` keyword names.
@@ -53,6 +58,8 @@ REPORTED_SETTINGS = (
     "initial_velocity",
     "observed_satellites",
     "observe_tensions",
+    "thrusters",
+    "thrust_delay",
 )
 
 #: Sections of the class docstring that get this id's own lines in front of the shared text.
@@ -283,8 +290,18 @@ def discretisation_text(cluster: tether_gym.Cluster) -> str:
 
 
 def thrust_text(facts: EnvFacts) -> str:
-    limit = facts.settings["thrust_limit"]
-    return f"{facts.thrusters}, up to {values(facts.settings['max_thrust'], 'N')} each ({limit!s} limit)"
+    """The thrusters: how many, on which satellites where not all carry one, their limit, and
+    their delay where there is one."""
+    settings = facts.settings
+    text = f"{facts.thrusters}"
+    if settings["thrusters"] is not None:
+        on = ", ".join(map(str, settings["thrusters"]))
+        text += f" (on satellites {on}; the other {facts.cluster.num_satellites - facts.thrusters} passive)"
+    text += f", up to {values(settings['max_thrust'], 'N')} each ({settings['thrust_limit']!s} limit)"
+    if settings["thrust_delay"]:
+        delay = settings["thrust_delay"]
+        text += f", each command acting {delay} control interval{'s' if delay > 1 else ''} after it is given"
+    return text
 
 
 def observation_rows(facts: EnvFacts) -> list[tuple[str, str, str]]:
@@ -344,6 +361,38 @@ def table(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def track(env_id: str) -> str:
+    """``"hard"`` for an id of :data:`~tether_gym.registration.HARD_TRACK`, else ``"standard"``."""
+    return "hard" if env_id in HARD_TRACK else "standard"
+
+
+def hard_track_meaning() -> str:
+    """One paragraph: what puts an id on the hard track (from the registry's threshold)."""
+    return (
+        "The **hard track** holds the ids where the best scripted law, its gains re-tuned for the id on "
+        "tuning seeds, costs at least "
+        f"{number(100 * HARD_TRACK_MIN_EXCESS_COST)} % more than the reference ceiling (the model-predictive "
+        "planner at full strength) on the benchmark's held-out seeds: its excess cost "
+        "`(-R[law]) / (-R[ceiling]) - 1`, averaged over the seeds, is at least "
+        f"{number(HARD_TRACK_MIN_EXCESS_COST)}. There a learned controller has room to win over the laws; on "
+        "the standard track the best law comes close to the ceiling. The hard ids are underactuated "
+        "formations and actuation as real thrusters have it.\n"
+    )
+
+
+def hard_track_table() -> str:
+    """What the hard track is, and a table of its ids: what each is and what it registers
+    beyond its preset's task (``environments.md``)."""
+    rows = []
+    for env_id in HARD_TRACK:
+        facts = env_facts(env_id)
+        registered = ", ".join(f"`{k}={v!r}`" for k, v in facts.registered.items()) or "none"
+        rows.append(
+            (f"[`{env_id}`]({ENV_PAGE_DIR}/{env_id}.md)", f"`{facts.preset}`", registered, env_doc(env_id).summary)
+        )
+    return hard_track_meaning() + "\n" + table(("id", "cluster", "registered beyond the preset", "what it is"), rows)
+
+
 def env_page(env_id: str) -> str:
     """The Markdown of ``envs/<env_id>.md``."""
     facts, doc, shared = env_facts(env_id), env_doc(env_id), docstring_sections(TetherClusterEnv)
@@ -359,6 +408,7 @@ def env_page(env_id: str) -> str:
         ("Frame", frame_text(cluster)),
         ("Control interval", f"{interval} s"),
         ("Episode", f"{facts.max_episode_steps} steps ({number(facts.episode_seconds)} s), then truncated"),
+        ("Track", f"[{track(env_id)}]({HARD_TRACK_LINK})"),
         ("Thrusters", thrust_text(facts)),
         (
             "Initial conditions (std per component)",
@@ -386,6 +436,7 @@ def env_page(env_id: str) -> str:
     own: dict[str, str] = {
         "Description": (
             doc.description.strip()
+            + ("\n\n### On the hard track\n\n" + hard_track_meaning() if env_id in HARD_TRACK else "")
             + "\n\n### The cluster\n\n"
             + preset_summary
             + "\n"
@@ -455,11 +506,19 @@ def animation(facts: EnvFacts) -> str:
             f"docs/{path} is missing: run `bash scripts/figures.sh --only env_animations`, which draws one "
             f"animation per registered id"
         )
-    left, right = figures.ANIMATED_CONTROLLERS
+    left, right = figures.animated_controllers(facts.env_id)
+    learned = right == figures.ANIMATED_CONTROLLERS[1]
+    # Before an id ships its learned controller, the animation shows the law it will correct.
+    shown = (
+        f"the shipped `{right}` policy (right)"
+        if learned
+        else f"the scripted law `{right}` (right: the id ships no `ars` policy yet, and its `ars` residual is "
+        f"trained on `{right}`)"
+    )
     interval = number(facts.settings["control_interval"])
     return (
         f"![{facts.env_id}: {left} and {right} from the same initial state](../{path})\n\n"
-        f"*{left} (left) and the shipped `{right}` policy (right) from the same reset (seed "
+        f"*{left} (left) and {shown} from the same reset (seed "
         f"{figures.ANIMATION_SEED}), {figures.ANIMATION_STEPS} control steps of {interval} s, one frame each; "
         f"blue cables are taut, orange dashed ones slack, red arrows the thrust. Drawn by "
         f"`bash scripts/figures.sh`.*\n"
@@ -494,10 +553,11 @@ def ids_table() -> str:
                 str(action),
                 str(observation),
                 f"{steps} × {number(interval)} s",
+                track(env_id),
                 env_doc(env_id).summary,
             )
         )
-    return table(("id", "cluster", "action", "observation", "episode", "what it is"), rows)
+    return table(("id", "cluster", "action", "observation", "episode", "track", "what it is"), rows)
 
 
 def readme_for_site(readme: str) -> str:
@@ -530,6 +590,5 @@ def on_files(files: Any, config: Any) -> Any:
 def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
     if page.file.src_uri == "index.md":
         return readme_for_site((ROOT / "README.md").read_text(encoding="utf-8"))
-    if IDS_TABLE_MARKER.search(markdown):
-        return IDS_TABLE_MARKER.sub(lambda _: ids_table(), markdown)
-    return markdown
+    markdown = IDS_TABLE_MARKER.sub(lambda _: ids_table(), markdown)
+    return HARD_TRACK_MARKER.sub(lambda _: hard_track_table(), markdown)

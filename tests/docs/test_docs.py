@@ -11,7 +11,7 @@ from types import ModuleType
 import pytest
 
 from tests.helpers import load_file
-from tether_gym.registration import ENV_DOCS, ENV_IDS
+from tether_gym.registration import ENV_DOCS, ENV_IDS, HARD_TRACK, HARD_TRACK_MIN_EXCESS_COST
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
@@ -115,6 +115,49 @@ def test_generated_env_page_has_the_sections_of_a_gymnasium_env_page(env_id: str
         assert section in sections, f"{env_id}: no {section!r} section"
     preset, steps, _ = ENV_IDS[env_id]
     assert f"preset `{preset}`" in page and f"{steps} steps" in page
+
+
+def test_the_hard_track_is_registered_ids_in_the_registry_order() -> None:
+    assert HARD_TRACK and list(HARD_TRACK) == [env_id for env_id in ENV_IDS if env_id in HARD_TRACK]
+    assert len(set(HARD_TRACK)) == len(HARD_TRACK) and len(HARD_TRACK) < len(ENV_IDS)
+    assert 0.0 < HARD_TRACK_MIN_EXCESS_COST < 1.0
+
+
+@pytest.mark.parametrize("env_id", list(ENV_IDS))
+def test_an_env_page_says_its_track_and_a_hard_page_what_the_track_means(env_id: str) -> None:
+    hook = load_hook()
+    page = hook.env_page(env_id)
+    hard = env_id in HARD_TRACK
+    assert f"| Track | [{'hard' if hard else 'standard'}]({hook.HARD_TRACK_LINK}) |" in page
+    assert ("### On the hard track" in page) == hard
+    threshold = f"at least {hook.number(100 * HARD_TRACK_MIN_EXCESS_COST)} % more than the reference ceiling"
+    assert (threshold in page) == hard, env_id
+    # The glance table says which satellites thrust where not all do, and how late a delayed id acts.
+    task = ENV_IDS[env_id][2]
+    row = next(line for line in page.splitlines() if line.startswith("| Thrusters |"))
+    thrusters, delay = task.get("thrusters"), task.get("thrust_delay", 0)
+    assert ("on satellites " + ", ".join(map(str, thrusters or ())) + ";" in row) == (thrusters is not None), row
+    assert (f"each command acting {delay} control interval" in row) == bool(delay), row
+
+
+def test_the_environments_page_explains_the_hard_track_and_lists_its_ids() -> None:
+    hook = load_hook()
+    source = (ROOT / "docs" / "environments.md").read_text(encoding="utf-8")
+    assert len(hook.HARD_TRACK_MARKER.findall(source)) == 1 and len(hook.IDS_TABLE_MARKER.findall(source)) == 1
+    heading, anchor = "## The hard track", hook.HARD_TRACK_LINK.partition("#")[2]
+    assert source.index(heading) < hook.HARD_TRACK_MARKER.search(source).start() and slug(heading[3:]) == anchor
+
+    class Page:
+        class file:  # noqa: N801 (MkDocs' page.file)
+            src_uri = "environments.md"
+
+    rendered = hook.on_page_markdown(source, Page(), None, None)
+    assert "<!--" not in rendered.split("## In short")[0], "a marker was left in the page"
+    section = rendered.split(heading)[1].split("\n## ")[0]
+    listed = re.findall(r"^\| \[`(Tether\w+-v\d+)`\]", section, re.MULTILINE)
+    assert listed == list(HARD_TRACK)
+    ids_rows = re.findall(r"^\| \[`(Tether\w+-v\d+)`\].*\| (hard|standard) \|", rendered, re.MULTILINE)
+    assert [(env_id, "hard" if env_id in HARD_TRACK else "standard") for env_id in ENV_IDS] == ids_rows
 
 
 def test_page_generator_refuses_a_docstring_without_its_sections() -> None:

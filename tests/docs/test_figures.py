@@ -11,7 +11,7 @@ from types import ModuleType
 import pytest
 
 from tests.helpers import load_file
-from tether_gym.registration import ENV_IDS
+from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
 
 from .test_docs import load_hook
 
@@ -169,3 +169,29 @@ def test_an_env_page_without_its_animation_fails_the_build_with_the_fix(monkeypa
     monkeypatch.setattr(figures, "env_animation", lambda env_id: f"envs/{env_id}-not-drawn.gif")
     with pytest.raises(hook.DocsBuildError, match="scripts/figures.sh --only env_animations"):
         hook.env_page(next(iter(ENV_IDS)))
+
+
+def test_an_animation_shows_the_shipped_ars_or_else_the_law_its_ars_will_correct(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An id that ships no ``ars`` yet (a new id) animates its ``residual_on`` law instead, and
+    its page's caption says which controller is drawn."""
+    import agents.policies
+    from agents.controllers.registry import BASELINES
+    from agents.policies import shipped_models
+    from agents.training.ars import load_ars_settings
+
+    figures, hook = load_figures(), load_hook()
+    drawn = {env_id: figures.animated_controllers(env_id) for env_id in ENV_IDS}
+    for env_id, (left, right) in drawn.items():
+        assert left == "passive"
+        if "ars" in shipped_models(env_id):
+            assert right == "ars"
+            assert "the shipped `ars` policy (right)" in hook.env_page(env_id)
+        else:
+            assert right == load_ars_settings(env_id).residual_on and right in BASELINES
+            assert f"the scripted law `{right}`" in hook.env_page(env_id)
+    # Both cases, whatever is shipped today: the default id with its models hidden.
+    assert "ars" in shipped_models(DEFAULT_ENV_ID)
+    monkeypatch.setattr(agents.policies, "shipped_models", lambda env_id: {})
+    assert figures.animated_controllers(DEFAULT_ENV_ID) == ("passive", load_ars_settings(DEFAULT_ENV_ID).residual_on)

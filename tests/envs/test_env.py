@@ -329,3 +329,51 @@ def test_domain_randomisation_redraws_parameters_and_keeps_the_equilibrium() -> 
     assert not np.array_equal(drawn[0], drawn[1])
     env.reset(seed=0)
     assert np.array_equal(env.task.sim.masses[0], drawn[0])  # reproducible from the seed
+
+
+#: The registered ids whose task gives only some satellites thrusters, and those with a delay.
+UNDERACTUATED = [env_id for env_id, (_, _, task) in tg.ENV_IDS.items() if task.get("thrusters") is not None]
+DELAYED = [env_id for env_id, (_, _, task) in tg.ENV_IDS.items() if task.get("thrust_delay")]
+
+
+def test_the_hard_track_has_underactuated_and_delayed_ids() -> None:
+    """The two lists below are not empty, so the tests over them test something."""
+    assert set(UNDERACTUATED) | set(DELAYED) <= set(tg.HARD_TRACK)
+    assert UNDERACTUATED and DELAYED
+
+
+@pytest.mark.parametrize("env_id", UNDERACTUATED)
+def test_an_underactuated_id_thrusts_only_on_its_thrusters_and_observes_every_satellite(env_id: str) -> None:
+    preset, _, task = tg.ENV_IDS[env_id]
+    env = gym.make(env_id)
+    thrusters = list(task["thrusters"])
+    passive = [i for i in range(env.unwrapped.cluster.num_satellites) if i not in thrusters]
+    assert env.action_space.shape == (3 * len(thrusters),) and passive
+    fully_actuated = TetherClusterEnv(preset=preset)
+    assert env.observation_space == fully_actuated.observation_space  # every satellite and cable
+    rng = np.random.default_rng(7)
+    env.reset(seed=7)
+    for _ in range(20):
+        *_, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+        assert np.all(info["thrust"][passive] == 0.0) and np.all(np.abs(info["thrust"][thrusters]).max(axis=1) > 0)
+
+
+@pytest.mark.parametrize("env_id", DELAYED)
+def test_a_delayed_id_does_not_observe_the_commands_in_flight(env_id: str) -> None:
+    """Two episodes that differ in one command observe the same until that command acts,
+    ``thrust_delay`` intervals later: nothing of it reaches the observation before."""
+    delay = tg.ENV_IDS[env_id][2]["thrust_delay"]
+    env = gym.make(env_id)
+    actions = np.random.default_rng(3).uniform(-1, 1, (12,) + env.action_space.shape).astype(np.float32)
+    changed = 4
+    observed = []
+    for flip in (False, True):
+        obs, _ = env.reset(seed=3)
+        run = [obs]
+        for step, action in enumerate(actions):
+            obs, *_ = env.step(-action if flip and step == changed else action)
+            run.append(obs)
+        observed.append(run)
+    first_different = next(k for k, (a, b) in enumerate(zip(*observed, strict=True)) if not np.array_equal(a, b))
+    # Observation k follows step k - 1; the changed command (step `changed`) acts in step changed + delay.
+    assert first_different == changed + delay + 1

@@ -24,7 +24,7 @@ from agents.evaluation.scoring import (
     score_policy,
 )
 from agents.policies import shipped_models
-from tether_gym.registration import ENV_IDS
+from tether_gym.registration import ENV_IDS, HARD_TRACK
 
 ENV_ID = "TetherTetrahedron-v0"
 
@@ -34,7 +34,13 @@ def test_the_shipped_reference_holds_every_id_and_controller() -> None:
     assert REFERENCE_FILE.parent.name == "reference" and REFERENCE_FILE.parent.parent.name == "agents"
     assert data["env_kwargs"] == {}, "the reference scores are on the ids' own settings"
     assert (data["zero"], data["reference"], data["episodes"]) == ("passive", "mpc", 64)
-    assert list(data["per_id"]) == list(ENV_IDS)
+    # Every id of the standard track, in the registry's order. A hard-track id joins the file from
+    # its own benchmark run (merged in as an addition); until then it is absent, and the tests of
+    # this file cover the ids the file holds.
+    assert list(data["per_id"]) == [env_id for env_id in ENV_IDS if env_id in data["per_id"]]
+    assert [env_id for env_id in ENV_IDS if env_id not in HARD_TRACK] == [
+        env_id for env_id in data["per_id"] if env_id not in HARD_TRACK
+    ]
     for env_id, entry in data["per_id"].items():
         assert entry["seeds"] == list(range(HELD_OUT_SEED, HELD_OUT_SEED + 64))
         assert set(entry["controllers"]) == {*BASELINES, "mpc", *shipped_models(env_id)}, env_id
@@ -120,6 +126,8 @@ LEARNED_RTOL_OTHER_CPU = 2e-3
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_every_baseline_and_shipped_model_reproduces_its_shipped_returns(env_id: str) -> None:
     data = load_reference()
+    if env_id in HARD_TRACK and env_id not in data["per_id"]:
+        pytest.skip(f"{env_id} (hard track) has no reference scores yet: its benchmark run adds them")
     entry = data["per_id"][env_id]
     same_machine = run_of(data, env_id)["machine"] == machine_description()
     for name in BASELINES:

@@ -21,7 +21,7 @@ from agents.training.hyperparams import HyperparameterError, load_hyperparameter
 from agents.training.sb3 import train
 from agents.training.selection import evaluation_seeds
 from agents.training.shipping import RunFileError, ship
-from tether_gym import ENV_IDS
+from tether_gym import ENV_IDS, HARD_TRACK
 
 ENV = "TetherTetrahedron-v0"
 TINY = dict(
@@ -132,7 +132,11 @@ def test_ship_command_errors_are_clear(tmp_path: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("env_id", list(ENV_IDS))
 def test_every_id_ships_a_learned_model_that_beats_passive(env_id: str) -> None:
+    """Every standard-track id ships one; a hard-track id may have none until it is trained, and
+    every model it ships beats passive too."""
     models = shipped_models(env_id)
+    if not models and env_id in HARD_TRACK:
+        pytest.skip(f"{env_id} (hard track) ships no learned controller yet")
     assert models, f"{env_id} has no shipped learned controller in agents/models"
     env = gym.make(env_id)
     seeds = list(range(10_000, 10_008))
