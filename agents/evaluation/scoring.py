@@ -12,7 +12,12 @@ benchmark reports for a controller on that id, with the benchmark's own function
   policy did better;
 * the normalised score, 0 for passive and 100 for ``mpc``:
   ``100 (mean R - mean R[passive]) / (mean R[mpc] - mean R[passive])``, with its paired
-  percentile-bootstrap interval (the benchmark's resamples and bootstrap seed).
+  percentile-bootstrap interval (the benchmark's resamples and bootstrap seed);
+* where ceiling data hold the id (the per-seed returns of the reference ceiling, a long-horizon
+  planner, on a subset of the held-out seeds): on those of the ceiling's seeds that the policy
+  ran, the excess cost over the ceiling, per seed ``(-R[e]) / (-R[ceiling, e]) - 1``, its mean
+  with a 95 % t interval, and the normalised score with 100 = the ceiling, with its paired
+  bootstrap interval.
 
 The other controllers' returns come from the **reference scores**, a data file shipped in the
 package (``reference/reference_scores.json``, :data:`REFERENCE_FILE`): per id, the held-out
@@ -46,7 +51,7 @@ import json
 import os
 import platform
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -58,11 +63,14 @@ from tether_gym.registration import ENV_IDS
 from ..common.commands import PACKAGE
 from ..common.data import REFERENCE_DIR
 from ..common.reading import read_json
+from .ceiling import CEILING_FILE, load_ceiling
 from .rollout import rollout
 from .stats import (
     SCORE_BOOTSTRAP_REPS,
+    ExcessCost,
     PairedDifference,
     best_eligible_baseline,
+    excess_cost,
     normalised_scores,
     paired_difference,
     score_interval,
@@ -75,6 +83,7 @@ __all__ = [
     "REFERENCE_FILE",
     "ReferenceDataError",
     "Score",
+    "ceiling_rows",
     "load_reference",
     "machine_description",
     "merge_reference",
@@ -127,6 +136,16 @@ class Score:
             interval, or None.
         score_note: what the normalised score is, or why it is not available.
         reference_commit: the commit of the benchmark run the reference scores come from.
+        ceiling_seeds: the seeds of the ceiling statistics below: the ceiling's seeds that
+            ``seeds`` include, in the ceiling's order (empty when there are none).
+        ceiling_excess: the excess cost over the reference ceiling on ``ceiling_seeds``
+            (fractions: mean of ``(-R[e]) / (-R[ceiling, e]) - 1``, 95 % t interval, seeds
+            cheaper than the ceiling), or None when not available (see ``ceiling_note``).
+        ceiling_score: the normalised score with 0 = ``zero`` and 100 = the ceiling on
+            ``ceiling_seeds``, or None.
+        ceiling_score_low, ceiling_score_high: its 95 % paired percentile-bootstrap interval
+            (the benchmark's resamples and seed), or None.
+        ceiling_note: what the ceiling statistics are, or why they are not available.
     """
 
     env_id: str
@@ -146,6 +165,12 @@ class Score:
     normalised_score_high: float | None
     score_note: str
     reference_commit: str
+    ceiling_seeds: tuple[int, ...] = ()
+    ceiling_excess: ExcessCost | None = None
+    ceiling_score: float | None = None
+    ceiling_score_low: float | None = None
+    ceiling_score_high: float | None = None
+    ceiling_note: str = "not available: no ceiling data"
 
     @property
     def episodes(self) -> int:
@@ -173,6 +198,23 @@ class Score:
         failures = "" if self.failures is None else f", {self.failures}/{self.episodes} failed"
         first, last = self.seeds[0], self.seeds[-1]
         span = f"seeds {first}..{last}" if self.seeds == tuple(range(first, last + 1)) else "chosen seeds"
+        ceiling = []
+        if self.ceiling_excess is not None:
+            excess = self.ceiling_excess
+            ceiling.append(
+                f"  excess cost over the ceiling: {100 * excess.mean:+.1f} % [{100 * excess.low:+.1f}, "
+                f"{100 * excess.high:+.1f}] (95 % t interval, {self.ceiling_note}), cheaper than the ceiling on "
+                f"{excess.beats}/{excess.episodes} episodes"
+            )
+            if self.ceiling_score is not None:
+                interval = (
+                    "[interval n/a]"
+                    if self.ceiling_score_low is None
+                    else f"[{self.ceiling_score_low:.1f}, {self.ceiling_score_high:.1f}]"
+                )
+                ceiling.append(
+                    f"  normalised score (0 = {self.zero}, 100 = the ceiling): {self.ceiling_score:.1f} {interval}"
+                )
         return "\n".join(
             [
                 f"{self.name} on {self.env_id}, {self.episodes} held-out episodes "
@@ -181,6 +223,7 @@ class Score:
                 f"  vs best baseline {self.best_baseline}: {paired.mean:+.2f} [{paired.low:+.2f}, {paired.high:+.2f}] "
                 f"(paired, 95 % t interval), better on {paired.wins}/{paired.episodes} episodes",
                 f"  normalised score: {score}",
+                *ceiling,
             ]
         )
 
@@ -214,6 +257,68 @@ def _held_out_seeds(entry: dict[str, Any], env_id: str, episodes: int | None, se
     return chosen
 
 
+def ceiling_rows(entry: dict[str, Any], env_id: str, ceiling_seeds: Any) -> np.ndarray:
+    """The rows (E,) int of the reference entry ``entry`` (an id's, in :func:`load_reference`'s
+    data) that hold the ceiling's seeds ``ceiling_seeds`` (E,), in their order: the reference's
+    returns at these rows pair with the ceiling's returns. Raises :class:`ReferenceDataError`
+    unless the ceiling's seeds are at least 2 distinct seeds among the reference's held-out
+    seeds (the ceiling must have run on the benchmark's seeds for the pairing to hold)."""
+    held = [int(seed) for seed in entry["seeds"]]
+    seeds = np.asarray(ceiling_seeds)
+    if seeds.ndim != 1 or seeds.size < 2 or not all(is_whole_number(seed) for seed in seeds.tolist()):
+        raise ReferenceDataError(
+            f"the ceiling data of {env_id} must hold at least 2 integer seeds (for an interval); got "
+            f"{seeds.tolist()!r}: recompute them with python -m agents.ceiling"
+        )
+    chosen = [int(seed) for seed in seeds.tolist()]
+    if len(set(chosen)) != len(chosen):
+        raise ReferenceDataError(
+            f"the ceiling data of {env_id} repeat seeds ({chosen}): each seed pairs once; recompute them with "
+            "python -m agents.ceiling"
+        )
+    index = {seed: row for row, seed in enumerate(held)}
+    foreign = [seed for seed in chosen if seed not in index]
+    if foreign:
+        raise ReferenceDataError(
+            f"the ceiling data of {env_id} hold seeds {foreign[:5]} that its reference scores do not (they hold "
+            f"{len(held)} held-out seeds, {held[0]}..{held[-1]}): the ceiling's seeds must be among the benchmark's "
+            "held-out seeds for its returns to pair with the other controllers'; recompute the ceiling on them "
+            "(python -m agents.ceiling)"
+        )
+    return np.array([index[seed] for seed in chosen], dtype=np.intp)
+
+
+def _ceiling_returns(run: Any, env_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """``run``'s (E,) seeds and (E,) returns (anything with ``.seeds`` and ``.returns``, such
+    as a ceiling run of :func:`agents.evaluation.ceiling.load_ceiling`), checked to pair."""
+    seeds, returns = np.asarray(getattr(run, "seeds", None)), np.asarray(getattr(run, "returns", None))
+    if seeds.ndim != 1 or returns.shape != seeds.shape:
+        raise ReferenceDataError(
+            f"the ceiling data of {env_id} need one return per seed; got seeds of shape {seeds.shape} and returns "
+            f"of shape {returns.shape}: recompute them with python -m agents.ceiling"
+        )
+    return seeds, returns.astype(np.float64)
+
+
+def _score_of(
+    values: np.ndarray, zero_values: np.ndarray, anchor_values: np.ndarray, data: dict[str, Any]
+) -> tuple[float, float | None, float | None]:
+    """The normalised score of ``values`` (E,) with 0 = ``zero_values`` and 100 = ``anchor_values``
+    (the same seeds), and its paired bootstrap interval with the reference's resamples and seed."""
+    score = float(normalised_scores(values, zero_values, anchor_values).mean())
+    bootstrap = data["score_bootstrap"]
+    interval = score_interval(
+        values,
+        zero_values,
+        anchor_values,
+        reps=bootstrap["reps"],
+        seed=bootstrap["seed"],
+        confidence=data["confidence"],
+    )
+    low, high = (None, None) if interval is None else interval
+    return score, low, high
+
+
 def _reference_entry(data: dict[str, Any], env_id: str) -> dict[str, Any]:
     if env_id not in data["per_id"]:
         raise ReferenceDataError(f"the reference scores hold no id {env_id!r}; they hold {', '.join(data['per_id'])}")
@@ -228,6 +333,7 @@ def score_returns(
     name: str = "policy",
     terminated: Any = None,
     reference: dict[str, Any] | str | Path | None = None,
+    ceiling: Mapping[str, Any] | str | Path | None = None,
 ) -> Score:
     """The benchmark's statistics of per-episode returns measured on held-out seeds.
 
@@ -241,8 +347,19 @@ def score_returns(
     best baseline is the reference's, chosen on all its episodes); the normalised score and its
     bootstrap interval use passive's and the reference controller's returns on those seeds, with
     the benchmark's resample count and bootstrap seed, so the numbers are those a benchmark over
-    these seeds reports. Raises :class:`ReferenceDataError` for an id or seeds the reference
-    does not hold, ValueError for returns that are not E finite numbers."""
+    these seeds reports.
+
+    ``ceiling`` maps ids to their reference-ceiling runs (anything with ``.seeds`` (C,) and
+    ``.returns`` (C,), such as :func:`agents.evaluation.ceiling.load_ceiling`'s), or is the path
+    of a ceiling file. The default pairs shipped data with shipped data: the shipped ceiling
+    (:data:`agents.evaluation.ceiling.CEILING_FILE`, when it exists) when ``reference`` is the
+    shipped reference (None), and no ceiling with a reference of one's own; ``{}`` is no
+    ceiling. When it holds ``env_id``, the score also has the excess cost over the ceiling and the
+    normalised score with 100 = the ceiling, on the ceiling's seeds among ``seeds`` (at least
+    2 of them; the note says why not otherwise). Raises :class:`ReferenceDataError` for an id or
+    seeds the reference does not hold, or ceiling seeds it does not hold; ValueError for returns
+    that are not E finite numbers, or a ceiling return that is not below 0."""
+    runs = _ceiling_runs(ceiling, reference)
     data = reference if isinstance(reference, dict) else load_reference(reference)
     entry = _reference_entry(data, env_id)
     chosen = _held_out_seeds(entry, env_id, None, seeds)
@@ -271,17 +388,8 @@ def score_returns(
             )
         else:
             note = f"0 = {zero}, 100 = {anchor}"
-            score = float(normalised_scores(values, zero_values, anchor_values).mean())
-            bootstrap = data["score_bootstrap"]
-            interval = score_interval(
-                values,
-                zero_values,
-                anchor_values,
-                reps=bootstrap["reps"],
-                seed=bootstrap["seed"],
-                confidence=data["confidence"],
-            )
-            low, high = (None, None) if interval is None else interval
+            score, low, high = _score_of(values, zero_values, anchor_values, data)
+    ceiling_fields = _ceiling_statistics(values, chosen, entry, env_id, runs, data)
     ended = None if terminated is None else np.asarray(terminated, dtype=bool)
     if ended is not None and ended.shape != values.shape:
         raise ValueError(f"terminated must be {values.size} flags, one per seed; got shape {ended.shape}")
@@ -303,7 +411,63 @@ def score_returns(
         normalised_score_high=high,
         score_note=note,
         reference_commit=run_of(data, env_id)["commit"],
+        **ceiling_fields,
     )
+
+
+def _ceiling_runs(
+    ceiling: Mapping[str, Any] | str | Path | None, reference: dict[str, Any] | str | Path | None
+) -> Mapping[str, Any]:
+    """The ceiling runs per id that ``ceiling`` names (see :func:`score_returns`)."""
+    if ceiling is None:
+        return load_ceiling() if reference is None and CEILING_FILE.is_file() else {}
+    if isinstance(ceiling, (str, Path)):
+        return load_ceiling(ceiling)
+    return ceiling
+
+
+def _ceiling_statistics(
+    values: np.ndarray,
+    chosen: list[int],
+    entry: dict[str, Any],
+    env_id: str,
+    ceiling: Mapping[str, Any] | None,
+    data: dict[str, Any],
+) -> dict[str, Any]:
+    """The :class:`Score` fields of the ceiling (``ceiling_*``) for ``values`` (E,) on the seeds
+    ``chosen`` (E,) of ``env_id``: on the ceiling's seeds among ``chosen``, in its order."""
+    if ceiling is None or env_id not in ceiling:
+        return {"ceiling_note": f"not available: no ceiling data for {env_id}"}
+    seeds, ceiling_values = _ceiling_returns(ceiling[env_id], env_id)
+    ceiling_rows(entry, env_id, seeds)  # the ceiling's seeds are the benchmark's, or a clear error
+    position = {seed: k for k, seed in enumerate(chosen)}
+    shared = [k for k, seed in enumerate(seeds.tolist()) if int(seed) in position]
+    if len(shared) < 2:
+        return {
+            "ceiling_note": (
+                f"not available: {len(shared)} of the ceiling's {seeds.size} seeds ({int(seeds[0])}..{int(seeds[-1])}) "
+                "are among the scored seeds; an interval needs 2"
+            )
+        }
+    own = values[[position[int(seeds[k])] for k in shared]]
+    on_ceiling = ceiling_values[shared]
+    zero_values = np.asarray(entry["controllers"][data["zero"]]["returns"], dtype=np.float64)[
+        ceiling_rows(entry, env_id, seeds[shared])
+    ]
+    fields: dict[str, Any] = {
+        "ceiling_seeds": tuple(int(seeds[k]) for k in shared),
+        "ceiling_excess": excess_cost(own, on_ceiling, data["confidence"]),
+        "ceiling_note": f"{len(shared)} ceiling seeds",
+    }
+    if on_ceiling.mean() > zero_values.mean():
+        score, low, high = _score_of(own, zero_values, on_ceiling, data)
+        fields.update(ceiling_score=score, ceiling_score_low=low, ceiling_score_high=high)
+    else:
+        fields["ceiling_note"] += (
+            f"; no normalised score: the ceiling's mean return ({on_ceiling.mean():.4g}) is not above "
+            f"{data['zero']}'s ({zero_values.mean():.4g}) on these seeds"
+        )
+    return fields
 
 
 class _CallablePolicy:
@@ -363,6 +527,7 @@ def score_policy(
     name: str | None = None,
     reference: dict[str, Any] | str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
+    ceiling: Mapping[str, Any] | str | Path | None = None,
 ) -> Score:
     """Run ``policy`` on ``env_id``'s held-out episodes and score it as the benchmark does.
 
@@ -386,17 +551,21 @@ def score_policy(
         reference: the reference scores (a dict from :func:`load_reference`, or a path; default:
             the shipped :data:`REFERENCE_FILE`).
         progress: optional ``progress(steps_done, steps_total)``, called after each step.
+        ceiling: the reference ceiling's runs per id, or a ceiling file (see
+            :func:`score_returns`); default: the shipped ceiling with the shipped reference.
 
     Returns:
         the :class:`Score`: mean return with its 95 % t interval, the paired difference against
         the id's best scripted baseline, and the normalised score (0 = passive, 100 = mpc) with
-        its 95 % paired bootstrap interval.
+        its 95 % paired bootstrap interval; with ceiling data for the id, also the excess cost
+        over the ceiling and the normalised score with 100 = the ceiling, on its seeds.
 
     Raises:
         ReferenceDataError: an id, ``episodes`` or ``seeds`` that the reference does not hold.
         TypeError: ``policy`` is none of the above.
         ValueError: the policy's actions have the wrong shape (or other errors of the rollout).
     """
+    runs = _ceiling_runs(ceiling, reference)  # read before anything runs, as the reference is
     data = reference if isinstance(reference, dict) else load_reference(reference)
     entry = _reference_entry(data, env_id)
     chosen = _held_out_seeds(entry, env_id, episodes, seeds)  # checked before anything runs
@@ -404,7 +573,9 @@ def score_policy(
     controller, label = _controller(policy, env_id, name, env_kwargs)
     record = rollout(controller, env_id, chosen, name=label, env_kwargs=env_kwargs, progress=progress)
     returns = record.rewards.sum(axis=1)
-    return score_returns(returns, env_id, chosen, name=label, terminated=record.terminated, reference=data)
+    return score_returns(
+        returns, env_id, chosen, name=label, terminated=record.terminated, reference=data, ceiling=runs
+    )
 
 
 # ---------------------------------------------------------------------------------------- the reference data

@@ -310,7 +310,7 @@ def aggregate_excess_costs(
         def statistics(drawn: np.ndarray, costs: np.ndarray = costs) -> np.ndarray:
             """IQM and mean over ids of the per-id mean excess costs of the episodes ``drawn`` ((E, ids) indices)."""
             per_id_means = costs[drawn.astype(np.intp), np.arange(costs.shape[1])].mean(axis=0)[None, :]  # (1, ids)
-            return np.array([metrics.aggregate_iqm(per_id_means), metrics.aggregate_mean(per_id_means)])
+            return np.array([_iqm(per_id_means), metrics.aggregate_mean(per_id_means)])
 
         (iqm, mean), (iqm_low, iqm_high, mean_low, mean_high) = _stratified_bootstrap(
             name, costs.shape[0], len(ids), statistics, reps, seed, confidence
@@ -397,7 +397,7 @@ def aggregate_scores(
             if not np.all(denominator > 0):
                 return np.array([math.nan, math.nan])
             per_id_scores = (100.0 * gain[picks, columns].mean(axis=0) / denominator)[None, :]  # (1 run, ids)
-            return np.array([metrics.aggregate_iqm(per_id_scores), metrics.aggregate_mean(per_id_scores)])
+            return np.array([_iqm(per_id_scores), metrics.aggregate_mean(per_id_scores)])
 
         (iqm, mean), (iqm_low, iqm_high, mean_low, mean_high) = _stratified_bootstrap(
             name, gain.shape[0], len(ids), statistics, reps, seed, confidence
@@ -414,6 +414,17 @@ def aggregate_scores(
             "episodes": int(gain.shape[0]),
         }
     return results
+
+
+def _iqm(scores: np.ndarray) -> float:
+    """:func:`rliable.metrics.aggregate_iqm` of ``scores`` (runs, ids), to the bit: the mean of the
+    middle half of its values, scipy's 25 % trimmed mean, with scipy's operations. Written out
+    because the bootstrap calls it once per replication, and scipy's argument-checking wrapper
+    costs about 0.7 ms a call (35 s a row at 50 000 replications); the numbers are the same
+    (a test compares them)."""
+    values = scores.ravel()
+    cut = int(0.25 * values.size)
+    return float(np.mean(np.partition(values, (cut, values.size - cut - 1))[cut : values.size - cut]))
 
 
 def _stratified_bootstrap(

@@ -38,14 +38,16 @@ PARSERS = {name: module.build_parser for name, module in MODULES.items()}
 
 #: The function each command's ``main`` hands its checked settings to, in the command's module: the
 #: work (training, rollouts, files), which the fuzzing replaces by a stand-in. A new command needs an
-#: entry here (a test fails until it has one).
-WORK = {
+#: entry here (a test fails until it has one). A command with several kinds of work names a
+#: function for each (``scoring --ceiling`` prints a table instead of writing a file).
+WORK: dict[str, str | tuple[str, ...]] = {
     "ars": "train_ars",
     "benchmark": "benchmark",
     "ceiling": "run_ceiling",
     "compare": "compare",
     "convert": "convert",
-    "scoring": "write_reference",
+    "dagger": "train_dagger",
+    "scoring": ("write_reference", "ceiling_report"),
     "ship": "ship",
     "train": "train",
     "train_rllib": "train_rllib",
@@ -189,7 +191,18 @@ def test_a_count_that_becomes_a_vector_env_is_bounded_by_the_largest_one(command
 
 
 #: The settings that are paths a command reads or writes.
-PATH_DESTS = {"out", "resume", "runs", "source", "destination", "hyperparams", "benchmark_json", "file"}
+PATH_DESTS = {
+    "out",
+    "resume",
+    "runs",
+    "source",
+    "destination",
+    "hyperparams",
+    "benchmark_json",
+    "file",
+    "ceiling_file",
+    "reference_file",
+}
 
 
 @pytest.mark.parametrize("command", sorted(PARSERS))
@@ -234,7 +247,8 @@ def test_every_command_is_fuzzed() -> None:
     for name in COMMANDS:
         module = MODULES[name]
         assert name in WORK, f"agents.{name} has no entry in WORK: name the function its main() hands the work to"
-        assert callable(getattr(module, WORK[name], None)), f"agents.{name} has no {WORK[name]}"
+        for work in _works(name):
+            assert callable(getattr(module, work, None)), f"agents.{name} has no {work}"
         errors = getattr(module, "ERRORS", None)
         assert isinstance(errors, tuple) and errors, f"agents.{name} has no ERRORS tuple of its refusals"
         assert isinstance(module.build_parser(), argparse.ArgumentParser)
@@ -296,6 +310,12 @@ class ReachedTheWork(Exception):
     """The stand-in for a command's work: everything before it (the checks) passed."""
 
 
+def _works(command: str) -> tuple[str, ...]:
+    """The names of ``command``'s work functions (:data:`WORK`)."""
+    work = WORK[command]
+    return (work,) if isinstance(work, str) else work
+
+
 def _reach_the_work(*args: Any, **kwargs: Any) -> None:
     raise ReachedTheWork
 
@@ -318,7 +338,8 @@ def test_any_command_line_reaches_the_work_or_is_refused_by_name(command: str, d
         contextlib.redirect_stderr(stderr),
         contextlib.redirect_stdout(stdout),
     ):
-        patch.setattr(module, WORK[command], _reach_the_work)
+        for work in _works(command):
+            patch.setattr(module, work, _reach_the_work)
         patch.chdir(scratch)  # relative paths among the values land in a scratch directory
         try:
             module.main(tokens)
