@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -365,6 +365,8 @@ class CostLowerBound:
             less what its last step's vibration term can give back); ``bounds = min(full_episode,
             failure)``.
         initial_energy: (S,) J, the vibration energy at the reset (exact rigid split), ``E(0)``.
+        optimisation_gap: (S,) reward units: how much higher the propellant-aware bound could
+            still be, had its convex minimisation been run to the end (its duality gap).
         times: (N + 1,) s, ``t_k = k * control_interval``, k = 0..N.
         energy: (S, N + 1) J, the envelope ``E_lb(t_k)`` under which no controller can bring the
             vibration energy, or None when not asked for (``return_energy=False``).
@@ -385,6 +387,7 @@ class CostLowerBound:
     full_episode: np.ndarray
     failure: np.ndarray
     initial_energy: np.ndarray
+    optimisation_gap: np.ndarray
     times: np.ndarray
     energy: np.ndarray | None
     max_episode_steps: int
@@ -439,7 +442,7 @@ def _check_task_scope(task: DampingTask) -> None:
         )
 
 
-def _seed_constants(task: DampingTask) -> dict[str, float]:
+def _seed_constants(task: DampingTask) -> dict[str, Any]:
     """The constants of the bound for cluster 0 of ``task`` in its current (just reset) state:
     see :func:`cost_lower_bound`.  Raises :class:`CostBoundScopeError` outside the derivation."""
     sim = task.sim
@@ -538,6 +541,8 @@ def _seed_constants(task: DampingTask) -> dict[str, float]:
         "deviation_0": math.sqrt(float(np.einsum("i,ij->", masses, (arm - reference_arm) ** 2))),
         "angular_momentum_0": float(np.linalg.norm(momentum)),
         "thrust_beta": math.sqrt(float((largest**2 / masses[thrusters]).sum())),
+        "thrust_largest": largest,
+        "thrust_masses": masses[thrusters],
         "thrust_torque": float((largest * np.linalg.norm(reference_arm[thrusters], axis=1)).sum()),
         "bias_coefficient": math.sqrt(float(((bias**2).sum(axis=1) / masses).sum())),
         "damping_rate": alpha,
@@ -547,54 +552,207 @@ def _seed_constants(task: DampingTask) -> dict[str, float]:
     }
 
 
-def _envelope(constants: dict[str, float], times: np.ndarray, substeps: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(E_lb(t_k), deviation bound Delta(t_k))`` at ``times`` (N + 1,) s for one seed: the
-    envelope of :func:`cost_lower_bound`, integrated over ``substeps`` pieces per interval with
-    each piece's coefficients at their largest (they grow with time)."""
+def _rotation_terms(constants: dict[str, Any]) -> Callable[[float], tuple[float, float]]:
+    """``t -> (kappa(t), g(t))``: the rigid rotation's exchange with the vibration at time t s,
+    bounded for any controller: ``kappa = |omega|^2 |r|_m`` (N/sqrt(kg), added to the thrust's
+    coefficient beta: the centrifugal power on the deformation is at most ``kappa sqrt(2 T_rel)``)
+    and ``g = |omega| q Delta`` (W, the bias torque's power on the rotation); both grow with t,
+    and are inf once the deviation bound reaches the nominal shape's smallest moment of inertia
+    (the bound then claims nothing more)."""
     k = constants
     beta, q, alpha = k["thrust_beta"], k["bias_coefficient"], k["damping_rate"]
-    dissipation = 2.0 * alpha + 2.0 * k["axial_rate"]
-    floor = k["potential_floor"]
-    total_0 = max(k["initial_total"] - floor, 0.0)  # Y(0) = E''(0) - U_min
     root_inertia = math.sqrt(k["inertia_min"])
 
-    def deviation(t: float) -> float:
-        # Delta' <= sqrt(2 T_w) <= sqrt(2 Y), sqrt(Y(t)) <= sqrt(Y(0)) + beta t / sqrt(2).
-        return k["deviation_0"] + math.sqrt(2.0 * total_0) * t + 0.5 * beta * t * t
-
-    def coefficients(t: float) -> tuple[float, float]:
-        spread = deviation(t)
+    def terms(t: float) -> tuple[float, float]:
+        # |L(t)| <= |L(0)| + int (thrust and bias torques) (damping only shrinks it), and
+        # lambda_min(I(t)) >= (sqrt(lambda_min(I_nominal)) - Delta(t))^2.
+        spread = _deviation_bound(k, t)
         decay = t if alpha == 0.0 else -math.expm1(-alpha * t) / alpha
         momentum = k["angular_momentum_0"] + (k["thrust_torque"] + (beta + q) * spread) * decay
         gap = root_inertia - spread
         if not gap > 0.0:
             return math.inf, math.inf
         omega = momentum / (gap * gap)
-        thrust = math.sqrt(2.0) * (beta + omega * omega * (k["arm_norm"] + spread))
-        return thrust, omega * q * spread
+        return omega * omega * (k["arm_norm"] + spread), omega * q * spread
 
+    return terms
+
+
+def _deviation_bound(constants: dict[str, Any], t: float) -> float:
+    """Delta(t) >= sqrt(sum_i m_i |d_i(t)|^2), kg^(1/2) m: the mass-weighted deviation from the
+    nominal shape about the centre of mass, for any controller (``Delta' <= sqrt(2 T_w) <=
+    sqrt(2 Y)`` with ``sqrt(Y(t)) <= sqrt(Y(0)) + beta t / sqrt(2)``)."""
+    k = constants
+    total_0 = max(k["initial_total"] - k["potential_floor"], 0.0)
+    return k["deviation_0"] + math.sqrt(2.0 * total_0) * t + 0.5 * k["thrust_beta"] * t * t
+
+
+def _envelope(
+    constants: dict[str, Any], times: np.ndarray, substeps: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(E_lb(t_k), Delta(t_k), rotation_drain_k, exchange_k)`` at ``times`` (N + 1,) s for one
+    seed: the full-thrust envelope of :func:`cost_lower_bound` (J), the deviation bound, and for
+    the propellant-aware bound the rotation's drain of ``sqrt(y)`` at full damping,
+    ``int_0^t exp(-a (t - s) / 2) kappa(s) / sqrt(2) ds`` (sqrt(J)), and ``int_0^t g`` (J).
+    Integrated over ``substeps`` pieces per interval with each piece's coefficients at their
+    largest (they grow with time)."""
+    k = constants
+    beta = k["thrust_beta"]
+    dissipation = 2.0 * k["damping_rate"] + 2.0 * k["axial_rate"]
+    floor = k["potential_floor"]
+    terms = _rotation_terms(k)
     energy = np.empty(times.size)
-    spreads = np.array([deviation(float(t)) for t in times])
+    drains = np.zeros(times.size)
+    exchanges = np.zeros(times.size)
+    spreads = np.array([_deviation_bound(k, float(t)) for t in times])
     y = max(k["initial_energy"] - floor, 0.0)
     energy[0] = floor + y
+    drain = exchange = 0.0
     for step in range(1, times.size):
         t0, t1 = float(times[step - 1]), float(times[step])
         h = (t1 - t0) / substeps
+        decay = math.exp(-0.5 * dissipation * h)
+        weight = h if dissipation == 0.0 else 2.0 * (1.0 - decay) / dissipation
         for piece in range(1, substeps + 1):
+            kappa, g = terms(t0 + piece * h)
+            drain = drain * decay + kappa * weight / math.sqrt(2.0)
+            exchange += g * h
             if y <= 0.0:
-                break
-            b, g = coefficients(t0 + piece * h)
+                continue
+            b = math.sqrt(2.0) * (beta + kappa)
             if not (math.isfinite(b) and math.isfinite(g)):
                 y = 0.0
-                break
+                continue
             root = math.sqrt(y)
             if dissipation > 0.0:
-                root = (root + b / dissipation) * math.exp(-0.5 * dissipation * h) - b / dissipation
+                root = (root + b / dissipation) * decay - b / dissipation
             else:
                 root -= 0.5 * b * h
             y = max(max(root, 0.0) ** 2 - g * h, 0.0)
         energy[step] = floor + y
-    return energy, spreads
+        drains[step], exchanges[step] = drain, exchange
+    return energy, spreads, drains, exchanges
+
+
+#: Thrusters up to which the thrust's efficiency per newton is bounded by the concave hull of all
+#: on/off subsets (2^k points); beyond, by ``min(beta, Phi / sqrt(m_min))``.
+_HULL_THRUSTERS = 12
+
+
+def _thrust_efficiency(largest: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Breakpoints ``(Phi, psi)`` of a concave, piecewise-linear psi(Phi) >= max{sqrt(sum_j
+    f_j^2 / m_j) : sum_j f_j = Phi, 0 <= f_j <= Fmax_j}: the largest thrust coefficient (N/sqrt(kg))
+    that a total thrust Phi (N, what the propellant term charges) can have.  The maximum of a
+    convex function over the box's slice lies below the upper concave hull of the box's vertices,
+    the on/off subsets of the thrusters."""
+    count = largest.size
+    beta = math.sqrt(float((largest**2 / masses).sum()))
+    total = float(largest.sum())
+    if count > _HULL_THRUSTERS:
+        knee = beta * math.sqrt(float(masses.min()))
+        return np.array([0.0, min(knee, total), total]), np.array(
+            [0.0, min(beta, total / math.sqrt(float(masses.min()))), beta]
+        )
+    subsets = (np.arange(2**count)[:, None] >> np.arange(count)[None, :]) & 1
+    phi = subsets @ largest
+    psi = np.sqrt(subsets @ (largest**2 / masses))
+    order = np.lexsort((-psi, phi))
+    hull: list[tuple[float, float]] = []
+    for x, y in zip(phi[order].tolist(), psi[order].tolist(), strict=True):
+        if hull and x == hull[-1][0]:
+            continue
+        while len(hull) >= 2:
+            (x1, y1), (x2, y2) = hull[-2], hull[-1]
+            if (y2 - y1) * (x - x1) <= (y - y1) * (x2 - x1):  # the middle point is not above the chord
+                hull.pop()
+            else:
+                break
+        hull.append((x, y))
+    xs, ys = (np.array(v) for v in zip(*hull, strict=True))
+    return xs, ys
+
+
+def _propellant_bound(
+    constants: dict[str, Any],
+    times: np.ndarray,
+    drains: np.ndarray,
+    exchanges: np.ndarray,
+    vibration_weight: float,
+    propellant_weight: float,
+    iterations: int,
+) -> tuple[float, float]:
+    """``(lower bound, gap)``: a lower bound on ``sum_k (w_v E(t_k) + w_p Phi_k dt)`` over the
+    episode's N steps for any controller, whose total thrust ``Phi_k`` (N) the propellant term
+    charges, and the duality gap left by the optimisation (how much tighter the exact minimum
+    could be).
+
+    Relaxation: ``r = sqrt(E - U_min)`` obeys ``r' >= -(psi(Phi) + kappa) / sqrt(2) - a r / 2``
+    (psi from :func:`_thrust_efficiency`), and ``E(t_k) >= U_min + max(max(l_k, 0)^2 - Gamma_k,
+    0)`` where ``l_k = exp(-a t_k / 2) r_0 - sum_i A_ki psi(Phi_i) / sqrt(2) - drain_k``
+    (``A_ki = int_step_i exp(-a (t_k - s) / 2) ds``) and ``Gamma_k = int_0^t_k g``: the cost is
+    then a convex function J(Phi) over the box [0, Phi_max]^N.  Projected gradient steps find a
+    good Phi-bar; ``J(Phi-bar) + min_box grad J . (Phi - Phi-bar)`` (the Frank-Wolfe gap) is a
+    lower bound on J's minimum whatever Phi-bar is.
+    """
+    k = constants
+    steps = times.size - 1
+    dt = float(times[1] - times[0])
+    dissipation = 2.0 * k["damping_rate"] + 2.0 * k["axial_rate"]
+    floor = k["potential_floor"]
+    xs, ys = _thrust_efficiency(k["thrust_largest"], k["thrust_masses"])
+    slopes = np.diff(ys) / np.diff(xs)
+    top = float(xs[-1])
+    decay = math.exp(-0.5 * dissipation * dt)
+    weight = dt if dissipation == 0.0 else 2.0 * (1.0 - decay) / dissipation
+    lags = np.arange(steps)[:, None] - np.arange(steps)[None, :]
+    influence = np.where(lags >= 0, weight * decay ** np.maximum(lags, 0), 0.0) / math.sqrt(2.0)  # A / sqrt(2)
+    finite = np.isfinite(drains[1:]) & np.isfinite(exchanges[1:])
+    r0 = math.sqrt(max(k["initial_energy"] - floor, 0.0))
+    free = np.where(finite, r0 * decay ** np.arange(1, steps + 1) - np.where(finite, drains[1:], 0.0), -math.inf)
+    gamma = np.where(finite, exchanges[1:], 0.0)
+    w_v, w_p = vibration_weight, propellant_weight * dt
+
+    def cost_and_gradient(phi: np.ndarray) -> tuple[float, np.ndarray]:
+        piece = np.clip(np.searchsorted(xs, phi, side="right") - 1, 0, slopes.size - 1)
+        psi = ys[piece] + slopes[piece] * (phi - xs[piece])
+        level = free - influence @ psi
+        excess = np.maximum(level, 0.0) ** 2 - gamma
+        live = (excess > 0.0) & np.isfinite(level)
+        vibration = np.where(live, excess, 0.0)
+        cost = float(w_v * (steps * floor + vibration.sum()) + w_p * phi.sum())
+        slope_of_cost = np.where(live, 2.0 * level, 0.0) * w_v
+        gradient = -(influence.T @ slope_of_cost) * slopes[piece] + w_p
+        return cost, gradient
+
+    def bound(phi: np.ndarray) -> tuple[float, float]:
+        cost, gradient = cost_and_gradient(phi)
+        gap = float(np.maximum(gradient * phi, gradient * (phi - top)).sum())  # max over the box of g.(phi - s)
+        return cost - max(gap, 0.0), max(gap, 0.0)
+
+    # Start from the best "full thrust for the first s steps, then none" (the shape of the optimum
+    # when thrust pays for itself early and not late), then improve by projected gradient steps.
+    switches = np.where(np.arange(steps + 1)[:, None] > np.arange(steps)[None, :], top, 0.0)  # (N + 1, N)
+    levels = free - (ys[-1] * (switches > 0)) @ influence.T
+    excess = np.maximum(levels, 0.0) ** 2 - gamma
+    costs = w_v * np.where((excess > 0.0) & np.isfinite(levels), excess, 0.0).sum(axis=1) + w_p * switches.sum(axis=1)
+    best_phi = switches[int(np.argmin(costs))]
+    best_cost = cost_and_gradient(best_phi)[0]
+    lower, gap = bound(best_phi)
+    phi, cost = best_phi, best_cost
+    step_size = top * top / max(abs(cost), 1e-12)
+    for _ in range(iterations):
+        gradient = cost_and_gradient(phi)[1]
+        trial = np.clip(phi - step_size * gradient, 0.0, top)
+        trial_cost = cost_and_gradient(trial)[0]
+        if trial_cost < cost:
+            phi, cost = trial, trial_cost
+            step_size *= 1.5
+            candidate, candidate_gap = bound(phi)
+            if candidate > lower:
+                lower, gap = candidate, candidate_gap
+        else:
+            step_size *= 0.5
+    return lower, gap
 
 
 def cost_lower_bound(
@@ -603,6 +761,7 @@ def cost_lower_bound(
     *,
     max_episode_steps: int | None = None,
     substeps: int = 16,
+    iterations: int = 50,
     return_energy: bool = False,
     options: Mapping[str, Any] | None = None,
     **env_kwargs: Any,
@@ -633,10 +792,18 @@ def cost_lower_bound(
 
     So ``dy/dt >= -b(t) sqrt(y) - a y - g(t)`` (``b = sqrt(2) (beta + |omega|^2 |r|_m)``, ``g =
     |omega| q Delta``), integrated piece by piece (exact in ``sqrt(y)`` for ``b``, ``a``; ``g``
-    subtracted), a lower bound by a comparison argument.  The cost of an episode that runs its
-    ``N`` steps is at least ``sum_k w_v E_lb(t_k)`` (propellant and slack terms are >= 0); one
-    that fails pays ``failure_penalty``, less at most what its last step's vibration term can
-    give back (a broken cable's energy leaves the reward's sum).
+    subtracted), a lower bound by a comparison argument: the envelope ``E_lb(t)``.
+
+    The cost of an episode that runs its ``N`` steps is at least ``sum_k w_v E_lb(t_k)``
+    (propellant and slack terms are >= 0), and, tighter, the minimum over every thrust schedule
+    of the vibration terms plus the propellant term that schedule pays: with a total thrust
+    ``Phi`` (N) the thrust coefficient is at most ``psi(Phi)``, the concave hull over the
+    thrusters' on/off subsets (Cauchy-Schwarz on the thrusters that fire), so removing energy
+    costs propellant.  That minimum is of a convex function of the per-step ``Phi_k``; projected
+    gradient steps and its Frank-Wolfe duality gap give a rigorous lower bound on it
+    (``optimisation_gap`` says how much was left).  An episode that fails pays
+    ``failure_penalty``, less at most what its last step's vibration term can give back (a
+    broken cable's energy leaves the reward's sum).
 
     Args:
         env: a registered id (made with ``gymnasium.make(env, **env_kwargs)``) or an env whose
@@ -646,6 +813,8 @@ def cost_lower_bound(
         max_episode_steps: N, the time limit in control steps; default the env's spec's.
         substeps: integration pieces per control interval (more: tighter, never looser than
             rigorous).
+        iterations: projected-gradient steps of the propellant-aware minimisation (more: tighter,
+            to within ``optimisation_gap``; any number gives a rigorous bound).
         return_energy: also return the envelope ``E_lb(t_k)`` (S, N + 1), J.
         options: reset options passed to every reset (an exact initial state, see the env's
             ``reset``); default None: each seed's random initial state.
@@ -657,7 +826,7 @@ def cost_lower_bound(
         CostBoundScopeError: a task outside the derivation: a turning frame, disturbances or thrust
             noise, ``cable_failure="continue"``, damping not proportional to mass (beads without
             damping beside damped satellites), a collinear nominal shape, the linearised elongation.
-        ValueError: bad ``seeds``, ``substeps`` or ``max_episode_steps``.
+        ValueError: bad ``seeds``, ``substeps``, ``iterations`` or ``max_episode_steps``.
     """
     import gymnasium as gym
 
@@ -687,6 +856,8 @@ def cost_lower_bound(
         raise ValueError(f"max_episode_steps must be a whole number >= 1; got {max_episode_steps!r}")
     if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or not 1 <= substeps <= 10_000:
         raise ValueError(f"substeps must be a whole number in [1, 10000]; got {substeps!r}")
+    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or not 0 <= iterations <= 100_000:
+        raise ValueError(f"iterations must be a whole number in [0, 100000]; got {iterations!r}")
     seed_array = np.asarray(seeds)
     if seed_array.ndim != 1 or seed_array.size == 0 or seed_array.dtype.kind not in "iu" or (seed_array < 0).any():
         raise ValueError(f"seeds must be a non-empty 1-d sequence of whole numbers >= 0; got {seeds!r:.80}")
@@ -696,7 +867,7 @@ def cost_lower_bound(
     dt = float(task.config.control_interval)
     times = dt * np.arange(steps + 1)
     weights = task.reward_weights
-    w_v, penalty = float(weights.vibration), float(weights.failure)
+    w_v, w_p, penalty = float(weights.vibration), float(weights.propellant), float(weights.failure)
     keys = (
         "thrust_coefficient",
         "dissipation_rate",
@@ -708,13 +879,15 @@ def cost_lower_bound(
         "potential_floor",
     )
     constants: dict[str, list[float]] = {key: [] for key in keys}
-    full, failure, initial, energies = [], [], [], []
+    full, failure, initial, energies, gaps = [], [], [], [], []
     for seed in seed_array.tolist():
         made.reset(seed=int(seed), options=None if options is None else dict(options))
         k = _seed_constants(task)
-        energy, spread = _envelope(k, times, int(substeps))
+        energy, spread, drains, exchanges = _envelope(k, times, int(substeps))
         vibration_terms = w_v * energy[1:]  # the steps' vibration costs, k = 1..N
-        full.append(float(vibration_terms.sum()))
+        with_propellant, gap = _propellant_bound(k, times, drains, exchanges, w_v, w_p, iterations)
+        full.append(max(float(vibration_terms.sum()), with_propellant))
+        gaps.append(gap)
         # A failure at step K costs the penalty plus the steps before it plus step K's vibration
         # term, which is >= min(0, w_v E_lb(t_K)), and after a cable break >= -w_v (V_nominal +
         # q Delta(t_K)) with Delta grown over one more interval by the unbalanced bias.
@@ -743,6 +916,7 @@ def cost_lower_bound(
         full_episode=full_array,
         failure=failure_array,
         initial_energy=np.array(initial),
+        optimisation_gap=np.array(gaps),
         times=times,
         energy=np.array(energies) if return_energy else None,
         max_episode_steps=steps,

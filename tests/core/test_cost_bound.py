@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import tether_gym as tg
-from tether_gym.analysis import CostBoundScopeError, cost_lower_bound
+from tether_gym.analysis import CostBoundScopeError, _thrust_efficiency, cost_lower_bound
 from tether_gym.envs import TetherClusterEnv
 from tether_gym.registration import DEFAULT_ENV_ID
 
@@ -79,7 +79,7 @@ _SPEED = 0.1
 _CORNERS = _SIDE * np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
 
 
-def _breathing_env(damping_rate: float) -> tuple[TetherClusterEnv, dict[str, np.ndarray]]:
+def _breathing_env(damping_rate: float, **task: Any) -> tuple[TetherClusterEnv, dict[str, np.ndarray]]:
     """The cube-diagonal tetrahedron without pretension (no bias), its satellites all moving
     inward at ``_SPEED``: the cables go slack, and only thrust and damping act."""
     cluster = tg.Cluster(
@@ -91,7 +91,8 @@ def _breathing_env(damping_rate: float) -> tuple[TetherClusterEnv, dict[str, np.
         damping=damping_rate * _MASS,
     )
     velocities = -_SPEED * _CORNERS / np.linalg.norm(_CORNERS, axis=1, keepdims=True)
-    return TetherClusterEnv(cluster=cluster, max_thrust=_THRUST), {"positions": _CORNERS, "velocities": velocities}
+    env = TetherClusterEnv(cluster=cluster, max_thrust=_THRUST, **task)
+    return env, {"positions": _CORNERS, "velocities": velocities}
 
 
 @pytest.mark.parametrize("damping_rate", [0.0, 0.2])
@@ -180,6 +181,50 @@ def test_cable_damping_enters_at_its_largest_rate() -> None:
     assert (simulated >= result.energy[0] - margin).all(), np.c_[result.times, simulated, result.energy[0]][:30]
 
 
+def test_thrust_efficiency_is_the_concave_hull_of_the_on_off_subsets() -> None:
+    """psi(Phi), the largest thrust coefficient a total thrust Phi can have, by hand: equal
+    thrusters give sqrt(j / m) Fmax at j Fmax; a light and a heavy one (1 and 4 kg, 1 N each) give
+    the hull of (0, 0), (1, 1) (the light one alone), (1, 0.5) and (2, sqrt(1.25))."""
+    xs, ys = _thrust_efficiency(np.full(4, 2.0), np.full(4, 10.0))
+    np.testing.assert_allclose(xs, 2.0 * np.arange(5))
+    np.testing.assert_allclose(ys, 2.0 * np.sqrt(np.arange(5) / 10.0))
+    xs, ys = _thrust_efficiency(np.array([1.0, 1.0]), np.array([4.0, 1.0]))
+    np.testing.assert_allclose(xs, [0.0, 1.0, 2.0])
+    np.testing.assert_allclose(ys, [0.0, 1.0, math.sqrt(1.25)])
+
+
+def test_propellant_term_raises_the_bound_and_thrust_schedules_pay_it() -> None:
+    """Removing energy takes thrust, and thrust costs propellant: the bound over every thrust
+    schedule is above the full-thrust envelope's vibration cost alone, equals it when propellant
+    is free, and no schedule of the breathing case (full thrust against the velocity for the first
+    s steps, then none) costs less than it."""
+    seeds = [10000, 10001]
+    free = cost_lower_bound(DEFAULT_ENV_ID, seeds, propellant_weight=0.0, return_energy=True)
+    assert free.energy is not None
+    np.testing.assert_allclose(free.full_episode, free.vibration_weight * free.energy[:, 1:].sum(axis=1), rtol=1e-12)
+    paid = cost_lower_bound(DEFAULT_ENV_ID, seeds, return_energy=True)
+    assert paid.energy is not None
+    assert (paid.full_episode > paid.vibration_weight * paid.energy[:, 1:].sum(axis=1) * 1.05).all()
+    assert (paid.optimisation_gap < 0.1 + 0.02 * paid.full_episode).all()
+
+    env, options = _breathing_env(0.0, vibration_weight=30.0)
+    steps = 40
+    result = cost_lower_bound(env, [0], max_episode_steps=steps, options=options)
+    costs = []
+    for switch in range(0, 36, 5):
+        env.reset(seed=0, options=options)
+        cost = 0.0
+        for step in range(steps):
+            velocity = env.unwrapped.task.sim.velocities[0]
+            action = -np.sign(velocity).ravel() if step < switch else np.zeros(12)
+            _, reward, terminated, _, _ = env.step(action.astype(np.float32))
+            assert not terminated
+            cost -= reward
+        costs.append(cost)
+    assert min(costs) >= result.bounds[0]
+    assert min(costs) <= 1.5 * result.bounds[0], (costs, result.bounds)
+
+
 def test_thruster_settings_enter_the_constants() -> None:
     """Thrusters on some satellites, per-thruster max_thrust and the magnitude limit change the
     thrust coefficient as the derivation says: b = sqrt(2 sum_thrusters Fmax_j^2 / m_j), Fmax =
@@ -243,6 +288,8 @@ def test_bad_arguments_are_refused() -> None:
         cost_lower_bound(DEFAULT_ENV_ID, [])
     with pytest.raises(ValueError, match="substeps"):
         cost_lower_bound(DEFAULT_ENV_ID, [0], substeps=0)
+    with pytest.raises(ValueError, match="iterations"):
+        cost_lower_bound(DEFAULT_ENV_ID, [0], iterations=-1)
     with pytest.raises(ValueError, match="max_episode_steps"):
         cost_lower_bound(DEFAULT_ENV_ID, [0], max_episode_steps=0)
     with pytest.raises(ValueError, match="env_kwargs"):
