@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agents.controllers.mpc import MPCSettings
 from agents.evaluation.ceiling import CEILING_FORMAT, CEILING_FORMAT_VERSION
@@ -82,6 +84,37 @@ def test_mismatched_or_bad_returns_are_refused() -> None:
         excess_cost([-2.0], [-1.0])
     with pytest.raises(ValueError, match="NaN or infinite"):
         excess_costs([-2.0, math.nan], [-1.0, -2.0])
+
+
+costs = st.floats(1e-3, 1e6, allow_nan=False, allow_infinity=False)
+factors = st.floats(0.25, 4.0, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(pairs=st.lists(st.tuples(costs, factors), min_size=2, max_size=20), scale=st.floats(1e-3, 1e3))
+def test_excess_cost_is_the_relative_cost_whatever_the_scale(pairs: list[tuple[float, float]], scale: float) -> None:
+    """A controller whose cost is k[e] times the ceiling's on seed e has excess cost k[e] - 1 there,
+    beats the ceiling where k[e] < 1, and keeps both when every return is scaled (a ratio of
+    costs has no units)."""
+    ceiling = np.array([-cost for cost, _ in pairs])
+    factor = np.array([k for _, k in pairs])
+    returns = factor * ceiling
+    assert excess_costs(returns, ceiling) == pytest.approx(factor - 1.0, rel=1e-12, abs=1e-12)
+    cost = excess_cost(returns, ceiling)
+    assert cost.beats == int(np.sum(returns > ceiling)) and cost.episodes == len(pairs)
+    assert cost.low <= cost.mean <= cost.high
+    assert excess_costs(scale * returns, scale * ceiling) == pytest.approx(factor - 1.0, rel=1e-9, abs=1e-12)
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(ceiling=st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=2, max_size=10), data=st.data())
+def test_any_ceiling_return_at_or_above_zero_is_refused_by_name(ceiling: list[float], data: st.DataObject) -> None:
+    returns = data.draw(st.lists(st.floats(-1e6, 0.0), min_size=len(ceiling), max_size=len(ceiling)))
+    if all(value < 0 for value in ceiling):
+        assert excess_costs(returns, ceiling).shape == (len(ceiling),)
+    else:
+        with pytest.raises(ValueError, match=r"ceiling's return .*recompute the ceiling data"):
+            excess_costs(returns, ceiling)
 
 
 # ---------------------------------------------------------------------------------------- over ids
