@@ -53,6 +53,8 @@ FAULTY = dict(
             dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1}, max_deviation=1.0),
         ),
         ("TetherSpinningTriangle-v0", 20, FAULTY),
+        # The hard track's ids on their own settings: passive satellites, a delay line across resets.
+        *[(env_id, 3, dict(max_episode_steps=40)) for env_id in tg.HARD_TRACK],
     ],
 )
 def test_vector_env_equals_single_envs_across_autoresets(env_id: str, num_envs: int, kwargs: dict) -> None:
