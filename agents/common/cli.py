@@ -350,6 +350,36 @@ def ars_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def dagger_parser() -> argparse.ArgumentParser:
+    """``agents.dagger``."""
+    parser = _parser("dagger")
+    add_env_argument(parser)
+    parser.add_argument(
+        "--seed",
+        type=int_at_least(0, 999),
+        default=1,
+        help="the run's seed, 0..999: it initialises the network and picks the training episodes (default 1)",
+    )
+    parser.add_argument(
+        "--out",
+        type=path_argument,
+        default="runs",
+        help="parent of the run directory <out>/<env>/dagger_seed<seed> (default runs)",
+    )
+    parser.add_argument(
+        "--hyperparams",
+        type=existing_file,
+        help=f"YAML file instead of {_hyperparams('dagger.yml')}, or a run's config.yml (reproduces it)",
+    )
+    parser.add_argument("--iterations", type=int_at_least(1), help="DAgger iterations, instead of the file's")
+    parser.add_argument(
+        "--episodes", type=int_at_least(1, MAX_NUM_ENVS), help="episodes per iteration, instead of the file's"
+    )
+    parser.add_argument("--force", action="store_true", help="replace an earlier run with the same --out, env and seed")
+    parser.add_argument("--no-progress", action="store_true", help="no progress lines (only the summary)")
+    return parser
+
+
 def _controllers_trust_epilog() -> str:
     return (
         "Trust: shipped models and the runs of the training commands are JSON + safetensors and load without "
@@ -524,6 +554,7 @@ _PARSERS: dict[str, Callable[[], argparse.ArgumentParser]] = {
     "convert": convert_parser,
     "train_rllib": train_rllib_parser,
     "ars": ars_parser,
+    "dagger": dagger_parser,
 }
 
 

@@ -8,7 +8,7 @@ run under either name.
 
 The console scripts of ``pyproject.toml`` (``tether-gym-train``, ``tether-gym-compare``,
 ``tether-gym-benchmark``, ``tether-gym-ship``, ``tether-gym-convert``, ``tether-gym-train-rllib``,
-``tether-gym-train-ars``)
+``tether-gym-train-ars``, ``tether-gym-train-dagger``)
 run their module exactly as ``python -m`` does, ``__main__`` block and its error handling
 included, so the two ways to run a command cannot drift apart. That block starts by parsing
 the command line with the command's parser (:func:`agents.common.cli.parse_before_imports`, which
@@ -35,6 +35,7 @@ __all__ = [
     "command_line",
     "compare",
     "convert",
+    "dagger",
     "description",
     "exit_on_error",
     "program",
@@ -52,6 +53,7 @@ SCRIPTS: dict[str, str] = {
     "convert": "tether-gym-convert",
     "train_rllib": "tether-gym-train-rllib",
     "ars": "tether-gym-train-ars",
+    "dagger": "tether-gym-train-dagger",
 }
 
 #: Command modules run only as ``python -m`` (no console script): ``scoring``, the maintainers'
@@ -155,3 +157,8 @@ def train_rllib() -> None:
 def ars() -> None:
     """``tether-gym-train-ars``: ``python -m tether_gym_agents.ars``."""
     _run("ars")
+
+
+def dagger() -> None:
+    """``tether-gym-train-dagger``: ``python -m tether_gym_agents.dagger``."""
+    _run("dagger")

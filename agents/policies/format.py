@@ -158,8 +158,9 @@ __all__ = [
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
 #: Training algorithms that are not SB3's, and the SB3 algorithm whose policy classes store their
-#: policies: ARS (:mod:`agents.ars`) trains the linear actor of PPO's ``ActorCriticPolicy``.
-POLICY_HOSTS: dict[str, type[BaseAlgorithm]] = {"ars": PPO}
+#: policies: ARS (:mod:`agents.ars`) trains the linear actor of PPO's ``ActorCriticPolicy``, and
+#: DAgger (:mod:`agents.dagger`) its MLP actor.
+POLICY_HOSTS: dict[str, type[BaseAlgorithm]] = {"ars": PPO, "dagger": PPO}
 #: The largest manifest read, bytes: one line of 67 bytes and a name per file of the directory.
 MAX_MANIFEST_BYTES = 64 * 2**10
 _SHA256_LINE = re.compile(r"^([0-9a-f]{64})  ([^/\\\x00]+)$")

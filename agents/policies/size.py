@@ -41,11 +41,21 @@ MAX_LAYERS = 16
 _DEFAULT_NET_ARCH: dict[str, Any] = {
     "ppo": {"pi": [64, 64], "vf": [64, 64]},
     "ars": {"pi": [64, 64], "vf": [64, 64]},
+    "dagger": {"pi": [64, 64], "vf": [64, 64]},
     "sac": [256, 256],
     "td3": [400, 300],
 }
 #: The keys a dict ``net_arch`` may have, by the algorithm's policy family.
-_NET_ARCH_KEYS = {"ppo": ("pi", "vf"), "ars": ("pi", "vf"), "sac": ("pi", "qf"), "td3": ("pi", "qf")}
+_NET_ARCH_KEYS = {
+    "ppo": ("pi", "vf"),
+    "ars": ("pi", "vf"),
+    "dagger": ("pi", "vf"),
+    "sac": ("pi", "qf"),
+    "td3": ("pi", "qf"),
+}
+#: The algorithms whose policy is SB3's ``ActorCriticPolicy`` (PPO's, and the trainers that store
+#: theirs in it: ARS and DAgger).
+_ACTOR_CRITIC = ("ppo", "ars", "dagger")
 
 
 def _mlp(inputs: int, hidden: list[int], outputs: int | None) -> int:
@@ -71,7 +81,7 @@ def _net_arch(algo: str, value: Any, where: str) -> tuple[list[int], list[int]]:
     """The actor's and the critic's hidden layers of ``net_arch`` as SB3 reads it."""
     if value is None:
         value = _DEFAULT_NET_ARCH[algo]
-    if isinstance(value, list) and len(value) == 1 and isinstance(value[0], dict) and algo in ("ppo", "ars"):
+    if isinstance(value, list) and len(value) == 1 and isinstance(value[0], dict) and algo in _ACTOR_CRITIC:
         value = value[0]  # SB3 < 1.8's form, which SB3 still accepts for actor-critic policies
     keys = _NET_ARCH_KEYS[algo]
     if isinstance(value, dict):
@@ -99,7 +109,7 @@ def parameter_count(
     algo: str, policy_kwargs: Mapping[str, Any], observation_size: int, action_size: int, where: str
 ) -> int:
     """The number of parameters (values of every tensor of its ``state_dict``) of the ``MlpPolicy``
-    of ``algo`` (``ppo``, ``ars``, ``sac``, ``td3``) that ``policy_kwargs`` (as ``policy.json``
+    of ``algo`` (``ppo``, ``ars``, ``dagger``, ``sac``, ``td3``) that ``policy_kwargs`` (as ``policy.json``
     stores them) describe, for flat observations of ``observation_size`` and actions of
     ``action_size`` values; a PolicyFormatError naming ``where`` for a malformed ``net_arch``,
     one deeper than :data:`MAX_LAYERS`, or a count above :data:`MAX_POLICY_PARAMETERS`."""
@@ -108,7 +118,7 @@ def parameter_count(
     actor, critic = _net_arch(algo, policy_kwargs.get("net_arch"), where)
     use_sde = _flag(policy_kwargs, "use_sde", False, where)
     full_std = _flag(policy_kwargs, "full_std", True, where)
-    if algo in ("ppo", "ars"):
+    if algo in _ACTOR_CRITIC:
         latent_pi = actor[-1] if actor else observation_size
         latent_vf = critic[-1] if critic else observation_size
         std = latent_pi * (action_size if full_std else 1) if use_sde else action_size
