@@ -86,8 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     ceiling.add_argument(
         "--bootstrap-reps",
         type=cli.int_at_least(100),
-        help="bootstrap replications of the aggregate over ids (default: the reference's, 50000; about 10 s per "
-        "controller on one core; with --ceiling)",
+        help="bootstrap replications of the aggregate over ids (default: the reference's, 50000: about 3 s of one "
+        "core per controller and statistic; with --ceiling)",
     )
     return parser
 
