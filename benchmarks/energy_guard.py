@@ -141,10 +141,10 @@ def main() -> None:
     snapping_pairs(count, seconds)
     modes = ("random", "saturated", "random disturbed", "saturated disturbed")
     for factor in (tg.simulator.DEFAULT_SAFETY_FACTOR, MAX_STABLE_SAFETY_FACTOR):
-        print(f"(b) the eight ids at safety factor {factor:g}, {count} envs x {steps} steps")
+        print(f"(b) the {len(ENV_IDS)} ids at safety factor {factor:g}, {count} envs x {steps} steps")
         worst = env_ids(count, steps, factor, modes)
         print(f"    largest relative residual at {factor:g}: {worst:.4f}")
-    print(f"(c) the eight ids at safety factor 1.0 (opt-in), {count} envs x {steps} steps")
+    print(f"(c) the {len(ENV_IDS)} ids at safety factor 1.0 (opt-in), {count} envs x {steps} steps")
     env_ids(count, steps, 1.0, ("random",))
 
 
