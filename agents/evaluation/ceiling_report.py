@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .scoring import ReferenceDataError, ceiling_rows
+from .scoring import ReferenceDataError, ceiling_rows, ceiling_seeds_and_returns
 from .stats import (
     ExcessCost,
     aggregate_excess_costs,
@@ -129,18 +129,8 @@ class CeilingTable:
     bootstrap: dict[str, int]
 
 
-def _run_parts(run: Any, env_id: str) -> tuple[np.ndarray, np.ndarray]:
-    seeds, returns = np.asarray(getattr(run, "seeds", None)), np.asarray(getattr(run, "returns", None))
-    if seeds.ndim != 1 or returns.shape != seeds.shape:
-        raise ReferenceDataError(
-            f"the ceiling data of {env_id} need one return per seed; got seeds of shape {seeds.shape} and returns "
-            f"of shape {returns.shape}: recompute them with python -m agents.ceiling"
-        )
-    return seeds, returns.astype(np.float64)
-
-
 def _id_table(env_id: str, entry: dict[str, Any], run: Any, reference: dict[str, Any]) -> CeilingId:
-    seeds, ceiling_returns = _run_parts(run, env_id)
+    seeds, ceiling_returns = ceiling_seeds_and_returns(run, env_id)
     rows_of_seeds = ceiling_rows(entry, env_id, seeds)
     controllers = entry["controllers"]
     zero = reference["zero"]

@@ -84,6 +84,7 @@ __all__ = [
     "ReferenceDataError",
     "Score",
     "ceiling_rows",
+    "ceiling_seeds_and_returns",
     "load_reference",
     "machine_description",
     "merge_reference",
@@ -288,7 +289,7 @@ def ceiling_rows(entry: dict[str, Any], env_id: str, ceiling_seeds: Any) -> np.n
     return np.array([index[seed] for seed in chosen], dtype=np.intp)
 
 
-def _ceiling_returns(run: Any, env_id: str) -> tuple[np.ndarray, np.ndarray]:
+def ceiling_seeds_and_returns(run: Any, env_id: str) -> tuple[np.ndarray, np.ndarray]:
     """``run``'s (E,) seeds and (E,) returns (anything with ``.seeds`` and ``.returns``, such
     as a ceiling run of :func:`agents.evaluation.ceiling.load_ceiling`), checked to pair."""
     seeds, returns = np.asarray(getattr(run, "seeds", None)), np.asarray(getattr(run, "returns", None))
@@ -438,7 +439,7 @@ def _ceiling_statistics(
     ``chosen`` (E,) of ``env_id``: on the ceiling's seeds among ``chosen``, in its order."""
     if ceiling is None or env_id not in ceiling:
         return {"ceiling_note": f"not available: no ceiling data for {env_id}"}
-    seeds, ceiling_values = _ceiling_returns(ceiling[env_id], env_id)
+    seeds, ceiling_values = ceiling_seeds_and_returns(ceiling[env_id], env_id)
     ceiling_rows(entry, env_id, seeds)  # the ceiling's seeds are the benchmark's, or a clear error
     position = {seed: k for k, seed in enumerate(chosen)}
     shared = [k for k, seed in enumerate(seeds.tolist()) if int(seed) in position]
