@@ -58,6 +58,10 @@ SMALL_IDS = [
     "TetherChain-v0",
     "TetherSpinningTriangle-v0",
     "TetherRadialChain-v0",
+    # The hard track's: thrusters on some satellites only, or a delay line.
+    "TetherUnderactuatedTetrahedron-v0",
+    "TetherEndActuatedChain-v0",
+    "TetherDelayedTetrahedron-v0",
 ]
 
 #: Gymnasium re-raises a TypeError from an env's constructor with every keyword argument appended
@@ -605,6 +609,37 @@ def test_the_registered_ids_pass_their_own_checks(env_id: str) -> None:
     spec = gym.spec(env_id)
     cluster = tg.make_cluster(spec.kwargs["preset"])
     TaskConfig(**{k: v for k, v in spec.kwargs.items() if k != "preset"}).validate(cluster)
+
+
+@fuzz(40)
+@given(preset=st.sampled_from(["tetrahedron", "chain", "triangle"]), data=st.data())
+def test_commands_act_only_on_thrusters_and_only_after_their_delay(preset: str, data: st.DataObject) -> None:
+    """Whichever satellites carry thrusters and however late they act (the hard track's kinds of
+    id): a satellite without a thruster never gets thrust, and a command in flight reaches
+    nothing observed before it acts, ``thrust_delay`` intervals after it is given."""
+    satellites = tg.make_cluster(preset).num_satellites
+    thrusters = data.draw(
+        st.lists(st.integers(0, satellites - 1), min_size=1, max_size=satellites, unique=True), label="thrusters"
+    )
+    delay = data.draw(st.integers(0, 3), label="thrust_delay")
+    changed = data.draw(st.integers(0, 4), label="changed step")
+    seed = data.draw(st.integers(0, 2**32 - 1), label="seed")
+    passive = [i for i in range(satellites) if i not in thrusters]
+    rng = np.random.default_rng(seed)
+    # At least half the full scale per axis, so that flipping a command shows in float32.
+    actions = rng.choice([-1.0, 1.0], (changed + 1, 3 * len(thrusters))) * rng.uniform(0.5, 1.0, (changed + 1, 1))
+    actions = np.concatenate([actions, np.zeros((delay + 2, 3 * len(thrusters)))]).astype(np.float32)
+    runs = []
+    for flip in (False, True):
+        env = TetherClusterEnv(preset=preset, thrusters=thrusters, thrust_delay=delay)
+        observations = [env.reset(seed=seed)[0]]
+        for step, action in enumerate(actions):
+            obs, _, terminated, _, info = env.step(-action if flip and step == changed else action)
+            assert not terminated and np.all(info["thrust"][passive] == 0.0)
+            observations.append(obs)
+        runs.append(observations)
+    first_different = next(k for k, (a, b) in enumerate(zip(*runs, strict=True)) if not np.array_equal(a, b))
+    assert first_different == changed + delay + 1
 
 
 # ---------------------------------------------------------------------- task snapshots
