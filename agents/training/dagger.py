@@ -556,10 +556,11 @@ def train_dagger(
         assert student is not None
         all_observations = np.concatenate(observations)
         features = statistics.normalize_obs(all_observations).astype(np.float32)
+        all_targets = np.concatenate(targets)
         loss = fit_student(
             model.policy,
             features,
-            np.concatenate(targets),
+            all_targets,
             s.epochs,
             s.learning_rate,
             s.batch_size,
@@ -574,6 +575,8 @@ def train_dagger(
             beta=beta,
             states=int(len(all_observations)),
             loss=loss,
+            # The loss against the targets' own spread: the fraction of the correction not learnt.
+            target_variance=float(all_targets.var(axis=0).mean()),
             rollout_return=float(data.returns.mean()),
             difference_vs_law=versus_law.mean,
             difference_vs_law_low=versus_law.low,
@@ -590,7 +593,8 @@ def train_dagger(
             left = wall / (iteration + 1) * (s.iterations - iteration - 1)
             print(
                 f"iteration {iteration + 1}/{s.iterations} (beta {beta:.2f}): {s.episodes} episodes, rollout return "
-                f"{data.returns.mean():.2f}, {len(all_observations):,} states, loss {loss:.4g}; eval "
+                f"{data.returns.mean():.2f}, {len(all_observations):,} states, loss {loss:.4g} (targets' variance "
+                f"{entry['target_variance']:.4g}); eval "
                 f"{entry['mean_return']:.2f} vs {s.residual_on} {law_returns.mean():.2f}: {versus_law.mean:+.2f} "
                 f"[{versus_law.low:+.2f}, {versus_law.high:+.2f}]"
                 + (" (new best)" if new_best else "")
