@@ -63,6 +63,20 @@ class LocalController(Controller):
     (along its beads) is below its slack point; :meth:`act_local` then refuses, since the
     multi-agent env's slots are the tethers' first segments.
 
+    **Passive satellites** (ids with thrusters on some satellites only). The agents are the
+    thrusting satellites; a passive satellite has no law. A thrusting satellite keeps every cable
+    slot, including those to a passive neighbour, and applies its own half of the pair's force
+    there (the dashpot with the pair's reduced mass, the strut); the passive end's half is not
+    applied, so the pair's forces are no longer equal and opposite. Two alternatives were
+    measured on the tuning seeds 2000-2031 with the default gains (32 episodes, mean return,
+    underactuated tetrahedron / end-actuated chain): the thrusting end doing the whole pair's
+    work (its own mass in place of the reduced mass) gave -81.2 / -66.6 for
+    ``local_velocity_feedback`` against -77.1 / -70.8, and -69.0 / -57.7 for
+    ``local_tension_aware`` against -69.8 / -56.3, mixed and within a few percent; dropping the
+    slots to passive neighbours gave -90.8 / -104.1 and -97.0 / -104.1 (on the chain, passive's
+    return: no slot is left). So the laws are unchanged; their gains for those ids are in
+    ``hyperparams/laws.yml``.
+
     Attributes:
         graph: the agents and their cables (:class:`tether_gym.multiagent.engine.AgentGraph`).
         slack_point: (A, D) elongation below which each cable slot is slack, m (0 for padding).

@@ -1,5 +1,6 @@
 """The LQR baseline: designed on the slack cluster, never worse than passive, stable for every
-taut/slack pattern of the cables."""
+taut/slack pattern of the cables (on ids with passive satellites: wherever taut cables tie each
+passive satellite to a thruster, and never growing where they do not)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import tether_gym
 from agents.controllers.centralised import (
     LQRController,
     PassiveController,
+    controllable_subspace,
 )
 from agents.controllers.linear_model import LinearModel
 from agents.evaluation.rollout import rollout
@@ -54,6 +56,24 @@ def test_the_taut_model_design_is_worse_than_passive() -> None:
     passive, lqr, failures = paired_returns(env_id, taut)
     assert lqr.mean() < 2 * passive.mean() < 0
     assert failures > 0
+
+
+def passive_satellites(controller: LQRController) -> list[int]:
+    """The satellites without a thruster (none on a fully actuated id)."""
+    return sorted(set(range(controller.num_nodes)) - {int(node) for node in controller.thrusters})
+
+
+def tied_to_a_thruster(cluster: tether_gym.Cluster, thrusters: np.ndarray, taut: np.ndarray) -> bool:
+    """Whether the taut cables (``taut``: (m,) 0/1) link every satellite to a thrusting one."""
+    reached = {int(node) for node in thrusters}
+    grown = True
+    while grown:
+        grown = False
+        for c, (i, j) in enumerate(cluster.cables):
+            if taut[c] and (int(i) in reached) != (int(j) in reached):
+                reached |= {int(i), int(j)}
+                grown = True
+    return len(reached) == cluster.num_nodes
 
 
 def cable_blocks(cluster: tether_gym.Cluster) -> tuple[np.ndarray, np.ndarray]:
@@ -109,9 +129,19 @@ def test_closed_loop_is_stable_for_every_pattern_of_taut_and_slack_cables(env_id
     closed[:, :r, r:] = np.eye(r)
     closed[:, r:, :r] = -stiffness_of - feedback[:, :r]
     closed[:, r:, r:] = -damping_of - feedback[:, r:]
-    assert np.linalg.eigvals(closed).real.max() < 0
-    # The sampled loops of the two extremes.
-    for cables in ("taut", "slack"):
+    slowest = np.linalg.eigvals(closed).real.max(axis=1)  # (2^m,) 1/s
+    if not passive_satellites(controller):
+        assert slowest.max() < 0
+    else:
+        # A passive satellite whose cables are all slack (or tie it only to other passive ones)
+        # is a free mass no thruster reaches: it drifts, and in these inertial frames never grows.
+        tied = np.array([tied_to_a_thruster(cluster, controller.thrusters, pattern) for pattern in patterns])
+        assert tied.any() and not tied.all()
+        assert slowest[tied].max() < 0
+        assert slowest[~tied].max() < 1e-9
+        assert slowest[~tied].max() > -1e-9  # the free drift is there: a pole at 0
+    # The sampled loops of the two extremes (the slack one: on its controllable part).
+    for cables in ("taut", "slack") if not passive_satellites(controller) else ("taut",):
         assert controller.closed_loop_eigenvalues(continuous=True, cables=cables).real.max() < 0
         assert np.abs(controller.closed_loop_eigenvalues(continuous=False, cables=cables)).max() < 1
 
@@ -127,7 +157,19 @@ def added_stiffness_and_damping(controller: LQRController) -> tuple[np.ndarray, 
 @pytest.mark.parametrize("env_id", tether_gym.ENV_IDS)
 def test_slack_design_stiffens_where_the_taut_design_softens(env_id: str) -> None:
     env = gym.make(env_id)
-    stiffness, damping = added_stiffness_and_damping(LQRController(env))
+    controller = LQRController(env)
+    if passive_satellites(controller):
+        # The gain stiffens and damps the directions the thrusters reach, and nothing else.
+        model, r = controller.model, controller.model.num_modes
+        feedback = model.modal_input @ controller.gain
+        reached = scipy.linalg.orth(model.modal_input)  # (r, s)
+        assert reached.shape[1] < r
+        for part in (feedback[:, :r], feedback[:, r:]):
+            symmetric = 0.5 * (part + part.T)
+            assert np.linalg.eigvalsh(symmetric).min() > -1e-9 * np.abs(symmetric).max()
+            assert np.linalg.eigvalsh(reached.T @ symmetric @ reached).min() > 0
+        return
+    stiffness, damping = added_stiffness_and_damping(controller)
     assert stiffness.min() > 0 and damping.min() > 0
     taut_stiffness, _ = added_stiffness_and_damping(LQRController(env, design="taut"))
     assert taut_stiffness.min() < 0
@@ -153,8 +195,76 @@ def test_models_and_arguments() -> None:
         LQRController(env).closed_loop_eigenvalues(cables="half")
 
 
-@pytest.mark.parametrize("env_id", tether_gym.ENV_IDS)
+@pytest.mark.parametrize("env_id", [i for i in tether_gym.ENV_IDS if not tether_gym.ENV_IDS[i][2].get("thrusters")])
 def test_lqr_closed_loop_is_stable_for_the_linear_model(env_id: str) -> None:
     controller = LQRController(gym.make(env_id))
+    assert controller.controllable_basis.shape[1] == controller.model.Ad.shape[0]
     assert controller.closed_loop_eigenvalues(continuous=True).real.max() < 0
     assert np.abs(controller.closed_loop_eigenvalues(continuous=False)).max() < 1
+
+
+@pytest.mark.parametrize(
+    "env_id", ["TetherTetrahedron-v0", "TetherChain-v0", "TetherSpinningHub-v0", "TetherBeadedChain-v0"]
+)
+def test_fully_actuated_gain_is_the_full_riccati_design_bit_for_bit(env_id: str) -> None:
+    """The reduced design is taken only where the system is not controllable: on a fully actuated
+    id the gain is the one the full Riccati equation gives, to the bit."""
+    controller = LQRController(gym.make(env_id), thrust_weight=2.0)
+    model = controller.model
+    state_weight = model.energy_weight() / controller.task.energy_scale
+    input_weight = np.diag(2.0 / np.repeat(controller.max_thrust, 3) ** 2)
+    riccati = scipy.linalg.solve_discrete_are(model.Ad, model.Bd, state_weight, input_weight)
+    gain = np.linalg.solve(input_weight + model.Bd.T @ riccati @ model.Bd, model.Bd.T @ riccati @ model.Ad)
+    np.testing.assert_array_equal(controller.gain, gain)
+    np.testing.assert_array_equal(controller.riccati, riccati)
+
+
+UNDERACTUATED_IDS = [i for i in tether_gym.ENV_IDS if tether_gym.ENV_IDS[i][2].get("thrusters")]
+
+
+@pytest.mark.parametrize("env_id", UNDERACTUATED_IDS)
+def test_reduced_design_is_stable_on_its_controllable_part(env_id: str) -> None:
+    controller = LQRController(gym.make(env_id))
+    model, basis = controller.model, controller.controllable_basis
+    size = model.Ad.shape[0]
+    np.testing.assert_allclose(basis.T @ basis, np.eye(basis.shape[1]), atol=1e-12)
+    # The controllable part is the elastic motion of the thrusting satellites: the modal states
+    # of their displacements and velocities (the passive satellites at rest) span it exactly.
+    n = controller.num_nodes
+    moved = np.zeros((3 * n, 3 * controller.thrusters.size))
+    for k, node in enumerate(controller.thrusters):
+        moved[3 * node : 3 * node + 3, 3 * k : 3 * k + 3] = np.eye(3)
+    image = scipy.linalg.block_diag(model.projection @ moved, model.projection @ moved)  # (2r, 6k)
+    assert np.linalg.matrix_rank(image) == basis.shape[1] < size
+    complement = scipy.linalg.null_space(basis.T)  # (2r, 2r - s)
+    assert np.abs(complement.T @ image).max() < 1e-9
+    # Invariant, and no thruster reaches the rest.
+    assert np.abs(complement.T @ model.Ad @ basis).max() < 1e-12
+    assert np.abs(complement.T @ model.Bd).max() < 1e-12
+    # Stable on the controllable part, in both times.
+    closed = model.Ad - model.Bd @ controller.gain
+    assert np.abs(np.linalg.eigvals(basis.T @ closed @ basis)).max() < 1
+    assert np.linalg.eigvals(basis.T @ (model.A - model.B @ controller.gain) @ basis).real.max() < 0
+    # The rest keeps its open-loop poles: the passive satellites' free motion, a drift (0) and
+    # their own damping (-d/m), whatever the gain.
+    free = np.linalg.eigvals(complement.T @ closed @ complement)
+    np.testing.assert_allclose(
+        np.sort(np.abs(free)), np.sort(np.abs(np.linalg.eigvals(complement.T @ model.Ad @ complement))), atol=1e-12
+    )
+    rates = np.log(np.abs(free)) / model.interval  # 1/s
+    passive = passive_satellites(controller)
+    allowed = np.array([0.0] + [-controller.cluster.damping[i] / controller.masses[i] for i in passive])
+    assert np.abs(rates[:, None] - allowed[None]).min(axis=1).max() < 1e-9
+    assert np.abs(rates).min() < 1e-9
+
+
+def test_controllable_subspace_of_known_systems() -> None:
+    """A double integrator is controllable from its force; a second, unforced one is not."""
+    step = 0.1
+    ad = np.array([[1.0, step, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, step], [0, 0, 0, 1.0]])
+    bd = np.array([[step**2 / 2], [step], [0.0], [0.0]])
+    basis = controllable_subspace(ad, bd)
+    assert basis.shape == (4, 2)
+    np.testing.assert_allclose(np.abs(basis[2:]), 0.0, atol=1e-15)
+    assert controllable_subspace(ad, np.hstack([bd, [[0.0], [0.0], [step**2 / 2], [step]]])).shape == (4, 4)
+    assert controllable_subspace(ad, np.zeros((4, 1))).shape == (4, 0)
