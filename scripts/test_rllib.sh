@@ -6,5 +6,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=.venv-rllib bash scripts/install.sh "rllib,dev"
 .venv-rllib/bin/python -c "import gymnasium, ray; print(f'ray {ray.__version__}, gymnasium {gymnasium.__version__}')"
-.venv-rllib/bin/python -m pytest -m rllib tests/agents/training/test_rllib.py "$@"
+.venv-rllib/bin/python -m pytest -m rllib tests/agents/training/test_rllib.py tests/agents/evaluation/test_ceiling_ray.py "$@"
 .venv-rllib/bin/python -m pytest -m "not slow" tests/envs "$@"
