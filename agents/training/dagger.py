@@ -81,6 +81,7 @@ with needs_extra("train", "the DAgger trainer"):
 
 __all__ = [
     "DAGGER_SETTINGS_FILE",
+    "DATASET_FILE",
     "SEEDS_PER_RUN",
     "TRAINING_SEEDS_START",
     "DAggerSettings",
@@ -97,6 +98,8 @@ __all__ = [
     "training_seeds",
 ]
 
+#: The labelled states of a run, in its directory: observations, targets and the iteration of each.
+DATASET_FILE = "dataset.npz"
 #: Per-id DAgger settings (plain YAML, nothing evaluated).
 DAGGER_SETTINGS_FILE = HYPERPARAMS_DIR / "dagger.yml"
 #: First training seed, and the seeds set aside per run (seed s: TRAINING_SEEDS_START + s *
@@ -614,6 +617,13 @@ def train_dagger(
     }
     log.finish(timesteps, best_iteration=best_iteration, compute=compute_record)
     save_student(run, model, env_id, s.residual_on, statistics, timesteps, provenance, extra_files=("config.yml",))
+    # The labelled states, for analysis and refits without rerunning the planner (plain arrays: no pickle).
+    np.savez_compressed(
+        run / DATASET_FILE,
+        observations=np.concatenate(observations),
+        targets=np.concatenate(targets),
+        iteration=np.concatenate([np.full(len(rows), k) for k, rows in enumerate(observations)]),
+    )
     if best_iteration < 0:  # never above the law: best/ is the law itself (a zero action head)
         with torch.no_grad():
             for parameter in model.policy.action_net.parameters():

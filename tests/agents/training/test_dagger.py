@@ -197,6 +197,9 @@ def test_a_run_aggregates_the_data_selects_on_the_evaluation_seeds_and_records_i
         compute["teacher_seconds_per_step"] / compute["network_single_seconds_per_step"]
     )
     assert read_metadata(run)["algo"] == "dagger"
+    with np.load(run / dagger.DATASET_FILE, allow_pickle=False) as data:
+        assert data["observations"].shape == (history[1]["states"], 30) and data["targets"].shape[1] == 12
+        assert np.bincount(data["iteration"]).tolist() == [2 * SHORT["max_episode_steps"]] * 2
 
 
 def test_selection_evaluates_on_the_evaluation_seeds_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
