@@ -8,6 +8,9 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import tether_gym
 from agents.controllers.centralised import TensionAwareController
@@ -138,3 +141,36 @@ def test_the_one_sided_strut_needs_its_tuned_gains() -> None:
     untuned = rollout(TensionAwareController(envs), env_id, SEEDS).rewards.sum(axis=1).mean()
     tuned = rollout(make_baseline("tension_aware", envs), env_id, SEEDS).rewards.sum(axis=1).mean()
     assert untuned < passive < tuned
+
+
+_names = st.sampled_from(
+    [*tether_gym.ENV_IDS, "TetherNowhere-v0", *BASELINES, "pid", "gain", "thrust_weight", "slack_gain", "design", "x"]
+)
+_values = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-3, 3),
+    st.floats(allow_nan=True),
+    st.text(max_size=5),
+    st.lists(st.integers(), max_size=2),
+)
+_laws_tables = st.recursive(_values, lambda inner: st.dictionaries(_names, inner, max_size=3), max_leaves=12)
+
+
+@pytest.mark.slow
+@given(table=_laws_tables)
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+def test_any_laws_file_is_read_or_refused_with_a_value_error(tmp_path: Path, table: object) -> None:
+    """Whatever the file holds, reading it either gives law -> arguments mappings of known laws
+    and arguments, or a ValueError that names the file: never another exception."""
+    file = tmp_path / "laws.yml"
+    file.write_text(yaml.safe_dump(table))
+    for env_id in HARD_TRACK[:1] + ("TetherTetrahedron-v0",):
+        try:
+            settings_of_id = load_law_settings(env_id, file)
+        except ValueError as error:
+            assert str(file) in str(error)
+            continue
+        for law, arguments in settings_of_id.items():
+            assert law in BASELINES and isinstance(arguments, dict)
+            assert all(isinstance(value, (int, float, str, type(None))) for value in arguments.values())

@@ -11,6 +11,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import scipy.stats
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import tether_gym
 from agents.controllers.centralised import (
@@ -268,3 +270,43 @@ def test_controllable_subspace_of_known_systems() -> None:
     np.testing.assert_allclose(np.abs(basis[2:]), 0.0, atol=1e-15)
     assert controllable_subspace(ad, np.hstack([bd, [[0.0], [0.0], [step**2 / 2], [step]]])).shape == (4, 4)
     assert controllable_subspace(ad, np.zeros((4, 1))).shape == (4, 0)
+
+
+@pytest.mark.slow
+@given(
+    env_id=st.sampled_from(
+        ["TetherTetrahedron-v0", "TetherTriangle-v0", "TetherChain-v0", "TetherSpinningTriangle-v0"]
+    ),
+    data=st.data(),
+    thrust_weight=st.floats(1e-2, 1e3),
+)
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_lqr_designs_a_stabilising_gain_for_any_set_of_thrusters(
+    env_id: str, data: st.DataObject, thrust_weight: float
+) -> None:
+    """The class of the defect: a Riccati design on a model no thruster fully reaches. For any
+    non-empty set of thrusting satellites the design succeeds, its gain is finite and it
+    stabilises the controllable part of the slack model."""
+    satellites = gym.make(env_id).unwrapped.task.cluster.num_satellites
+    thrusters = data.draw(
+        st.lists(st.integers(0, satellites - 1), min_size=1, max_size=satellites, unique=True).map(sorted)
+    )
+    controller = LQRController(gym.make(env_id, thrusters=tuple(thrusters)), thrust_weight=thrust_weight)
+    model, basis = controller.model, controller.controllable_basis
+    assert np.isfinite(controller.gain).all()
+    assert 0 < basis.shape[1] <= model.Ad.shape[0]
+    # The controllable part holds the elastic motion of the thrusting satellites, and in an
+    # inertial frame it is exactly that. (In a turning frame the frame terms, projected on the
+    # elastic modes, couple the satellites, and one thruster may reach more.)
+    moved = np.zeros((3 * controller.num_nodes, 3 * len(thrusters)))
+    for k, node in enumerate(thrusters):
+        moved[3 * node : 3 * node + 3, 3 * k : 3 * k + 3] = np.eye(3)
+    image = scipy.linalg.block_diag(model.projection @ moved, model.projection @ moved)
+    assert np.abs(image - basis @ (basis.T @ image)).max() < 1e-9 * np.abs(image).max()
+    cluster = controller.cluster
+    if not (np.any(frame_stiffness(cluster)) or np.any(gyroscopic_matrix(cluster))):
+        assert np.linalg.matrix_rank(image) == basis.shape[1]
+    if len(thrusters) == satellites:
+        assert basis.shape[1] == model.Ad.shape[0]
+    closed = basis.T @ (model.Ad - model.Bd @ controller.gain) @ basis
+    assert np.abs(np.linalg.eigvals(closed)).max() < 1
