@@ -39,7 +39,6 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
     "TetherBeadedTetrahedron-v0": ("beaded_tetrahedron", 300, {}),
     "TetherBeadedChain-v0": ("beaded_chain", 300, {}),
     "TetherUnderactuatedTetrahedron-v0": ("tetrahedron", 300, {"thrusters": (0, 1)}),
-    "TetherEndActuatedChain-v0": ("chain", 300, {"thrusters": (0, 4)}),
     "TetherDelayedTetrahedron-v0": ("tetrahedron", 300, {"thrust_delay": 2}),
 }
 
@@ -50,7 +49,6 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
 #: standard track. Every id here is an id of :data:`ENV_IDS`, in its order.
 HARD_TRACK: tuple[str, ...] = (
     "TetherUnderactuatedTetrahedron-v0",
-    "TetherEndActuatedChain-v0",
     "TetherDelayedTetrahedron-v0",
 )
 
@@ -229,18 +227,6 @@ ENV_DOCS: dict[str, EnvDoc] = {
             "damps each satellite where it stands leaves the passive pair to the cables; a controller has "
             "to move the thrusting pair so that the cables do the work, which is where the reference "
             "ceiling gains most over the scripted laws (see the benchmark page)."
-        ),
-        version_history=_HARD_TRACK_V0,
-    ),
-    "TetherEndActuatedChain-v0": EnvDoc(
-        summary="The chain with thrusters on its two end satellites only: a hard-track id.",
-        description=(
-            "The chain of satellites in a line, with thrusters on the first and the last satellite only, "
-            "as a formation steered from its ends. The inner satellites are passive: their lateral motion, "
-            "held only by the pretension of their two cables, reaches the ends only as a slow wave along "
-            "the line, and their axial motion only while the cables between are taut.\n\n"
-            "The laws that act on each satellite's own motion do little here; pulling the line straight "
-            "from its ends at the right moments is what damps the inner satellites."
         ),
         version_history=_HARD_TRACK_V0,
     ),

@@ -60,7 +60,6 @@ SMALL_IDS = [
     "TetherRadialChain-v0",
     # The hard track's: thrusters on some satellites only, or a delay line.
     "TetherUnderactuatedTetrahedron-v0",
-    "TetherEndActuatedChain-v0",
     "TetherDelayedTetrahedron-v0",
 ]
 
