@@ -113,9 +113,9 @@ class DAggerSettings:
     """Settings of :func:`train_dagger` (see the module docstring); a run's ``config.yml`` records
     them as its ``hyperparams``."""
 
-    residual_on: str = "local_tension_aware"
-    """The scripted law the student corrects (a name of :data:`agents.controllers.registry.BASELINES`):
-    the teacher's prior, so that the student learns the planner's correction to it."""
+    residual_on: str | None = None
+    """The scripted law the student corrects (a name of :data:`agents.controllers.registry.BASELINES`),
+    or None: the teacher's prior, so that the student learns the planner's correction to it."""
     iterations: int = 8
     """DAgger iterations (iteration 0 rolls out the teacher)."""
     episodes: int = 8
@@ -135,8 +135,11 @@ class DAggerSettings:
     """Evaluation episodes after each iteration (seeds 1 000 000 up)."""
 
     def __post_init__(self) -> None:
-        if self.residual_on not in BASELINES:
-            raise ValueError(f"dagger setting residual_on must be one of {sorted(BASELINES)}; got {self.residual_on!r}")
+        if self.residual_on is not None and self.residual_on not in BASELINES:
+            raise ValueError(
+                f"dagger setting residual_on must be one of {sorted(BASELINES)} or null (the teacher's prior); "
+                f"got {self.residual_on!r}"
+            )
         counts = {"iterations": (1, SEEDS_PER_RUN), "epochs": (1, 100_000), "batch_size": (1, 1_000_000)}
         # The episodes of an iteration and of an evaluation run as one vector env: at most MAX_NUM_ENVS;
         # an evaluation needs 2 episodes for its paired interval.
@@ -510,6 +513,14 @@ def train_dagger(
     teacher_settings = teacher if teacher is not None else load_ceiling_settings(env_id)
     if not isinstance(teacher_settings, MPCSettings):
         raise TypeError(f"teacher must be MPCSettings; got {type(teacher_settings).__name__}")
+    if s.residual_on is None:
+        if teacher_settings.prior == "none":
+            raise ValueError(
+                f"dagger setting residual_on is null (the teacher's prior), but {env_id}'s teacher plans without a "
+                "prior: name the law the student corrects"
+            )
+        s = dataclasses.replace(s, residual_on=teacher_settings.prior)
+    law_name: str = s.residual_on  # type: ignore[assignment]
     run = prepare_run_dir(out, env_id, "dagger", seed, force)
     if force:
         clear_earlier_run(run, "dagger", set())
@@ -530,7 +541,7 @@ def train_dagger(
 
     eval_seeds = evaluation_seeds(s.eval_episodes)
     by_name, bar = baseline_returns(env_id, eval_seeds, kwargs)
-    law_returns = by_name[s.residual_on]
+    law_returns = by_name[law_name]
     # A first "best" must beat the law the student starts near.
     log = EvaluationLog(env_id, eval_seeds, by_name, bar, started, best_mean=float(law_returns.mean()))
     if progress:
@@ -547,7 +558,7 @@ def train_dagger(
     for iteration in range(s.iterations):
         beta = s.beta(iteration)
         seeds = training_seeds(seed, iteration, s.episodes)
-        data = collect(env_id, seeds, teacher_settings, s.residual_on, student, beta, rng, kwargs)
+        data = collect(env_id, seeds, teacher_settings, law_name, student, beta, rng, kwargs)
         teacher_seconds += data.teacher_seconds
         teacher_steps += data.teacher_steps
         timesteps += len(data.observations)
@@ -555,7 +566,7 @@ def train_dagger(
         targets.append(data.targets)
         if statistics is None:  # fixed from the teacher's own states of iteration 0
             statistics = observation_statistics(data.observations)
-            student = _attached(student_controller(model, statistics, env_id, s.residual_on), env_id, kwargs)
+            student = _attached(student_controller(model, statistics, env_id, law_name), env_id, kwargs)
         assert student is not None
         all_observations = np.concatenate(observations)
         features = statistics.normalize_obs(all_observations).astype(np.float32)
@@ -587,9 +598,7 @@ def train_dagger(
         )
         if new_best:
             best_iteration = iteration
-            save_student(
-                run / "best", model, env_id, s.residual_on, statistics, timesteps, provenance, whole_directory=True
-            )
+            save_student(run / "best", model, env_id, law_name, statistics, timesteps, provenance, whole_directory=True)
         log.write(run / "best")
         if progress:
             wall = time.perf_counter() - started
@@ -598,7 +607,7 @@ def train_dagger(
                 f"iteration {iteration + 1}/{s.iterations} (beta {beta:.2f}): {s.episodes} episodes, rollout return "
                 f"{data.returns.mean():.2f}, {len(all_observations):,} states, loss {loss:.4g} (targets' variance "
                 f"{entry['target_variance']:.4g}); eval "
-                f"{entry['mean_return']:.2f} vs {s.residual_on} {law_returns.mean():.2f}: {versus_law.mean:+.2f} "
+                f"{entry['mean_return']:.2f} vs {law_name} {law_returns.mean():.2f}: {versus_law.mean:+.2f} "
                 f"[{versus_law.low:+.2f}, {versus_law.high:+.2f}]"
                 + (" (new best)" if new_best else "")
                 + f"; {wall / 60:.1f} min, about {left / 60:.1f} min left",
@@ -606,7 +615,7 @@ def train_dagger(
             )
     assert statistics is not None and student is not None
     sample = np.concatenate(observations)[:: max(1, timesteps // 320)][:320]
-    compute = measure_compute(student, _attached_law(s.residual_on, env_id, kwargs), sample, s.episodes)
+    compute = measure_compute(student, _attached_law(law_name, env_id, kwargs), sample, s.episodes)
     teacher_per_step = teacher_seconds / max(teacher_steps, 1)
     compute_record = {
         "teacher_seconds_per_step": teacher_per_step,
@@ -616,7 +625,7 @@ def train_dagger(
         "machine": machine_description(),
     }
     log.finish(timesteps, best_iteration=best_iteration, compute=compute_record)
-    save_student(run, model, env_id, s.residual_on, statistics, timesteps, provenance, extra_files=("config.yml",))
+    save_student(run, model, env_id, law_name, statistics, timesteps, provenance, extra_files=("config.yml",))
     # The labelled states, for analysis and refits without rerunning the planner (plain arrays: no pickle).
     np.savez_compressed(
         run / DATASET_FILE,
@@ -628,13 +637,13 @@ def train_dagger(
         with torch.no_grad():
             for parameter in model.policy.action_net.parameters():
                 parameter.zero_()
-        save_student(run / "best", model, env_id, s.residual_on, statistics, 0, provenance, whole_directory=True)
+        save_student(run / "best", model, env_id, law_name, statistics, 0, provenance, whole_directory=True)
     log.write(run / "best")
     last = log.history[-1]
     print(
         f"trained dagger on {env_id} for {s.iterations} iterations ({timesteps:,} labelled states) in "
         f"{log.finished['wall_time_s'] / 60:.1f} min; best evaluation {log.best_mean:.2f} at iteration "
-        f"{best_iteration} against {s.residual_on} {law_returns.mean():.2f} (last: {last['difference_vs_law']:+.2f} "
+        f"{best_iteration} against {law_name} {law_returns.mean():.2f} (last: {last['difference_vs_law']:+.2f} "
         f"[{last['difference_vs_law_low']:+.2f}, {last['difference_vs_law_high']:+.2f}]); compute per step: "
         f"planner {teacher_per_step * 1e3:.1f} ms (batch {s.episodes}), student {compute['student_single'] * 1e6:.0f} "
         f"us alone ({compute_record['speedup_student_single']:.0f}x), {compute['student_batched'] * 1e6:.0f} us "

@@ -41,7 +41,7 @@ from agents.training.dagger import (
 from agents.training.selection import EVAL_SEEDS_START
 
 ENV_ID = "TetherTetrahedron-v0"  # it has ceiling settings, so train_dagger finds a teacher by default
-LAW = "local_tension_aware"
+LAW = "local_tension_aware"  # the tiny teacher's prior
 SHORT = {"max_episode_steps": 40}
 TEACHER = MPCSettings(samples=3, horizon=2, knots=1, noise=0.3, prior=LAW)
 TINY = DAggerSettings(
@@ -219,8 +219,11 @@ def test_selection_evaluates_on_the_evaluation_seeds_only(tmp_path: Path, monkey
 
     monkeypatch.setattr(dagger, "episode_returns", spy)
     monkeypatch.setattr(dagger, "collect", collect_spy)
-    one = DAggerSettings(residual_on=LAW, iterations=2, episodes=1, epochs=1, eval_episodes=2, net_arch=(4,))
-    train_dagger(ENV_ID, 999, tmp_path, one, teacher=TEACHER, progress=False, env_kwargs=SHORT)
+    # residual_on null: the teacher's prior, recorded by name.
+    one = DAggerSettings(residual_on=None, iterations=2, episodes=1, epochs=1, eval_episodes=2, net_arch=(4,))
+    run = train_dagger(ENV_ID, 999, tmp_path, one, teacher=TEACHER, progress=False, env_kwargs=SHORT)
+    assert yaml.safe_load((run / "config.yml").read_text())["hyperparams"]["residual_on"] == TEACHER.prior
+    assert read_metadata(run)["residual_on"] == TEACHER.prior
     assert seen == [[EVAL_SEEDS_START, EVAL_SEEDS_START + 1]] * 2
     assert rolled == [training_seeds(999, 0, 1), training_seeds(999, 1, 1)] == [[999_200], [999_201]]
     assert max(max(seeds) for seeds in rolled) < EVAL_SEEDS_START
@@ -263,6 +266,9 @@ def test_settings_files_and_runs_without_a_teacher_are_refused(tmp_path: Path) -
     with pytest.raises(ValueError, match="no ceiling settings for 'TetherHub-v0'"):
         train_dagger("TetherHub-v0", 1, tmp_path, TINY, progress=False)
     assert not (tmp_path / "TetherHub-v0").exists()  # refused before any work
+    without_prior = MPCSettings(samples=3, horizon=2, knots=1)
+    with pytest.raises(ValueError, match="residual_on is null .* plans without a prior: name the law"):
+        train_dagger(ENV_ID, 1, tmp_path, DAggerSettings(), teacher=without_prior, progress=False)
     with pytest.raises(ValueError, match="needs a student"):
         collect(ENV_ID, [1], TEACHER, LAW, None, 0.5, np.random.default_rng(0))
     with pytest.raises(ValueError, match="seed must be an integer in 0..999"):
