@@ -67,6 +67,26 @@ is careful with files as ``agents.compare`` is (see :mod:`agents.common.files`):
 and refuses to replace an earlier benchmark without ``--force`` before it loads a controller or
 runs a rollout, and writes every file atomically.
 
+**The two tracks.** The hard track is :data:`tether_gym.registration.HARD_TRACK`, every other id
+the standard track (``--track`` picks one). Each track has its own aggregate over ids, never one
+mixing them: the standard track's (``aggregate``, as before) is over its ids with massless
+tethers (the beaded ids are reported per id, as in the reference scores), the hard track's is
+``tracks["hard"]["aggregate"]``.
+
+**The reference ceiling** (:mod:`agents.evaluation.ceiling`, the planner at full strength) is
+read from its shipped per-seed returns, never rerun. On each id where they exist, on the
+ceiling's seeds that the run holds (at least 2; otherwise the id is skipped with why),
+``ceiling`` holds per track what :func:`agents.evaluation.ceiling_report.ceiling_table` gives:
+every controller's excess cost over the ceiling (per seed ``(-R[c, e]) / (-R[ceiling, e]) - 1``,
+mean with a paired 95 % t interval), the normalised score with 100 = the ceiling, the best
+scripted law and its excess cost (the room left), and the track's rliable IQM and mean of the
+excess costs with stratified-bootstrap intervals.
+
+**Run time and the quick mode.** Before the rollouts it prints the estimated run time
+(:func:`estimate_seconds`, the cost model :data:`SECONDS_PER_EPISODE_STEP`): about 1 h 40 min for
+the full run on a 2-core machine. ``quick`` runs :data:`QUICK_EPISODES` episodes, every baseline
+and shipped model, no ``mpc``, in 2 to 4 minutes, and says so in every output.
+
 **Where it lives.** :func:`benchmark` runs what one :class:`BenchmarkConfig` asks for, in named
 steps (controllers loaded, rollouts with a progress display, statistics, files); the statistics
 are :mod:`agents.evaluation.stats`, the tables :mod:`agents.evaluation.report` and the plots
@@ -84,7 +104,7 @@ from typing import Any
 
 import numpy as np
 
-from tether_gym.registration import ENV_IDS
+from tether_gym.registration import ENV_IDS, HARD_TRACK
 
 from ..common.checks import MAX_NUM_ENVS, check_int
 from ..common.cli import HELD_OUT_SEED, REFERENCE, did_you_mean
@@ -95,12 +115,17 @@ from ..policies import OtherIdError, make_controller, shipped_models
 from ..policies.format import is_policy_dir
 from ..policies.layout import PolicyFormatError
 from ..policies.pickled import PickleNotTrustedError
+from .ceiling import CEILING_FILE, load_ceiling
+from .ceiling_report import ceiling_table
 from .plots import plot_aggregate, plot_normalised_scores, plot_paired_differences
 from .report import clock, write_benchmark_tables
 from .rollout import EpisodeRecord, rollout, summarise
+from .scoring import ReferenceDataError
 from .stats import (
     CONFIDENCE,
+    SCORE_BOOTSTRAP_REPS,
     ZERO,
+    ExcessCost,
     aggregate_scores,
     best_eligible_baseline,
     normalised_scores,
@@ -122,6 +147,28 @@ __all__ = [
 BEST_BASELINE_ROW = "best baseline (per id)"
 SHIPPED_ROW = "shipped model (per id)"
 
+#: The tracks of ``--track``: the standard ids, the hard ones, or both.
+TRACKS = ("standard", "hard", "all")
+#: Held-out episodes per controller and id of a full run, and of the quick mode.
+FULL_EPISODES = 64
+QUICK_EPISODES = 8
+
+#: The cost model of the run-time estimate: wall seconds per episode step (one episode advanced
+#: by one control step, the episodes of a rollout batched), keyed by (controller is ``mpc``,
+#: the id's tethers have beads). Measured on a 2-core AMD EPYC / Intel Xeon with another job
+#: sharing the machine: ``mpc`` 0.013 s on the massless ids (the 8-id benchmark took 38 min),
+#: about 0.07 s with beaded tethers (27 and 19 min for the two beaded ids, 64 episodes each);
+#: the scripted laws and the shipped networks 0.04-0.3 ms massless, 0.3-1.8 ms beaded.
+SECONDS_PER_EPISODE_STEP: dict[tuple[bool, bool], float] = {
+    (True, False): 0.013,
+    (True, True): 0.07,
+    (False, False): 1.5e-4,
+    (False, True): 1.0e-3,
+}
+#: Loading the controllers, compiling the kernels, the statistics and the files, s (a rough
+#: allowance on top of the rollouts).
+OVERHEAD_SECONDS = 60.0
+
 TABLE_FILES = ("benchmark.md", "benchmark.json", "scores.csv", "episodes.csv", "aggregate.csv")
 PLOT_FILES = ("normalised_scores.png", "paired_differences.png", "aggregate.png")
 
@@ -141,8 +188,9 @@ class BenchmarkConfig:
     every id where :func:`agents.policies.make_controller` accepts them (None: every baseline,
     ``reference`` and every shipped model of each id). Passive is always added: it is the score's
     zero and the eligibility bar."""
-    episodes: int = 64
-    """Held-out episodes per controller and id, E >= 2, seeds ``seed .. seed+E-1``."""
+    episodes: int | None = None
+    """Held-out episodes per controller and id, E >= 2, seeds ``seed .. seed+E-1`` (None:
+    :data:`FULL_EPISODES`, or :data:`QUICK_EPISODES` with ``quick``)."""
     seed: int = HELD_OUT_SEED
     """The first held-out seed; it also seeds the bootstrap."""
     out: str | Path = "outputs/benchmark"
@@ -166,20 +214,60 @@ class BenchmarkConfig:
     ``{"max_episode_steps": ...}``; the reference scores use the ids' own settings)."""
     command: str | None = None
     """The command line recorded in the outputs (None: the Python call)."""
+    track: str = "all"
+    """The ids' track (:data:`TRACKS`): ``standard``, ``hard``
+    (:data:`tether_gym.registration.HARD_TRACK`) or ``all``. With ``env_ids``, every id must be
+    on it."""
+    quick: bool = False
+    """The quick mode, a smoke check of a few minutes: :data:`QUICK_EPISODES` episodes (the
+    reference ceiling's first seeds), every baseline and shipped model, no ``mpc``. It fixes the
+    episodes and the controllers, so it refuses ``episodes`` and ``controllers``."""
+    ceiling_file: str | Path | None = None
+    """The reference ceiling's per-seed returns (None: the shipped
+    :data:`agents.evaluation.ceiling.CEILING_FILE`, if it exists yet). Read, never rerun."""
 
     def __post_init__(self) -> None:
         env_ids = _check_names("env_ids (--envs)", self.env_ids, allowed=list(ENV_IDS))
         controllers = _check_names("controllers", self.controllers)
+        if self.track not in TRACKS:
+            raise ValueError(f"track (--track) must be one of {list(TRACKS)}; got {self.track!r}")
+        if env_ids is not None and self.track != "all":
+            off_track = [env_id for env_id in env_ids if env_id not in track_ids(self.track)]
+            if off_track:
+                raise ValueError(
+                    f"--envs names {off_track}, which are not on the {self.track} track (its ids: "
+                    f"{', '.join(track_ids(self.track))}): drop --track, or drop those ids"
+                )
+        if self.quick and (self.episodes is not None or controllers is not None):
+            given = "--episodes" if self.episodes is not None else "--controllers"
+            raise ValueError(
+                f"--quick fixes the episodes ({QUICK_EPISODES}) and the controllers (every baseline and shipped "
+                f"model, no {REFERENCE}); drop {given}, or drop --quick for a run of your own settings"
+            )
+        episodes = self.episodes if self.episodes is not None else QUICK_EPISODES if self.quick else FULL_EPISODES
         object.__setattr__(self, "env_ids", None if env_ids is None else tuple(env_ids))
         object.__setattr__(self, "controllers", None if controllers is None else tuple(controllers))
         object.__setattr__(
-            self, "episodes", check_int("episodes", self.episodes, 2, MAX_NUM_ENVS)
+            self, "episodes", check_int("episodes", episodes, 2, MAX_NUM_ENVS)
         )  # two at least, for an interval
         object.__setattr__(self, "seed", check_int("seed", self.seed, 0))
         object.__setattr__(self, "bootstrap_reps", check_int("bootstrap_reps", self.bootstrap_reps, 100))
         reference = self.reference
         if not isinstance(reference, str) or not reference or reference == ZERO:
             raise ValueError(f"reference must name a controller other than {ZERO!r} (it scores 100); got {reference!r}")
+
+
+def track_ids(track: str) -> list[str]:
+    """The ids of ``track`` (:data:`TRACKS`), in the order of :data:`tether_gym.registration.ENV_IDS`:
+    the hard track is :data:`tether_gym.registration.HARD_TRACK`, the standard track every other id."""
+    if track not in TRACKS:
+        raise ValueError(f"track must be one of {list(TRACKS)}; got {track!r}")
+    return [env_id for env_id in ENV_IDS if track == "all" or (env_id in HARD_TRACK) == (track == "hard")]
+
+
+def track_of(env_id: str) -> str:
+    """``hard`` for an id of :data:`tether_gym.registration.HARD_TRACK`, else ``standard``."""
+    return "hard" if env_id in HARD_TRACK else "standard"
 
 
 def _check_names(name: str, values: Any, allowed: Sequence[str] | None = None) -> list[str] | None:
@@ -212,6 +300,17 @@ class _Unit:
     name: str
     controller: Any
     steps: int
+    beaded: bool = False
+    """The id's tethers have beads (mass): every step costs more, the planner's most."""
+
+
+def estimate_seconds(units: Sequence[_Unit], episodes: int) -> float:
+    """The run time (s) the cost model :data:`SECONDS_PER_EPISODE_STEP` predicts for ``units``
+    with ``episodes`` episodes each, plus :data:`OVERHEAD_SECONDS`."""
+    rollouts = sum(
+        SECONDS_PER_EPISODE_STEP[(unit.name == REFERENCE, unit.beaded)] * episodes * unit.steps for unit in units
+    )
+    return rollouts + OVERHEAD_SECONDS
 
 
 class _Progress:
@@ -278,20 +377,33 @@ def benchmark(config: BenchmarkConfig) -> dict[str, Any]:
     controller on every id (so a corrupted model or an untrusted pickle stops it at once; an
     unknown name raises ValueError)."""
     started_at = time.perf_counter()
-    ids = list(config.env_ids or ENV_IDS)
+    ids = list(config.env_ids or track_ids(config.track))
     rliable_modules()
     out = prepare_table_outputs(
         config.out, TABLE_FILES, PLOT_FILES, config.plots, config.force, what="an earlier benchmark"
     )
+    ceiling, ceiling_note = _read_ceiling(config.ceiling_file)
     shipped = {env_id: shipped_models(env_id) for env_id in ids}
     _check_reference(config, shipped)
     requested = _requested_controllers(config, shipped)
     units, missing = _load_controllers(config, ids, requested, shipped)
-    seeds = list(range(config.seed, config.seed + config.episodes))
+    episodes = config.episodes
+    assert episodes is not None  # set by BenchmarkConfig.__post_init__
+    seeds = list(range(config.seed, config.seed + episodes))
+    if config.quick:
+        print(
+            f"QUICK MODE: a smoke check, {QUICK_EPISODES} episodes per controller and id (the reference ceiling's "
+            f"first seeds), no {REFERENCE}; its numbers are noisier than a full run's"
+        )
+    tracks = ", ".join(f"{sum(track_of(env_id) == t for env_id in ids)} {t}" for t in ("standard", "hard"))
     print(
-        f"benchmark: {len(ids)} ids, {len(units)} rollouts of {config.episodes} episodes "
-        f"(seeds {seeds[0]}..{seeds[-1]})"
+        f"benchmark: {len(ids)} ids ({tracks}), {len(units)} rollouts of {episodes} episodes "
+        f"(seeds {seeds[0]}..{seeds[-1]}); estimated run time about {clock(estimate_seconds(units, episodes))} "
+        f"on a 2-core machine ({sum(episodes * unit.steps for unit in units)} episode steps; "
+        f"{REFERENCE} costs about {1e3 * SECONDS_PER_EPISODE_STEP[(True, False)]:.0f} ms per episode step, "
+        f"{1e3 * SECONDS_PER_EPISODE_STEP[(True, True)]:.0f} ms with beaded tethers, the others under 2 ms)"
     )
+    print(f"reference ceiling: {ceiling_note}")
     for env_id, entries in missing.items():
         for entry in entries:
             print(f"  missing on {env_id}: {entry['controller']} ({entry['reason']})")
@@ -300,7 +412,11 @@ def benchmark(config: BenchmarkConfig) -> dict[str, Any]:
         f"rollouts done in {clock(rollout_seconds)}; statistics (rliable's bootstrap: {config.bootstrap_reps} "
         "replications per row) and files..."
     )
-    results = _analyse(ids, records, wall, missing, config.reference, shipped, config.bootstrap_reps, config.seed)
+    beaded = {unit.env_id: unit.beaded for unit in units}
+    results = _analyse(
+        ids, records, wall, missing, config.reference, shipped, config.bootstrap_reps, config.seed, beaded
+    )
+    results["ceiling"] = _against_ceiling(results, ids, ceiling, ceiling_note, config, seeds)
     results["settings"] = _settings(config, ids, seeds)
     results["rollout_seconds"] = rollout_seconds
     # From the call to the statistics, loading the controllers included; writing the files is left out,
@@ -361,9 +477,11 @@ def _load_controllers(
     units: list[_Unit] = []
     missing: dict[str, list[dict[str, str]]] = {}
     for env_id in ids:
-        candidates = requested or list(dict.fromkeys([*BASELINES, config.reference, *shipped[env_id]]))
+        anchor = [] if config.quick else [config.reference]  # the quick mode runs no planner
+        candidates = requested or list(dict.fromkeys([*BASELINES, *anchor, *shipped[env_id]]))
         probe = gym.make_vec(env_id, num_envs=1, **dict(config.env_kwargs or {}))
         steps = probe.unwrapped.max_episode_steps
+        beaded = int(probe.unwrapped.cluster.num_beads) > 0
         missing[env_id] = []
         for name in candidates:
             try:
@@ -385,7 +503,7 @@ def _load_controllers(
                 )
                 missing[env_id].append({"controller": name, "reason": reason})
                 continue
-            units.append(_Unit(env_id, name, controller, int(steps)))
+            units.append(_Unit(env_id, name, controller, int(steps), beaded))
         probe.close()
     return units, missing
 
@@ -424,6 +542,9 @@ def _settings(config: BenchmarkConfig, ids: list[str], seeds: list[int]) -> dict
         or f"{__name__}.benchmark(BenchmarkConfig(env_ids={ids!r}, controllers={names!r}, "
         f"episodes={config.episodes}, seed={config.seed}, reference={config.reference!r}))",
         "env_ids": ids,
+        "track": config.track,
+        "quick": config.quick,
+        "tracks": {track: [env_id for env_id in ids if track_of(env_id) == track] for track in ("standard", "hard")},
         "episodes": config.episodes,
         "seeds": seeds,
         "reference": config.reference,
@@ -448,8 +569,13 @@ def _analyse(
     shipped: dict[str, dict[str, Path]],
     bootstrap_reps: int,
     seed: int,
+    beaded: dict[str, bool] | None = None,
 ) -> dict[str, Any]:
-    """Every statistic of the benchmark, as a JSON-ready dict (NaN never appears: None instead)."""
+    """Every statistic of the benchmark, as a JSON-ready dict (NaN never appears: None instead).
+
+    The aggregate over ids never mixes tracks: ``aggregate`` is the standard track's, over its ids
+    with massless tethers (``beaded`` marks the others, reported per id only, as in the reference
+    scores), and ``tracks["hard"]["aggregate"]`` the hard track's, over its ids."""
     per_id: dict[str, Any] = {}
     row_returns: dict[str, dict[str, np.ndarray]] = {}  # aggregate row -> id -> (E,) returns
     zero_returns: dict[str, np.ndarray] = {}  # id -> passive's (E,) returns, where the score exists
@@ -523,15 +649,160 @@ def _analyse(
             "missing": missing[env_id],
             "seeds": seeds,
         }
-    shipped_names = {name for env_id in ids for name in records[env_id] if name in shipped[env_id]}
-    if len(shipped_names) < 2:
-        row_returns.pop(SHIPPED_ROW, None)  # the same numbers as the one shipped name's own row
-    aggregate = (
-        aggregate_scores(row_returns, zero_returns, reference_returns, reps=bootstrap_reps, seed=seed)
-        if row_returns
-        else {}
-    )
-    return {"per_id": per_id, "aggregate": aggregate, "aggregate_ids": len(ids)}
+    beaded = beaded or {}
+    tracks: dict[str, Any] = {}
+    for track in ("standard", "hard"):
+        members = [env_id for env_id in ids if track_of(env_id) == track]
+        left_out = {
+            env_id: "beaded tethers: reported per id, outside the aggregate over the massless ids"
+            for env_id in members
+            if track == "standard" and beaded.get(env_id, False)
+        }
+        group = [env_id for env_id in members if env_id not in left_out]
+        track_rows = {row: {i: values[i] for i in values if i in group} for row, values in row_returns.items()}
+        track_rows = {row: values for row, values in track_rows.items() if values}
+        shipped_names = {name for env_id in group for name in records[env_id] if name in shipped[env_id]}
+        if len(shipped_names) < 2:
+            track_rows.pop(SHIPPED_ROW, None)  # the same numbers as the one shipped name's own row
+        aggregate = (
+            aggregate_scores(track_rows, zero_returns, reference_returns, reps=bootstrap_reps, seed=seed)
+            if track_rows
+            else {}
+        )
+        tracks[track] = {"ids": members, "aggregate_ids": group, "left_out": left_out, "aggregate": aggregate}
+    standard = tracks["standard"]
+    return {
+        "per_id": per_id,
+        "aggregate": standard["aggregate"],
+        "aggregate_ids": len(standard["aggregate_ids"]),
+        "tracks": tracks,
+    }
+
+
+def _read_ceiling(path: str | Path | None) -> tuple[dict[str, Any], str]:
+    """The reference ceiling's runs (id -> :class:`~agents.evaluation.ceiling.CeilingRun`) and a
+    line saying where they come from. The shipped file may not exist yet: then none, and the line
+    says so; a file named by ``path`` must exist. A malformed file raises
+    :class:`~agents.evaluation.ceiling.CeilingDataError` (before any rollout)."""
+    file = CEILING_FILE if path is None else Path(path)
+    if not file.is_file():
+        if path is not None:
+            raise FileNotFoundError(
+                f"--ceiling-file {file}: no such file; pass a ceiling file written by python -m agents.ceiling, or "
+                "drop --ceiling-file for the shipped one"
+            )
+        return {}, f"none: no shipped ceiling at {file} yet (python -m agents.ceiling computes it)"
+    runs = load_ceiling(file)
+    return runs, f"read from {file} ({len(runs)} ids; not rerun)"
+
+
+@dataclasses.dataclass(frozen=True)
+class _CeilingOnSeeds:
+    """The ceiling's returns on the seeds the benchmark ran: what :func:`ceiling_table` pairs."""
+
+    seeds: np.ndarray
+    returns: np.ndarray
+    seconds_per_step: float
+    machine: str
+
+
+def _ceiling_on_seeds(run: Any, seeds: list[int], env_kwargs: dict[str, Any]) -> tuple[_CeilingOnSeeds | None, str]:
+    """``run`` restricted to the ceiling seeds among the benchmark's ``seeds``, and a line saying
+    which; None (with why) when its returns cannot pair with the benchmark's: other env settings,
+    or fewer than 2 of its seeds run here."""
+    if dict(run.env_kwargs) != dict(env_kwargs):
+        return None, (
+            f"skipped: the ceiling ran with env_kwargs {dict(run.env_kwargs)}, the benchmark with {dict(env_kwargs)}; "
+            "its returns do not pair"
+        )
+    ran = set(seeds)
+    kept = [index for index, seed in enumerate(run.seeds.tolist()) if int(seed) in ran]
+    span = f"{int(run.seeds.min())}..{int(run.seeds.max())}" if run.seeds.size else "none"
+    if len(kept) < 2:
+        return None, (
+            f"skipped: the benchmark's seeds ({seeds[0]}..{seeds[-1]}) hold {len(kept)} of the ceiling's "
+            f"{run.seeds.size} seeds ({span}); 2 at least are needed: run with --seed and --episodes covering them"
+        )
+    on_seeds = _CeilingOnSeeds(run.seeds[kept], run.returns[kept], float(run.seconds_per_step), str(run.machine))
+    return on_seeds, f"on {len(kept)} of the ceiling's {run.seeds.size} seeds ({span})"
+
+
+def _excess_dict(excess: ExcessCost) -> dict[str, Any]:
+    return dataclasses.asdict(excess)
+
+
+def _against_ceiling(
+    results: dict[str, Any],
+    ids: list[str],
+    ceiling: dict[str, Any],
+    note: str,
+    config: BenchmarkConfig,
+    seeds: list[int],
+) -> dict[str, Any]:
+    """Every controller against the reference ceiling, per track, from the ceiling's shipped
+    returns on the seeds the benchmark ran (:func:`agents.evaluation.ceiling_report.ceiling_table`):
+    per id, the excess cost over the ceiling of every controller (mean over the ceiling's seeds,
+    95 % t interval, paired), the normalised score with 100 = the ceiling, the best scripted law
+    and its excess cost, the room left; per track, rliable's IQM and mean of the excess costs and
+    scores with stratified-bootstrap intervals. Ids without usable ceiling data are listed with why."""
+    reference = {
+        "zero": ZERO,
+        "confidence": CONFIDENCE,
+        "score_bootstrap": {"reps": SCORE_BOOTSTRAP_REPS, "seed": config.seed},
+        "aggregate_bootstrap": {"reps": config.bootstrap_reps, "random_state": config.seed},
+    }
+    env_kwargs = dict(config.env_kwargs or {})
+    tracks: dict[str, Any] = {}
+    for track in ("standard", "hard"):
+        members = [env_id for env_id in ids if track_of(env_id) == track]
+        if not members:
+            continue
+        usable: dict[str, _CeilingOnSeeds] = {}
+        coverage: dict[str, str] = {}
+        for env_id in members:
+            if env_id not in ceiling:
+                coverage[env_id] = "skipped: the ceiling data hold no returns for this id"
+                continue
+            on_seeds, coverage[env_id] = _ceiling_on_seeds(ceiling[env_id], seeds, env_kwargs)
+            if on_seeds is not None:
+                usable[env_id] = on_seeds
+        entry: dict[str, Any] = {"coverage": coverage, "per_id": {}, "aggregate": {}, "aggregate_note": ""}
+        if usable:
+            data = {**reference, "per_id": {env_id: results["per_id"][env_id] for env_id in usable}}
+            try:
+                table = ceiling_table(data, usable)
+            except ReferenceDataError as error:
+                entry["aggregate_note"] = f"not available: {error}"
+                print(f"  ceiling, {track} track: {entry['aggregate_note']}")
+            else:
+                entry["per_id"] = {
+                    item.env_id: {
+                        "seeds": list(item.seeds),
+                        "ceiling_seconds_per_step": item.seconds_per_step,
+                        "ceiling_machine": item.machine,
+                        "best_law": item.best_law,
+                        "room_left": _excess_dict(item.room_left),
+                        "controllers": {
+                            row.controller: {
+                                "kind": row.kind,
+                                "mean_return": row.mean_return,
+                                "return_ci95": row.return_ci95,
+                                "excess_cost": _excess_dict(row.excess),
+                                "ceiling_score": None
+                                if row.score is None
+                                else {"mean": row.score, "low": row.score_low, "high": row.score_high},
+                            }
+                            for row in item.rows
+                        },
+                    }
+                    for item in table.ids
+                }
+                entry["aggregate"] = table.aggregate
+                entry["aggregate_note"] = table.aggregate_note
+        for env_id, line in coverage.items():
+            print(f"  ceiling on {env_id}: {line}")
+        tracks[track] = entry
+    return {"source": note, "tracks": tracks}
 
 
 def _write_outputs(out: Path, results: dict[str, Any], plots: bool) -> None:

@@ -80,27 +80,30 @@ def _aggregate_cell(row: dict[str, Any], key: str) -> str:
     return f"{row[key]:.1f} [{row[key + '_low']:.1f}, {row[key + '_high']:.1f}]"
 
 
-def benchmark_markdown(results: dict[str, Any]) -> str:
-    """``benchmark.md``: overview tables (mean return and normalised score per id), the
-    aggregate, and a detailed table per id, with the definitions."""
-    settings = results["settings"]
-    seeds, reference = settings["seeds"], settings["reference"]
-    columns = controller_columns(results)
+#: What each track is, for the tables' headings.
+_TRACK_TITLES = {
+    "standard": "Standard track",
+    "hard": "Hard track (room left over the best scripted law)",
+}
+
+
+def _track_overview(results: dict[str, Any], track: str, group: dict[str, Any], columns: list[str]) -> list[str]:
+    """The overview of one track's ids: mean returns, normalised scores, and the track's own
+    aggregate over ids (never one mixing tracks)."""
+    reference = results["settings"]["reference"]
+    ids = group["ids"]
+    aggregate = group["aggregate"]
+    aggregate_ids = group.get("aggregate_ids", ids)
     lines = [
-        "# tether-gym benchmark",
+        f"## {_TRACK_TITLES.get(track, track)}: {len(ids)} ids",
         "",
-        (
-            f"{len(settings['env_ids'])} ids; {settings['episodes']} held-out episodes per controller and id "
-            f"(seeds {seeds[0]}..{seeds[-1]}); normalised score: 0 = {ZERO}, 100 = {reference}. "
-            f"Made by `{settings['command']}` in {clock(results['wall_seconds'])}."
-        ),
-        "",
-        "## Mean return per id (95 % t interval)",
+        "### Mean return per id (95 % t interval)",
         "",
         "| id | " + " | ".join(columns) + " |",
         "|---|" + "---|" * len(columns),
     ]
-    for env_id, entry in results["per_id"].items():
+    for env_id in ids:
+        entry = results["per_id"][env_id]
         cells = []
         for name in columns:
             item = entry["controllers"].get(name)
@@ -120,34 +123,160 @@ def benchmark_markdown(results: dict[str, Any]) -> str:
         ),
         "",
         (
-            f"## Normalised score per id (0 = {ZERO}, 100 = {reference}; score of the means "
+            f"### Normalised score per id (0 = {ZERO}, 100 = {reference}; score of the means "
             "[95 % paired bootstrap interval])"
         ),
         "",
         "| id | " + " | ".join(columns) + " |",
         "|---|" + "---|" * len(columns),
     ]
-    for env_id, entry in results["per_id"].items():
+    for env_id in ids:
+        entry = results["per_id"][env_id]
         cells = [_score_cell(entry["controllers"].get(name)) for name in columns]
         lines.append(f"| {env_id} | " + " | ".join(cells) + " |")
     lines += [
         "",
-        ("## Aggregate over ids (normalised scores; rliable: IQM and mean over ids, 95 % stratified bootstrap)"),
+        (
+            f"### Aggregate over the {track} track's ids (normalised scores; rliable: IQM and mean over ids, 95 % "
+            "stratified bootstrap)"
+        ),
         "",
     ]
-    if results["aggregate"]:
+    left_out = group.get("left_out") or {}
+    if left_out:
+        lines += [f"Outside the aggregate: {', '.join(f'{i} ({why})' for i, why in left_out.items())}.", ""]
+    if aggregate:
         lines += ["| controller | ids | IQM [95 % CI] | mean [95 % CI] |", "|---|---|---|---|"]
-        for row, values in results["aggregate"].items():
+        for row, values in aggregate.items():
             lines.append(
-                f"| {row} | {values['ids']}/{results['aggregate_ids']} | "
+                f"| {row} | {values['ids']}/{len(aggregate_ids)} | "
                 f"{_aggregate_cell(values, 'iqm')} | {_aggregate_cell(values, 'mean')} |"
             )
-        lines += ["", "A row over fewer ids than another is not comparable with it."]
+        lines += ["", "A row over fewer ids than another is not comparable with it.", ""]
     else:
-        lines.append(
+        lines += [
             f"Not available: the normalised score needs {reference}, which did not run (or did not "
-            f"beat {ZERO}) on any id."
-        )
+            f"beat {ZERO}) on any id of this track.",
+            "",
+        ]
+    return lines
+
+
+def _percent_cell(excess: dict[str, Any] | None) -> str:
+    if excess is None:
+        return "—"
+    return f"{100 * excess['mean']:+.1f} % [{100 * excess['low']:+.1f}, {100 * excess['high']:+.1f}]"
+
+
+def _aggregate_percent(entry: dict[str, Any], key: str) -> str:
+    if not entry:
+        return "n/a"
+    low, high = entry[f"{key}_low"], entry[f"{key}_high"]
+    if low is None or high is None:
+        return f"{100 * entry[key]:+.1f} % [interval n/a]"
+    return f"{100 * entry[key]:+.1f} % [{100 * low:+.1f}, {100 * high:+.1f}]"
+
+
+def _ceiling_sections(ceiling: dict[str, Any] | None) -> list[str]:
+    """Per track, every controller's excess cost over the reference ceiling (the ceiling's shipped
+    returns on the seeds the benchmark ran): per id the best law and its excess cost (the room
+    left) and every other controller's; the track's aggregate of excess costs and of the scores
+    with 100 = the ceiling."""
+    if not ceiling:
+        return []
+    lines = [
+        "## Against the reference ceiling",
+        "",
+        (
+            f"Reference ceiling: {ceiling['source']}. Excess cost over the ceiling, per seed "
+            "(-R[c]) / (-R[ceiling]) - 1, mean over the ceiling's seeds that this run holds [paired 95 % t "
+            "interval]; lower is better, 0 is the ceiling. Room left: the excess cost of the best scripted law."
+        ),
+        "",
+    ]
+    for track, entry in ceiling["tracks"].items():
+        lines += [f"### {_TRACK_TITLES.get(track, track)}: excess cost over the ceiling", ""]
+        per_id = entry["per_id"]
+        names: list[str] = []
+        for item in per_id.values():
+            names += [n for n in item["controllers"] if n not in names and n != "ceiling" and n != item["best_law"]]
+        if per_id:
+            lines += [
+                "| id | ceiling seeds | best law | room left | " + " | ".join(names) + " |",
+                "|---|---|---|---|" + "---|" * len(names),
+            ]
+            for env_id, item in per_id.items():
+                others = [
+                    "(best law)"
+                    if name == item["best_law"]
+                    else _percent_cell((item["controllers"].get(name) or {}).get("excess_cost"))
+                    for name in names
+                ]
+                lines.append(
+                    f"| {env_id} | {len(item['seeds'])} | {item['best_law']} | {_percent_cell(item['room_left'])} | "
+                    + " | ".join(others)
+                    + " |"
+                )
+            lines.append("")
+        skipped = {env_id: why for env_id, why in entry["coverage"].items() if why.startswith("skipped")}
+        for env_id, why in skipped.items():
+            lines.append(f"- {env_id}: {why}.")
+        if skipped:
+            lines.append("")
+        if entry["aggregate"]:
+            lines += [
+                (
+                    f"Over the {track} track's ids with a ceiling (rliable's IQM and mean, 95 % stratified-bootstrap "
+                    "intervals over seeds within ids; score: 0 = passive, 100 = the ceiling):"
+                ),
+                "",
+                "| controller | ids | excess cost IQM | excess cost mean | score IQM | score mean |",
+                "|---|---|---|---|---|---|",
+            ]
+            for name, values in entry["aggregate"].items():
+                excess, score = values["excess"], values["score"]
+                score_cells = [_aggregate_cell(score, key) if score else "n/a" for key in ("iqm", "mean")]
+                lines.append(
+                    f"| {name} | {excess['ids']}/{len(per_id)} | {_aggregate_percent(excess, 'iqm')} | "
+                    f"{_aggregate_percent(excess, 'mean')} | " + " | ".join(score_cells) + " |"
+                )
+            lines.append("")
+        if entry["aggregate_note"]:
+            lines += [f"({entry['aggregate_note']}.)", ""]
+    return lines
+
+
+def benchmark_markdown(results: dict[str, Any]) -> str:
+    """``benchmark.md``: overview tables (mean return and normalised score per id), the
+    aggregate, and a detailed table per id, with the definitions."""
+    settings = results["settings"]
+    seeds, reference = settings["seeds"], settings["reference"]
+    columns = controller_columns(results)
+    quick = settings.get("quick", False)
+    lines = [
+        "# tether-gym benchmark" + (" (QUICK MODE: a smoke check)" if quick else ""),
+        "",
+        (
+            f"{len(settings['env_ids'])} ids; {settings['episodes']} held-out episodes per controller and id "
+            f"(seeds {seeds[0]}..{seeds[-1]}); normalised score: 0 = {ZERO}, 100 = {reference}. "
+            f"Made by `{settings['command']}` in {clock(results['wall_seconds'])}."
+        ),
+        "",
+    ]
+    if quick:
+        lines += [
+            (
+                f"**Quick mode**: {settings['episodes']} episodes and no {reference}, a smoke check whose numbers are "
+                "noisier than a full run's; the reference ceiling and the shipped reference scores give the "
+                "planner's numbers."
+            ),
+            "",
+        ]
+    tracks = results.get("tracks") or {"standard": {"ids": list(results["per_id"]), "aggregate": results["aggregate"]}}
+    for track, group in tracks.items():
+        if group["ids"]:
+            lines += _track_overview(results, track, group, columns)
+    lines += _ceiling_sections(results.get("ceiling"))
     lines += ["", "## Per id", ""]
     for env_id, entry in results["per_id"].items():
         best = entry["best_baseline"]
@@ -218,6 +347,13 @@ def _csv_text(header: list[str], rows: list[list[Any]]) -> str:
     return stream.getvalue()
 
 
+def _aggregates_by_track(results: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """Each track's aggregate over ids, the standard track's (``results["aggregate"]``) first."""
+    tracks = results.get("tracks") or {}
+    hard = (tracks.get("hard") or {}).get("aggregate") or {}
+    return [("standard", results["aggregate"]), ("hard", hard)]
+
+
 def write_benchmark_tables(out: Path, results: dict[str, Any]) -> None:
     """The benchmark's tables in ``out``, each written atomically: ``benchmark.md``
     (:func:`benchmark_markdown`), ``benchmark.json`` (``results``, strict JSON: None for NaN),
@@ -286,7 +422,7 @@ def write_benchmark_tables(out: Path, results: dict[str, Any]) -> None:
     atomic_write_text(
         out / "aggregate.csv",
         _csv_text(
-            ["row", "ids", "iqm", "iqm_low", "iqm_high", "mean", "mean_low", "mean_high", "env_ids"],
+            ["row", "ids", "iqm", "iqm_low", "iqm_high", "mean", "mean_low", "mean_high", "env_ids", "track"],
             [
                 [
                     row,
@@ -298,8 +434,10 @@ def write_benchmark_tables(out: Path, results: dict[str, Any]) -> None:
                     v["mean_low"],
                     v["mean_high"],
                     " ".join(v["env_ids"]),
+                    track,
                 ]
-                for row, v in results["aggregate"].items()
+                for track, aggregate in _aggregates_by_track(results)
+                for row, v in aggregate.items()
             ],
         ),
     )
