@@ -224,3 +224,29 @@ def test_the_ceiling_columns_are_the_hand_computed_excess_costs(
 def test_a_named_ceiling_file_must_exist(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="--ceiling-file .*no such file"):
         main(["--envs", STANDARD_ID, "--ceiling-file", str(tmp_path / "nope.json"), "--out", str(tmp_path / "o")])
+
+
+def test_the_standard_aggregate_is_over_its_massless_ids(tmp_path: Path) -> None:
+    """A beaded id is reported per id but left out of the standard track's aggregate (as in the
+    reference scores); the aggregate's numbers are those of the massless ids alone."""
+    beaded = "TetherBeadedChain-v0"
+    settings = dict(
+        controllers=["passive", "velocity_feedback", "lqr"],
+        reference="lqr",
+        episodes=3,
+        env_kwargs=SHORT,
+        bootstrap_reps=200,
+        plots=False,
+        ceiling_file=None,
+    )
+    both = benchmark(BenchmarkConfig(env_ids=[STANDARD_ID, beaded], out=tmp_path / "both", **settings))
+    alone = benchmark(BenchmarkConfig(env_ids=[STANDARD_ID], out=tmp_path / "alone", **settings))
+    standard = both["tracks"]["standard"]
+    assert standard["ids"] == [STANDARD_ID, beaded] and standard["aggregate_ids"] == [STANDARD_ID]
+    assert list(standard["left_out"]) == [beaded]
+    assert both["per_id"][beaded]["controllers"]["velocity_feedback"]["normalised_score"] is not None
+    assert both["aggregate_ids"] == 1 and both["aggregate"] == alone["aggregate"]
+    assert (
+        "Outside the aggregate: TetherBeadedChain-v0 (beaded tethers"
+        in (tmp_path / "both" / "benchmark.md").read_text()
+    )
