@@ -116,7 +116,7 @@ from ..policies.format import is_policy_dir
 from ..policies.layout import PolicyFormatError
 from ..policies.pickled import PickleNotTrustedError
 from .ceiling import CEILING_FILE, load_ceiling
-from .ceiling_report import ceiling_table
+from .ceiling_report import CeilingId, ceiling_table
 from .plots import plot_aggregate, plot_normalised_scores, plot_paired_differences
 from .report import clock, write_benchmark_tables
 from .rollout import EpisodeRecord, rollout, summarise
@@ -731,6 +731,29 @@ def _excess_dict(excess: ExcessCost) -> dict[str, Any]:
     return dataclasses.asdict(excess)
 
 
+def _ceiling_id_dict(item: CeilingId) -> dict[str, Any]:
+    """One id of :func:`ceiling_table`, as JSON-ready numbers (fractions for the excess costs)."""
+    return {
+        "seeds": list(item.seeds),
+        "ceiling_seconds_per_step": item.seconds_per_step,
+        "ceiling_machine": item.machine,
+        "best_law": item.best_law,
+        "room_left": _excess_dict(item.room_left),
+        "controllers": {
+            row.controller: {
+                "kind": row.kind,
+                "mean_return": row.mean_return,
+                "return_ci95": row.return_ci95,
+                "excess_cost": _excess_dict(row.excess),
+                "ceiling_score": None
+                if row.score is None
+                else {"mean": row.score, "low": row.score_low, "high": row.score_high},
+            }
+            for row in item.rows
+        },
+    }
+
+
 def _against_ceiling(
     results: dict[str, Any],
     ids: list[str],
@@ -767,38 +790,25 @@ def _against_ceiling(
             if on_seeds is not None:
                 usable[env_id] = on_seeds
         entry: dict[str, Any] = {"coverage": coverage, "per_id": {}, "aggregate": {}, "aggregate_note": ""}
-        if usable:
-            data = {**reference, "per_id": {env_id: results["per_id"][env_id] for env_id in usable}}
+        # The ids outside the track's aggregate of normalised scores (the beaded ones) stay outside this one too.
+        left_out = results["tracks"][track]["left_out"]
+        inside = {env_id: run for env_id, run in usable.items() if env_id not in left_out}
+        outside = {env_id: run for env_id, run in usable.items() if env_id in left_out}
+        for part, aggregated in ((inside, True), (outside, False)):
+            if not part:
+                continue
+            data = {**reference, "per_id": {env_id: results["per_id"][env_id] for env_id in part}}
             try:
-                table = ceiling_table(data, usable)
+                table = ceiling_table(data, part)
             except ReferenceDataError as error:
                 entry["aggregate_note"] = f"not available: {error}"
                 print(f"  ceiling, {track} track: {entry['aggregate_note']}")
-            else:
-                entry["per_id"] = {
-                    item.env_id: {
-                        "seeds": list(item.seeds),
-                        "ceiling_seconds_per_step": item.seconds_per_step,
-                        "ceiling_machine": item.machine,
-                        "best_law": item.best_law,
-                        "room_left": _excess_dict(item.room_left),
-                        "controllers": {
-                            row.controller: {
-                                "kind": row.kind,
-                                "mean_return": row.mean_return,
-                                "return_ci95": row.return_ci95,
-                                "excess_cost": _excess_dict(row.excess),
-                                "ceiling_score": None
-                                if row.score is None
-                                else {"mean": row.score, "low": row.score_low, "high": row.score_high},
-                            }
-                            for row in item.rows
-                        },
-                    }
-                    for item in table.ids
-                }
+                continue
+            entry["per_id"].update({item.env_id: _ceiling_id_dict(item) for item in table.ids})
+            if aggregated:
                 entry["aggregate"] = table.aggregate
                 entry["aggregate_note"] = table.aggregate_note
+        entry["per_id"] = {env_id: entry["per_id"][env_id] for env_id in members if env_id in entry["per_id"]}
         for env_id, line in coverage.items():
             print(f"  ceiling on {env_id}: {line}")
         tracks[track] = entry

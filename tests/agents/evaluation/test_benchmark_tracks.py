@@ -237,7 +237,12 @@ def test_the_standard_aggregate_is_over_its_massless_ids(tmp_path: Path) -> None
         env_kwargs=SHORT,
         bootstrap_reps=200,
         plots=False,
-        ceiling_file=None,
+        ceiling_file=tmp_path / "ceiling.json",
+    )
+    seeds = [FIRST_SEED, FIRST_SEED + 1, FIRST_SEED + 2]
+    write_ceiling(
+        [_ceiling_run(env_id, seeds, [-0.3, -0.4, -0.5], SHORT) for env_id in (STANDARD_ID, beaded)],
+        tmp_path / "ceiling.json",
     )
     both = benchmark(BenchmarkConfig(env_ids=[STANDARD_ID, beaded], out=tmp_path / "both", **settings))
     alone = benchmark(BenchmarkConfig(env_ids=[STANDARD_ID], out=tmp_path / "alone", **settings))
@@ -246,6 +251,11 @@ def test_the_standard_aggregate_is_over_its_massless_ids(tmp_path: Path) -> None
     assert list(standard["left_out"]) == [beaded]
     assert both["per_id"][beaded]["controllers"]["velocity_feedback"]["normalised_score"] is not None
     assert both["aggregate_ids"] == 1 and both["aggregate"] == alone["aggregate"]
+    # The same for the excess costs over the ceiling: the beaded id's are reported, outside the aggregate.
+    ceiling = both["ceiling"]["tracks"]["standard"]
+    assert list(ceiling["per_id"]) == [STANDARD_ID, beaded]
+    assert ceiling["aggregate"]["lqr"]["excess"]["env_ids"] == [STANDARD_ID]
+    assert ceiling["aggregate"] == alone["ceiling"]["tracks"]["standard"]["aggregate"]
     assert (
         "Outside the aggregate: TetherBeadedChain-v0 (beaded tethers"
         in (tmp_path / "both" / "benchmark.md").read_text()
