@@ -94,6 +94,7 @@ __all__ = [
     "observation_statistics",
     "save_student",
     "student_controller",
+    "student_loss",
     "train_dagger",
     "training_seeds",
 ]
@@ -333,6 +334,15 @@ def _student_outputs(policy: Any, features: torch.Tensor) -> torch.Tensor:
     return policy.action_net(policy.mlp_extractor.forward_actor(policy.extract_features(features)))
 
 
+def student_loss(policy: Any, features: np.ndarray, targets: np.ndarray) -> float:
+    """The mean squared error of ``policy``'s clipped outputs on (N, O) normalised observations
+    ``features`` against (N, A) ``targets`` (normalised thrust squared)."""
+    x = torch.as_tensor(np.asarray(features, dtype=np.float32))
+    y = torch.as_tensor(np.asarray(targets, dtype=np.float32))
+    with _one_torch_thread(), torch.no_grad():
+        return float(torch.nn.functional.mse_loss(_student_outputs(policy, x).clamp(-1.0, 1.0), y))
+
+
 def fit_student(
     policy: Any,
     features: np.ndarray,
@@ -370,8 +380,7 @@ def fit_student(
                 loss.backward()
                 optimizer.step()
         policy.set_training_mode(False)
-        with torch.no_grad():
-            return float(torch.nn.functional.mse_loss(_student_outputs(policy, x).clamp(-1.0, 1.0), y))
+    return student_loss(policy, features, targets)
 
 
 def student_controller(model: Any, statistics: NormalizationStatistics, env_id: str, residual_on: str) -> TrainedPolicy:
@@ -568,6 +577,13 @@ def train_dagger(
             statistics = observation_statistics(data.observations)
             student = _attached(student_controller(model, statistics, env_id, law_name), env_id, kwargs)
         assert student is not None
+        # The student's error on the states it has just visited, before it is refitted on them: what
+        # it had not learnt of the teacher where it goes (NaN at iteration 0, before any fit).
+        new_loss = (
+            student_loss(model.policy, statistics.normalize_obs(data.observations), data.targets)
+            if iteration
+            else float("nan")
+        )
         all_observations = np.concatenate(observations)
         features = statistics.normalize_obs(all_observations).astype(np.float32)
         all_targets = np.concatenate(targets)
@@ -589,6 +605,7 @@ def train_dagger(
             beta=beta,
             states=int(len(all_observations)),
             loss=loss,
+            loss_on_new_states=new_loss,
             # The loss against the targets' own spread: the fraction of the correction not learnt.
             target_variance=float(all_targets.var(axis=0).mean()),
             rollout_return=float(data.returns.mean()),
@@ -606,7 +623,7 @@ def train_dagger(
             print(
                 f"iteration {iteration + 1}/{s.iterations} (beta {beta:.2f}): {s.episodes} episodes, rollout return "
                 f"{data.returns.mean():.2f}, {len(all_observations):,} states, loss {loss:.4g} (targets' variance "
-                f"{entry['target_variance']:.4g}); eval "
+                f"{entry['target_variance']:.4g}; on the new states before the fit {new_loss:.4g}); eval "
                 f"{entry['mean_return']:.2f} vs {law_name} {law_returns.mean():.2f}: {versus_law.mean:+.2f} "
                 f"[{versus_law.low:+.2f}, {versus_law.high:+.2f}]"
                 + (" (new best)" if new_best else "")

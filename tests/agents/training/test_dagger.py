@@ -175,6 +175,7 @@ def test_a_run_aggregates_the_data_selects_on_the_evaluation_seeds_and_records_i
     assert [entry["iteration"] for entry in history] == [0, 1] and [e["beta"] for e in history] == [1.0, 0.0]
     assert history[1]["states"] == 2 * history[0]["states"] == 4 * SHORT["max_episode_steps"]
     assert all(entry["target_variance"] > 0 and entry["loss"] >= 0 for entry in history)
+    assert np.isnan(history[0]["loss_on_new_states"]) and history[1]["loss_on_new_states"] > 0
     assert log["seeds"] == [EVAL_SEEDS_START, EVAL_SEEDS_START + 1]
     config = yaml.safe_load((run / "config.yml").read_text())
     assert config["training_seeds"] == [TRAINING_SEEDS_START + 3 * SEEDS_PER_RUN, TRAINING_SEEDS_START + 3 * 800 + 3]
