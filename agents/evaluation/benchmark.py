@@ -62,7 +62,8 @@ than another is not comparable with it: the table gives the count. The per-episo
 README), ``benchmark.json`` (every number, per-episode returns included, and the settings),
 ``scores.csv`` (per id and controller), ``episodes.csv`` (per episode), ``aggregate.csv``,
 and, unless ``--no-plots``, ``normalised_scores.png`` (per id, with the 95 % intervals),
-``paired_differences.png`` and ``aggregate.png`` (rliable-style interval estimates). The command
+``paired_differences.png``, ``aggregate.png`` (rliable-style interval estimates) and
+``excess_costs.png`` (per track, the excess costs over the reference ceiling). The command
 is careful with files as ``agents.compare`` is (see :mod:`agents.common.files`): it checks ``--out``
 and refuses to replace an earlier benchmark without ``--force`` before it loads a controller or
 runs a rollout, and writes every file atomically.
@@ -117,7 +118,7 @@ from ..policies.layout import PolicyFormatError
 from ..policies.pickled import PickleNotTrustedError
 from .ceiling import CEILING_FILE, load_ceiling
 from .ceiling_report import CeilingId, ceiling_table
-from .plots import plot_aggregate, plot_normalised_scores, plot_paired_differences
+from .plots import plot_aggregate, plot_excess_costs, plot_normalised_scores, plot_paired_differences
 from .report import clock, write_benchmark_tables
 from .rollout import EpisodeRecord, rollout, summarise
 from .scoring import ReferenceDataError
@@ -170,7 +171,7 @@ SECONDS_PER_EPISODE_STEP: dict[tuple[bool, bool], float] = {
 OVERHEAD_SECONDS = 60.0
 
 TABLE_FILES = ("benchmark.md", "benchmark.json", "scores.csv", "episodes.csv", "aggregate.csv")
-PLOT_FILES = ("normalised_scores.png", "paired_differences.png", "aggregate.png")
+PLOT_FILES = ("normalised_scores.png", "paired_differences.png", "aggregate.png", "excess_costs.png")
 
 
 # ---------------------------------------------------------------------------------------- the settings
@@ -823,5 +824,6 @@ def _write_outputs(out: Path, results: dict[str, Any], plots: bool) -> None:
         plot_normalised_scores(results, out / "normalised_scores.png")
         plot_paired_differences(results, out / "paired_differences.png")
         plot_aggregate(results, out / "aggregate.png")
+        plot_excess_costs(results, out / "excess_costs.png")
         written += [out / name for name in PLOT_FILES]
     print("wrote " + ", ".join(str(path) for path in written))

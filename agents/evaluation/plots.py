@@ -4,7 +4,7 @@ extra) on its Agg backend, so no display is needed. Each file is written atomica
 * The comparison (:mod:`agents.evaluation.comparison`): :func:`plot_energy` and
   :func:`plot_displacement`, from the episode records.
 * The benchmark (:mod:`agents.evaluation.benchmark`): :func:`plot_normalised_scores`,
-  :func:`plot_paired_differences` and :func:`plot_aggregate`, from its results (the dict
+  :func:`plot_paired_differences`, :func:`plot_aggregate` and :func:`plot_excess_costs`, from its results (the dict
   written to ``benchmark.json``). Scores beyond :data:`SCORE_AXIS` are cut at the axis' edge and
   written out.
 """
@@ -24,10 +24,12 @@ from .rollout import EpisodeRecord
 from .stats import ZERO
 
 __all__ = [
+    "EXCESS_AXIS",
     "SCORE_AXIS",
     "plot_aggregate",
     "plot_displacement",
     "plot_energy",
+    "plot_excess_costs",
     "plot_normalised_scores",
     "plot_paired_differences",
 ]
@@ -279,4 +281,63 @@ def plot_aggregate(results: dict[str, Any], path: Path) -> None:
         f"normalised score (0 = {ZERO}, 100 = {reference}); values off the axis written at its edge", fontsize=9
     )
     fig.suptitle("aggregate over ids: point estimate and 95 % stratified-bootstrap interval (rliable)", fontsize=10)
+    _save(plt, fig, path)
+
+
+#: The excess-cost axis of :func:`plot_excess_costs`, in %: the strong controllers sit within tens
+#: of % of the ceiling, passive hundreds of % above it; values beyond are cut at the edge and written.
+EXCESS_AXIS = (-20.0, 100.0)
+
+
+def plot_excess_costs(results: dict[str, Any], path: Path) -> None:
+    """Per track, every controller's excess cost over the reference ceiling on each id (mean and
+    95 % t interval, in %; 0 = the ceiling), from the results' ``ceiling`` entry; the best law of
+    each id in bold. Values beyond :data:`EXCESS_AXIS` are cut at its edge and written out. A
+    figure that says why when no id has ceiling data."""
+    plt = _pyplot(BENCHMARK)
+    tracks = {
+        track: entry["per_id"]
+        for track, entry in ((results.get("ceiling") or {}).get("tracks") or {}).items()
+        if entry["per_id"]
+    }
+    if not tracks:
+        _placeholder(path, "excess cost over the reference ceiling", "not available: no id has ceiling data here")
+        return
+    low_limit, high_limit = EXCESS_AXIS
+    heights = [sum(len(item["controllers"]) - 1 for item in per_id.values()) for per_id in tracks.values()]
+    fig, axes = plt.subplots(
+        len(tracks),
+        1,
+        figsize=(9, 0.22 * sum(heights) + 1.5 * len(tracks)),
+        squeeze=False,
+        gridspec_kw={"height_ratios": heights},
+    )
+    for ax, (track, per_id) in zip(axes[:, 0], tracks.items(), strict=True):
+        labels: list[str] = []
+        for env_id, item in per_id.items():
+            for name, row in item["controllers"].items():
+                if name == "ceiling":
+                    continue
+                j = len(labels)
+                excess = row["excess_cost"]
+                mean, low, high = (
+                    float(np.clip(100 * excess[k], low_limit, high_limit)) for k in ("mean", "low", "high")
+                )
+                ax.barh(
+                    j, high - low, left=low, height=0.6, color="C1" if name == item["best_law"] else "C0", alpha=0.7
+                )
+                ax.vlines(mean, j - 0.3, j + 0.3, color="k", linewidth=1.2)
+                if mean != 100 * excess["mean"]:
+                    text = f" {100 * excess['mean']:.0f} % "
+                    ax.text(mean, j, text, ha="right" if mean == high_limit else "left", va="center", fontsize=7)
+                labels.append(f"{env_id}: {name}" + (" (best law)" if name == item["best_law"] else ""))
+        ax.set_yticks(range(len(labels)), labels, fontsize=7)
+        ax.invert_yaxis()
+        ax.axvline(0, color="0.5", linewidth=0.8)
+        ax.set_xlim(low_limit, high_limit)
+        ax.set_title(f"{track} track", fontsize=9)
+        ax.grid(True, axis="x", alpha=0.3)
+    fig.supxlabel(
+        "excess cost over the reference ceiling, % (mean over its seeds, 95 % t interval); 0 = the ceiling", fontsize=9
+    )
     _save(plt, fig, path)

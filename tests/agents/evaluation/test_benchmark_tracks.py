@@ -27,6 +27,7 @@ from agents.evaluation.benchmark import (
     track_ids,
 )
 from agents.evaluation.ceiling import CeilingRun, SeedNoise, write_ceiling
+from agents.evaluation.plots import plot_excess_costs
 from tether_gym.registration import ENV_IDS, HARD_TRACK
 
 STANDARD_ID = "TetherTetrahedron-v0"
@@ -219,6 +220,8 @@ def test_the_ceiling_columns_are_the_hand_computed_excess_costs(
     cell = f"{100 * room['mean']:+.1f} % [{100 * room['low']:+.1f}, {100 * room['high']:+.1f}]"
     assert f"| {HARD_TRACK[0]} | 3 | {first['best_law']} | {cell} |" in report
     assert f"- {STANDARD_ID}: skipped: the benchmark's seeds" in report
+    plot_excess_costs(results, tmp_path / "excess_costs.png")
+    assert (tmp_path / "excess_costs.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_a_named_ceiling_file_must_exist(tmp_path: Path) -> None:
