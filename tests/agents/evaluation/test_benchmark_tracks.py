@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.stats
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import agents.evaluation.benchmark
 import agents.evaluation.report
@@ -263,3 +265,20 @@ def test_the_standard_aggregate_is_over_its_massless_ids(tmp_path: Path) -> None
         "Outside the aggregate: TetherBeadedChain-v0 (beaded tethers"
         in (tmp_path / "both" / "benchmark.md").read_text()
     )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    env_ids=st.lists(st.sampled_from(list(ENV_IDS)), min_size=1, max_size=len(ENV_IDS), unique=True),
+    track=st.sampled_from(["standard", "hard", "all"]),
+)
+def test_any_envs_and_track_are_run_or_refused_by_name(env_ids: list[str], track: str) -> None:
+    """Property: --envs with --track runs exactly the ids named when all are on the track, and is
+    otherwise refused with every id off the track named (never a silent subset)."""
+    off_track = [env_id for env_id in env_ids if env_id not in track_ids(track)]
+    if not off_track:
+        assert BenchmarkConfig(env_ids=env_ids, track=track).env_ids == tuple(env_ids)
+        return
+    with pytest.raises(ValueError) as error:
+        BenchmarkConfig(env_ids=env_ids, track=track)
+    assert f"--envs names {off_track}, which are not on the {track} track" in str(error.value)
