@@ -43,7 +43,12 @@ def test_the_shipped_reference_holds_every_id_and_controller() -> None:
     ]
     for env_id, entry in data["per_id"].items():
         assert entry["seeds"] == list(range(HELD_OUT_SEED, HELD_OUT_SEED + 64))
-        assert set(entry["controllers"]) == {*BASELINES, "mpc", *shipped_models(env_id)}, env_id
+        expected = {*BASELINES, "mpc", *shipped_models(env_id)}
+        if env_id in HARD_TRACK:
+            # The hard track's reference is the shipped ceiling (agents/reference/ceiling.json); its
+            # benchmark runs the laws and the shipped models, and mpc only where it was affordable.
+            expected -= {"mpc"} - set(entry["controllers"])
+        assert set(entry["controllers"]) == expected, env_id
         assert entry["best_baseline"] in BASELINES
     # The file is what the converter gives from its runs' results, each statistic what its
     # returns give: the aggregate's run, then each addition's ids merged in.
