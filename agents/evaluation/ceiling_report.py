@@ -36,8 +36,7 @@ from .stats import (
     aggregate_excess_costs,
     aggregate_scores,
     excess_cost,
-    normalised_scores,
-    score_interval,
+    score_with_interval,
     t_interval,
 )
 
@@ -151,8 +150,7 @@ def _id_table(env_id: str, entry: dict[str, Any], run: Any, reference: dict[str,
         mean, _, half_width = t_interval(values, confidence)
         score = low = high = None
         if scaled:
-            score = float(normalised_scores(values, zero_returns, ceiling_returns).mean())
-            interval = score_interval(
+            score, low, high = score_with_interval(
                 values,
                 zero_returns,
                 ceiling_returns,
@@ -160,7 +158,6 @@ def _id_table(env_id: str, entry: dict[str, Any], run: Any, reference: dict[str,
                 seed=bootstrap["seed"],
                 confidence=confidence,
             )
-            low, high = (None, None) if interval is None else interval
         rows.append(CeilingRow(env_id, name, kind, values, mean, half_width, excess, score, low, high))
     laws = [row for row in rows if row.kind == _LAW and row.controller != zero]
     if not laws:

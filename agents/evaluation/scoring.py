@@ -71,9 +71,8 @@ from .stats import (
     PairedDifference,
     best_eligible_baseline,
     excess_cost,
-    normalised_scores,
     paired_difference,
-    score_interval,
+    score_with_interval,
     t_interval,
 )
 
@@ -306,9 +305,8 @@ def _score_of(
 ) -> tuple[float, float | None, float | None]:
     """The normalised score of ``values`` (E,) with 0 = ``zero_values`` and 100 = ``anchor_values``
     (the same seeds), and its paired bootstrap interval with the reference's resamples and seed."""
-    score = float(normalised_scores(values, zero_values, anchor_values).mean())
     bootstrap = data["score_bootstrap"]
-    interval = score_interval(
+    return score_with_interval(
         values,
         zero_values,
         anchor_values,
@@ -316,8 +314,6 @@ def _score_of(
         seed=bootstrap["seed"],
         confidence=data["confidence"],
     )
-    low, high = (None, None) if interval is None else interval
-    return score, low, high
 
 
 def _reference_entry(data: dict[str, Any], env_id: str) -> dict[str, Any]:

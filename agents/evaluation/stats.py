@@ -38,6 +38,7 @@ __all__ = [
     "paired_difference",
     "rliable_modules",
     "score_interval",
+    "score_with_interval",
     "t_interval",
 ]
 
@@ -190,6 +191,23 @@ def score_interval(
     return float(low), float(high)
 
 
+def score_with_interval(
+    returns: Any,
+    zero_returns: Any,
+    reference_returns: Any,
+    reps: int = SCORE_BOOTSTRAP_REPS,
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+) -> tuple[float, float | None, float | None]:
+    """The normalised score of the mean of ``returns`` (E,) with 0 = ``zero_returns`` and 100 =
+    ``reference_returns`` (the same seeds), and the ends of its paired bootstrap interval
+    (:func:`score_interval`; None, None where it has none)."""
+    score = float(normalised_scores(returns, zero_returns, reference_returns).mean())
+    interval = score_interval(returns, zero_returns, reference_returns, reps=reps, seed=seed, confidence=confidence)
+    low, high = (None, None) if interval is None else interval
+    return score, low, high
+
+
 @dataclasses.dataclass(frozen=True)
 class ExcessCost:
     """A controller's excess cost over a reference ceiling on the ceiling's seeds, as fractions
@@ -312,20 +330,7 @@ def aggregate_excess_costs(
             per_id_means = costs[drawn.astype(np.intp), np.arange(costs.shape[1])].mean(axis=0)[None, :]  # (1, ids)
             return np.array([_iqm(per_id_means), metrics.aggregate_mean(per_id_means)])
 
-        (iqm, mean), (iqm_low, iqm_high, mean_low, mean_high) = _stratified_bootstrap(
-            name, costs.shape[0], len(ids), statistics, reps, seed, confidence
-        )
-        results[name] = {
-            "iqm": iqm,
-            "iqm_low": iqm_low,
-            "iqm_high": iqm_high,
-            "mean": mean,
-            "mean_low": mean_low,
-            "mean_high": mean_high,
-            "ids": len(ids),
-            "env_ids": ids,
-            "episodes": int(costs.shape[0]),
-        }
+        results[name] = _aggregate_entry(name, ids, costs.shape[0], statistics, reps, seed, confidence)
     return results
 
 
@@ -399,21 +404,35 @@ def aggregate_scores(
             per_id_scores = (100.0 * gain[picks, columns].mean(axis=0) / denominator)[None, :]  # (1 run, ids)
             return np.array([_iqm(per_id_scores), metrics.aggregate_mean(per_id_scores)])
 
-        (iqm, mean), (iqm_low, iqm_high, mean_low, mean_high) = _stratified_bootstrap(
-            name, gain.shape[0], len(ids), statistics, reps, seed, confidence
-        )
-        results[name] = {
-            "iqm": iqm,
-            "iqm_low": iqm_low,
-            "iqm_high": iqm_high,
-            "mean": mean,
-            "mean_low": mean_low,
-            "mean_high": mean_high,
-            "ids": len(ids),
-            "env_ids": ids,
-            "episodes": int(gain.shape[0]),
-        }
+        results[name] = _aggregate_entry(name, ids, gain.shape[0], statistics, reps, seed, confidence)
     return results
+
+
+def _aggregate_entry(
+    name: str,
+    ids: list[str],
+    episodes: int,
+    statistics: Any,
+    reps: int,
+    seed: int,
+    confidence: float,
+) -> dict[str, Any]:
+    """One row's aggregate: the IQM and mean that ``statistics`` gives on the (episodes, ids)
+    matrix of every episode, with their stratified-bootstrap intervals, and the ids it covers."""
+    (iqm, mean), (iqm_low, iqm_high, mean_low, mean_high) = _stratified_bootstrap(
+        name, episodes, len(ids), statistics, reps, seed, confidence
+    )
+    return {
+        "iqm": iqm,
+        "iqm_low": iqm_low,
+        "iqm_high": iqm_high,
+        "mean": mean,
+        "mean_low": mean_low,
+        "mean_high": mean_high,
+        "ids": len(ids),
+        "env_ids": ids,
+        "episodes": int(episodes),
+    }
 
 
 def _iqm(scores: np.ndarray) -> float:
