@@ -38,7 +38,6 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
     "TetherSpinningHub-v0": ("spinning_hub", 300, {}),
     "TetherBeadedTetrahedron-v0": ("beaded_tetrahedron", 300, {}),
     "TetherBeadedChain-v0": ("beaded_chain", 300, {}),
-    "TetherUnderactuatedTetrahedron-v0": ("tetrahedron", 300, {"thrusters": (0, 1)}),
     "TetherDelayedTetrahedron-v0": ("tetrahedron", 300, {"thrust_delay": 2}),
 }
 
@@ -48,7 +47,6 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
 #: formations and actuation as real thrusters have it; the other ids of :data:`ENV_IDS` are the
 #: standard track. Every id here is an id of :data:`ENV_IDS`, in its order.
 HARD_TRACK: tuple[str, ...] = (
-    "TetherUnderactuatedTetrahedron-v0",
     "TetherDelayedTetrahedron-v0",
 )
 
@@ -214,21 +212,6 @@ ENV_DOCS: dict[str, EnvDoc] = {
             "lines' ends."
         ),
         version_history=_BEADED_V0,
-    ),
-    "TetherUnderactuatedTetrahedron-v0": EnvDoc(
-        summary="The paper's tetrahedron with thrusters on two of its four satellites: a hard-track id.",
-        description=(
-            "The tetrahedron of the paper's case, with thrusters on two satellites only: the other two are "
-            "passive, as daughter craft that carry no propulsion of their own. The action "
-            "and the thrust limits cover the two thrusting satellites, in the order of their indices; the "
-            "observation still covers all four satellites and every cable.\n\n"
-            "The passive satellites are reached only through the cables, which pull but never push: while "
-            "the cables to a passive satellite are slack, no thruster can act on it at all. A law that "
-            "damps each satellite where it stands leaves the passive pair to the cables; a controller has "
-            "to move the thrusting pair so that the cables do the work, which is where the reference "
-            "ceiling gains most over the scripted laws (see the benchmark page)."
-        ),
-        version_history=_HARD_TRACK_V0,
     ),
     "TetherDelayedTetrahedron-v0": EnvDoc(
         summary="The paper's tetrahedron with each command acting two control steps late: a hard-track id.",

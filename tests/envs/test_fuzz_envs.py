@@ -58,8 +58,7 @@ SMALL_IDS = [
     "TetherChain-v0",
     "TetherSpinningTriangle-v0",
     "TetherRadialChain-v0",
-    # The hard track's: thrusters on some satellites only, or a delay line.
-    "TetherUnderactuatedTetrahedron-v0",
+    # The hard track's: a delay line.
     "TetherDelayedTetrahedron-v0",
 ]
 
