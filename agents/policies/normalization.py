@@ -59,6 +59,28 @@ class NormalizationStatistics:
     norm_reward: bool
 
     @classmethod
+    def fixed(cls, observations: np.ndarray) -> NormalizationStatistics:
+        """Statistics fixed from (N, obs_dim) ``observations``, as ``VecNormalize`` would hold them
+        had it seen exactly these: their mean and variance, no reward scaling, SB3's defaults for
+        the rest (clip 10, epsilon 1e-8). The trainers that do not adapt their statistics while
+        training (ARS, DAgger) normalise with these."""
+        states = np.asarray(observations, dtype=np.float64)
+        return cls(
+            obs_mean=states.mean(axis=0),
+            obs_var=states.var(axis=0),
+            obs_count=float(len(states)),
+            ret_mean=np.zeros(()),
+            ret_var=np.ones(()),
+            ret_count=1e-4,
+            clip_obs=10.0,
+            clip_reward=10.0,
+            epsilon=1e-8,
+            gamma=0.99,
+            norm_obs=True,
+            norm_reward=False,
+        )
+
+    @classmethod
     def from_vec_normalize(cls, normalizer: VecNormalize) -> NormalizationStatistics:
         """The statistics of a ``VecNormalize`` (Box observations only)."""
         if isinstance(normalizer.obs_rms, dict):

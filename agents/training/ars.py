@@ -213,21 +213,7 @@ def observation_statistics(env_id: str, residual_on: str, seeds: list[int]) -> N
         observation, _, terminated, truncated, _ = envs.step(action)
         alive &= ~(terminated | truncated)
     envs.close()
-    states = np.concatenate(visited)
-    return NormalizationStatistics(
-        obs_mean=states.mean(axis=0),
-        obs_var=states.var(axis=0),
-        obs_count=float(len(states)),
-        ret_mean=np.zeros(()),
-        ret_var=np.ones(()),
-        ret_count=1e-4,
-        clip_obs=10.0,
-        clip_reward=10.0,
-        epsilon=1e-8,
-        gamma=0.99,
-        norm_obs=True,
-        norm_reward=False,
-    )
+    return NormalizationStatistics.fixed(np.concatenate(visited))
 
 
 def save_linear_policy(

@@ -272,21 +272,7 @@ def collect(
 
 def observation_statistics(observations: np.ndarray) -> NormalizationStatistics:
     """Fixed normalisation statistics (mean and variance, no reward scaling) of (N, O) observations."""
-    states = np.asarray(observations, dtype=np.float64)
-    return NormalizationStatistics(
-        obs_mean=states.mean(axis=0),
-        obs_var=states.var(axis=0),
-        obs_count=float(len(states)),
-        ret_mean=np.zeros(()),
-        ret_var=np.ones(()),
-        ret_count=1e-4,
-        clip_obs=10.0,
-        clip_reward=10.0,
-        epsilon=1e-8,
-        gamma=0.99,
-        norm_obs=True,
-        norm_reward=False,
-    )
+    return NormalizationStatistics.fixed(observations)
 
 
 def build_student(env_id: str, net_arch: Sequence[int], seed: int) -> Any:
