@@ -235,7 +235,8 @@ class LQRController(Controller):
     :func:`controllable_subspace`; the Riccati equation of ``T^T Ad T, T^T Bd`` with the state
     weight ``T^T Q T``; ``G = G_r T^T``). In an inertial frame the controllable part is the elastic
     motion the thrusting satellites can make with the passive ones at rest (a test checks that
-    it spans exactly that; in a turning frame the frame terms may let the thrusters reach more). The law reads the state through its projection on that subspace, ``T^T z``, and
+    it spans exactly that; in a turning frame the frame terms may let the thrusters reach more).
+    The law reads the state through its projection on that subspace, ``T^T z``, and
     stiffens and damps it; the rest, the passive satellites' own motion, gets no gain and keeps
     its open-loop poles in the design model (a drift at ``z = 1`` and the satellite damping). In
     the env a passive satellite is then damped only through its taut cables, by the thrusting
