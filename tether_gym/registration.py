@@ -38,7 +38,7 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
     "TetherSpinningHub-v0": ("spinning_hub", 300, {}),
     "TetherBeadedTetrahedron-v0": ("beaded_tetrahedron", 300, {}),
     "TetherBeadedChain-v0": ("beaded_chain", 300, {}),
-    "TetherDelayedTetrahedron-v0": ("tetrahedron", 300, {"thrust_delay": 2}),
+    "TetherDelayedTetrahedron-v0": ("tetrahedron", 300, {"thrust_delay": 2, "observe_commands": True}),
 }
 
 #: The hard track: ids where the best scripted law, its gains re-tuned for the id, costs at least
@@ -217,9 +217,10 @@ ENV_DOCS: dict[str, EnvDoc] = {
         description=(
             "The tetrahedron of the paper's case, with every thrust command acting two control intervals "
             "after it is given, as thrusters behind a slow valve, a command bus and a flight computer "
-            "do. The observation does not include the commands still in flight: a controller that needs "
-            "them remembers what it sent. An episode's first intervals have no command yet to act, and fly "
-            "with the bias thrust alone.\n\n"
+            "do. The observation ends with the two commands still in flight, oldest first, as the flight "
+            "computer knows what it sent: with them the state is observed, and a controller can predict "
+            "the state its command will meet. An episode's first intervals have no command yet to act, "
+            "and fly with the bias thrust alone.\n\n"
             "Feedback on the present velocity then pushes against where the satellite was, not where it "
             "is; a law has to act on a prediction of the state the command will meet, and the cables' "
             "snaps make that prediction hard."

@@ -60,6 +60,7 @@ REPORTED_SETTINGS = (
     "observe_tensions",
     "thrusters",
     "thrust_delay",
+    "observe_commands",
 )
 
 #: Sections of the class docstring that get this id's own lines in front of the shared text.
@@ -346,6 +347,18 @@ def observation_rows(facts: EnvFacts) -> list[tuple[str, str, str]]:
                 )
             )
     start += width * cluster.num_tethers
+    if settings["observe_commands"]:
+        delay, size = settings["thrust_delay"], facts.action_size
+        for age in range(delay):
+            rows.append(
+                (
+                    f"{start} .. {start + size - 1}",
+                    f"the command given {delay - age} control interval{'s' if delay - age > 1 else ''} ago, not "
+                    f"acting yet ({'the next to act' if age == 0 else 'acts after the one above'})",
+                    "1 (action units)",
+                )
+            )
+            start += size
     if start != facts.observation_size:
         raise DocsBuildError(
             f"{facts.env_id}: the observation layout of TetherClusterEnv's docstring gives {start} entries, but "

@@ -245,6 +245,7 @@ FLAT_ARGUMENTS = {
     "failure_penalty": 50.0,
     "max_deviation": 1.0,
     "observe_tensions": True,
+    "observe_commands": True,
     "observation_noise": 0.01,
     "observed_satellites": (1, 3),
     "randomize": {"masses": 0.1},
@@ -270,7 +271,7 @@ def test_task_config_groups_hold_every_setting_of_their_concern() -> None:
     grouped = {name for group in TASK_CONFIG_GROUPS.values() for name in group.__dataclass_fields__}
     top_level = {"control_interval", "thrusters", "max_thrust", "thrust_limit", "max_deviation", "observe_tensions"}
     top_level |= {"observation_noise", "observed_satellites", "safety_factor", "allow_unstable_safety_factor"}
-    top_level |= {"difficulty"}
+    top_level |= {"difficulty", "observe_commands"}
     assert grouped | top_level == set(FLAT_ARGUMENTS) == set(TaskConfig.__dataclass_fields__)
     assert not grouped & top_level
     for attribute, group_type in TASK_CONFIG_GROUPS.items():

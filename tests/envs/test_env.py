@@ -362,21 +362,29 @@ def test_an_underactuated_cluster_thrusts_only_on_its_thrusters_and_observes_eve
 
 
 @pytest.mark.parametrize("env_id", DELAYED)
-def test_a_delayed_id_does_not_observe_the_commands_in_flight(env_id: str) -> None:
-    """Two episodes that differ in one command observe the same until that command acts,
-    ``thrust_delay`` intervals later: nothing of it reaches the observation before."""
+def test_a_delayed_id_observes_its_commands_in_flight_and_feels_them_late(env_id: str) -> None:
+    """The observation ends with the commands given but not acting yet, oldest first, clipped
+    to [-1, 1]; the physical part of two episodes that differ in one command stays the same
+    until that command acts, ``thrust_delay`` intervals later."""
     delay = tg.ENV_IDS[env_id][2]["thrust_delay"]
     env = gym.make(env_id)
-    actions = np.random.default_rng(3).uniform(-1, 1, (12,) + env.action_space.shape).astype(np.float32)
+    layout = env.unwrapped.task.observation_layout
+    size = env.action_space.shape[0]
+    assert layout.commands == delay * size and layout.command.stop == env.observation_space.shape[0]
+    actions = np.random.default_rng(3).uniform(-1.5, 1.5, (12, size)).astype(np.float32)
     changed = 4
     observed = []
     for flip in (False, True):
         obs, _ = env.reset(seed=3)
-        run = [obs]
+        assert not obs[layout.command].any()  # nothing in flight at reset
+        run, sent = [obs], [np.zeros(size, np.float32)] * delay
         for step, action in enumerate(actions):
-            obs, *_ = env.step(-action if flip and step == changed else action)
+            sent.append(-action if flip and step == changed else action)
+            obs, *_ = env.step(sent[-1])
+            np.testing.assert_array_equal(obs[layout.command], np.clip(sent[-delay:], -1, 1).ravel())
             run.append(obs)
         observed.append(run)
-    first_different = next(k for k, (a, b) in enumerate(zip(*observed, strict=True)) if not np.array_equal(a, b))
+    physical = [[obs[: layout.command.start] for obs in run] for run in observed]
+    first_different = next(k for k, (a, b) in enumerate(zip(*physical, strict=True)) if not np.array_equal(a, b))
     # Observation k follows step k - 1; the changed command (step `changed`) acts in step changed + delay.
     assert first_different == changed + delay + 1

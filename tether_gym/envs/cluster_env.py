@@ -55,8 +55,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Observation Space
 
-    ``Box(-1e4, 1e4, (6 s + c [+ c] [+ f t],), float32)``, where s is the number of observed
-    satellites, c the number of cables and t of tethers with mass (f entries each, below).
+    ``Box(-1e4, 1e4, (6 s + c [+ c] [+ f t] [+ d a],), float32)``, where s is the number of
+    observed satellites, c the number of cables, t of tethers with mass (f entries each, below),
+    d the ``thrust_delay`` and a the action size (with ``observe_commands`` only).
     Everything is in the **cluster frame**: the origin is at the centre of mass, and the axes are
     those of the simulation frame (inertial, Hill or spinning), in which the nominal shape is at
     rest. ``D`` is
@@ -73,6 +74,11 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     ``ends[0]`` to ``ends[1]``, ``r`` the z axis, or x for a tether within 45 degrees of z):
 
     TETHER_TABLE
+
+    With ``thrust_delay`` d and ``observe_commands``, the last d a entries are the commands
+    given but not acting yet, oldest (the next to act) first, each the action as given, clipped
+    to [-1, 1] (``ObservationLayout.command``). They are the controller's own numbers, so
+    ``observation_noise`` leaves them exact.
 
     At reset every entry is of order 1; values are clipped to +-1e4. ``observation_noise`` adds Gaussian noise with that
     standard deviation, in these units.
@@ -166,8 +172,9 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m),
     ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1),
     ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest
-    cable), ``observe_tensions``, ``observation_noise``, ``observed_satellites``, ``randomize``,
-    ``safety_factor``, and the disturbance, fault and ``difficulty`` options above.
+    cable), ``observe_tensions``, ``observe_commands``, ``observation_noise``,
+    ``observed_satellites``, ``randomize``, ``safety_factor``, and the disturbance, fault and
+    ``difficulty`` options above.
 
     Every argument is checked before anything is built, and a bad one raises
     :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``; ``TypeError`` for an unknown

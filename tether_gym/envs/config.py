@@ -241,6 +241,10 @@ class TaskConfig:
             frame ends the episode (formation lost), m; None: 30 % of the shortest cable; inf:
             never.
         observe_tensions: append cable tensions / breaking load to the observation.
+        observe_commands: append the commands given but not acting yet (the ``thrust_delay``
+            line, oldest first), as a flight computer knows what it sent; needs
+            ``thrust_delay`` > 0.  With it the delayed task's state is observed (a Markov
+            observation), without it a controller has to remember its own commands.
         observation_noise: std of Gaussian noise added to the observation (its own units).
         observed_satellites: satellites whose displacements and velocities are observed (None:
             all).
@@ -279,6 +283,7 @@ class TaskConfig:
     failure_penalty: float = RewardConfig.failure_penalty
     max_deviation: float | None = None
     observe_tensions: bool = False
+    observe_commands: bool = False
     observation_noise: float = 0.0
     observed_satellites: tuple[int, ...] | None = None
     randomize: Mapping[str, float] = dataclasses.field(default_factory=dict)
@@ -307,6 +312,7 @@ class TaskConfig:
             "max_thrust": self._checked_thrust(),
             "thrust_limit": check_choice("thrust_limit", self.thrust_limit, ("per_axis", "magnitude")),
             "observe_tensions": check_bool("observe_tensions", self.observe_tensions),
+            "observe_commands": check_bool("observe_commands", self.observe_commands),
             "observation_noise": number("observation_noise", self.observation_noise, 0.0, MAX_OBSERVATION_NOISE),
             "observed_satellites": check_satellites("observed_satellites", self.observed_satellites),
             "safety_factor": number(
@@ -334,6 +340,11 @@ class TaskConfig:
             group = group_type(**{name: getattr(self, name) for name in names})
             object.__setattr__(self, "_" + group_name, group)
             fields.update({name: getattr(group, name) for name in names})
+        if fields["observe_commands"] and not fields["thrust_delay"]:
+            raise EnvArgumentError(
+                "observe_commands=True needs thrust_delay > 0: without a delay no command is in flight to "
+                "observe; pass thrust_delay=k (control intervals) or drop observe_commands"
+            )
         # The simulator's own bound on the safety factor, with its opt-in, named as env arguments.
         check_safety_factor(fields["safety_factor"], fields["allow_unstable_safety_factor"], error=EnvArgumentError)
         for name, value in fields.items():

@@ -208,8 +208,13 @@ class ObservationLayout:
         displacement, velocity: slices of 3 s entries each, satellite k's x, y, z at 3 k + d.
         elongation: slice of c entries, one per cable.
         tension_ratio: slice of c entries, or an empty slice at the end without tensions.
-        tether: slice of ``len(TETHER_FEATURES)`` t entries at the end, tether k's feature f at
-            ``len(TETHER_FEATURES) k + f`` (empty without tethers).
+        commands: the number of command entries (``thrust_delay`` x action size with
+            ``observe_commands``, else 0).
+        tether: slice of ``len(TETHER_FEATURES)`` t entries after the cable blocks, tether k's
+            feature f at ``len(TETHER_FEATURES) k + f`` (empty without tethers).
+        command: slice of the ``commands`` entries at the end: the commands given but not
+            acting yet, oldest (the next to act) first, each an action in [-1, 1] (empty
+            without ``observe_commands``).
         size: the observation's length.
     """
 
@@ -217,11 +222,13 @@ class ObservationLayout:
     cables: int
     tensions: bool
     tethers: int = 0
+    commands: int = 0
     displacement: slice = dataclasses.field(init=False)
     velocity: slice = dataclasses.field(init=False)
     elongation: slice = dataclasses.field(init=False)
     tension_ratio: slice = dataclasses.field(init=False)
     tether: slice = dataclasses.field(init=False)
+    command: slice = dataclasses.field(init=False)
     size: int = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
@@ -233,7 +240,8 @@ class ObservationLayout:
             start = stop
         stop = start + len(TETHER_FEATURES) * self.tethers
         object.__setattr__(self, "tether", slice(start, stop))
-        object.__setattr__(self, "size", stop)
+        object.__setattr__(self, "command", slice(stop, stop + self.commands))
+        object.__setattr__(self, "size", stop + self.commands)
 
     def satellite_values(self, observation: np.ndarray, block: str) -> np.ndarray:
         """The ``"displacement"`` or ``"velocity"`` entries of (..., size) observations, as

@@ -423,7 +423,11 @@ class DampingTask:
         # A tether's segments are observed per tether (the last block), not one by one.
         self.observed_cables = m - sum(spec.segments for spec in cluster.tethers)
         self.observation_layout = layout = ObservationLayout(
-            self.observed.size, self.observed_cables, config.observe_tensions, cluster.num_tethers
+            self.observed.size,
+            self.observed_cables,
+            config.observe_tensions,
+            cluster.num_tethers,
+            config.thrust_delay * action_size if config.observe_commands else 0,
         )
         self.observation_size = layout.size
         tk = _task_kernels
@@ -535,8 +539,19 @@ class DampingTask:
             self.end_reason,
             parallel=self.num_clusters >= PARALLEL_MIN_BATCH,
         )
-        if self.observation_layout.tethers:
+        self._observe_extra_blocks()
+
+    def _observe_extra_blocks(self) -> None:
+        """Write the observation blocks the compiled kernels do not: each tether's and the
+        commands in flight, when the layout has them."""
+        layout = self.observation_layout
+        if layout.tethers:
             self._observe_tethers()
+        if layout.commands:
+            start = _task_kernels.OBSERVATION_COLUMNS + layout.command.start
+            # The queue holds the commands as given; the thrusters act on them clipped to [-1, 1].
+            commands = np.clip(self.disturbances.action_queue.reshape(self.num_clusters, -1), -1.0, 1.0)
+            self.task_cluster_table[:, start : start + layout.commands] = commands
 
     def _observe_tethers(self) -> None:
         """Write each tether's observation block (see :data:`~tether_gym.envs.contract.TETHER_FEATURES`)
@@ -836,8 +851,7 @@ class DampingTask:
                 (self.task_node_table, self.task_cluster_table, self.propellant, self.end_reason),
                 self._no_record,
             )
-            if self.observation_layout.tethers:
-                self._observe_tethers()
+            self._observe_extra_blocks()
             return
         if rngs is None:
             raise ValueError("this task draws disturbances or thrust noise: pass step(..., rngs=[one per cluster])")
@@ -867,6 +881,8 @@ class DampingTask:
         if self.config.observation_noise == 0:
             return observation.astype(np.float32)
         noise = np.stack([rng.standard_normal(self.observation_size) for rng in rngs])
+        # The commands in flight are the controller's own numbers, not a measurement.
+        noise[:, self.observation_layout.command] = 0.0
         noisy = observation + self.config.observation_noise * noise
         return np.clip(noisy, -OBSERVATION_LIMIT, OBSERVATION_LIMIT).astype(np.float32)
 
