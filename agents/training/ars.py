@@ -49,15 +49,13 @@ from tether_gym._optional import needs_extra, require
 from ..common.checks import MAX_NUM_ENVS, check_int
 from ..common.commands import command_line
 from ..common.data import HYPERPARAMS_DIR
-from ..common.files import atomic_directory, atomic_write_text, holds_output_claims
+from ..common.files import atomic_write_text, holds_output_claims
 from ..common.settings import load_settings
 from ..controllers.registry import BASELINES, make_baseline
 from ..controllers.residual import residual_actions
-from ..policies.format import save_policy
-from ..policies.layout import POLICY_FILES, PolicyFormatError
+from ..policies.layout import PolicyFormatError
 from ..policies.normalization import NormalizationStatistics
-from ..policies.spec import PolicySpec
-from .runs import clear_earlier_run, prepare_run_dir
+from .runs import clear_earlier_run, prepare_run_dir, save_residual_policy
 from .selection import EvaluationLog, baseline_returns, episode_returns, evaluation_seeds
 
 with needs_extra("train", "the ARS settings files"):
@@ -254,15 +252,9 @@ def save_linear_policy(
             parameter.zero_()
     model.num_timesteps = int(timesteps)
     venv.close()
-    spec = PolicySpec(residual_on=residual_on)
-    if not whole_directory:
-        return save_policy(
-            directory, model, statistics, env_id, provenance, extra_files=extra_files, spec=spec, algo="ars"
-        )
-    directory.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_directory(directory, ours=POLICY_FILES) as staging:
-        save_policy(staging, model, statistics, env_id, provenance, extra_files=extra_files, spec=spec, algo="ars")
-    return directory
+    return save_residual_policy(
+        directory, model, statistics, env_id, provenance, residual_on, "ars", extra_files, whole_directory
+    )
 
 
 @holds_output_claims

@@ -5,16 +5,19 @@ when it is replaced, and what ``--resume`` names checked against the run to be t
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from ..common.files import (
     OutputError,
     OutputExistsError,
+    atomic_directory,
     check_no_symlinks_inside,
     prepare_output_dir,
     remove_written_files,
 )
-from ..policies.format import check_resumable, is_policy_dir, read_metadata
+from ..policies.format import check_resumable, is_policy_dir, read_metadata, save_policy
 from ..policies.layout import METADATA_FILE, POLICY_FILES
+from ..policies.normalization import NormalizationStatistics
 from ..policies.pickled import is_pickle_model, normalization_file_of, refuse_untrusted, sb3_model_file
 from ..policies.spec import PolicySpec
 from .selection import EVALUATIONS_FILE
@@ -26,6 +29,7 @@ __all__ = [
     "earlier_run_files",
     "prepare_run_dir",
     "resume_source",
+    "save_residual_policy",
 ]
 
 #: Files an earlier run of agents.train may have left (this format and the pickle-based one).
@@ -127,3 +131,29 @@ def resume_source(
         f"--resume {path} holds no checkpoint: pass a directory with {METADATA_FILE} "
         f"(or, with --trust-pickle, an SB3 .zip)"
     )
+
+
+def save_residual_policy(
+    directory: Path,
+    model: Any,
+    statistics: NormalizationStatistics,
+    env_id: str,
+    provenance: dict[str, Any],
+    residual_on: str,
+    algo: str,
+    extra_files: tuple[str, ...] = (),
+    whole_directory: bool = False,
+) -> Path:
+    """Write ``model``'s policy, a residual on the baseline ``residual_on``, in the safe format
+    as ``algo`` (the trainers without an SB3 run of their own: ``ars``, ``dagger``). With
+    ``whole_directory`` (``best/``), the save replaces ``directory`` as a whole, so an interrupt
+    never leaves it half-written."""
+    spec = PolicySpec(residual_on=residual_on)
+    if not whole_directory:
+        return save_policy(
+            directory, model, statistics, env_id, provenance, extra_files=extra_files, spec=spec, algo=algo
+        )
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_directory(directory, ours=POLICY_FILES) as staging:
+        save_policy(staging, model, statistics, env_id, provenance, extra_files=extra_files, spec=spec, algo=algo)
+    return directory
