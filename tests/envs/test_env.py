@@ -388,3 +388,18 @@ def test_a_delayed_id_observes_its_commands_in_flight_and_feels_them_late(env_id
     first_different = next(k for k, (a, b) in enumerate(zip(*physical, strict=True)) if not np.array_equal(a, b))
     # Observation k follows step k - 1; the changed command (step `changed`) acts in step changed + delay.
     assert first_different == changed + delay + 1
+
+
+def test_observed_commands_are_exact_under_observation_noise() -> None:
+    """The commands in flight are the controller's own numbers: observation noise leaves them
+    as given (clipped), while it perturbs every measured entry."""
+    env = gym.make("TetherTriangle-v0", thrust_delay=1, observe_commands=True, observation_noise=0.5)
+    layout = env.unwrapped.task.observation_layout
+    env.reset(seed=0)
+    action = np.linspace(-2.0, 2.0, env.action_space.shape[0]).astype(np.float32)
+    obs, *_ = env.step(action)
+    np.testing.assert_array_equal(obs[layout.command], np.clip(action, -1.0, 1.0))
+    clean = gym.make("TetherTriangle-v0", thrust_delay=1, observe_commands=True)
+    clean.reset(seed=0)
+    clean_obs, *_ = clean.step(action)
+    assert np.all(obs[: layout.command.start] != clean_obs[: layout.command.start])
