@@ -26,14 +26,13 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import shlex
 import sys
 from collections.abc import Callable, Iterator
 from typing import Any
 
 from .common import cli
 from .common.checks import MAX_NUM_ENVS
-from .common.commands import exit_on_error, program
+from .common.commands import command_line, exit_on_error, program
 from .evaluation.ceiling import (
     CEILING_FILE,
     DEFAULT_CHUNK,
@@ -142,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{args.file}" if shipped else "hyperparams/ceiling.yml"
         raise ValueError(f"--envs: no ceiling for {unknown} in {where}; known: {', '.join(known)}")
     runner, how = (None, "") if args.show else _runner(args)
-    command = shlex.join([f"python -m {program('ceiling')}", *(argv if argv is not None else sys.argv[1:])])
+    command = command_line("ceiling", argv if argv is not None else sys.argv[1:])
     return run_ceiling(args, list(args.envs or known), shipped, runner, how, command)
 
 

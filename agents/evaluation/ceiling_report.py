@@ -276,13 +276,13 @@ def _span(seeds: tuple[int, ...]) -> str:
     return f"{len(seeds)} ({first}..{last})" if seeds == tuple(range(first, last + 1)) else f"{len(seeds)} (chosen)"
 
 
-def ceiling_markdown(table: CeilingTable) -> str:
-    """``table`` as Markdown: the room left per id, the aggregate over ids, then one table per id
-    of every controller (mean return ± 95 % t half-width; excess cost over the ceiling, mean
-    [95 % t interval] in %; seeds cheaper than the ceiling; normalised score [95 % bootstrap
-    interval], 0 = passive, 100 = the ceiling)."""
+def ceiling_markdown(table: CeilingTable, title: str = "Against the reference ceiling") -> str:
+    """``table`` as Markdown under the heading ``## <title>``: the room left per id, the
+    aggregate over ids, then one table per id of every controller (mean return ± 95 % t
+    half-width; excess cost over the ceiling, mean [95 % t interval] in %; seeds cheaper than the
+    ceiling; normalised score [95 % bootstrap interval], 0 = passive, 100 = the ceiling)."""
     lines = [
-        "## Against the reference ceiling",
+        f"## {title}",
         "",
         "Excess cost over the ceiling, per seed (-R[c]) / (-R[ceiling]) - 1: mean over the ceiling's seeds with its "
         "paired 95 % t interval; lower is better, 0 is the ceiling. Room left: the lowest excess cost of a scripted "
@@ -301,7 +301,8 @@ def ceiling_markdown(table: CeilingTable) -> str:
     lines.append("")
     if table.aggregate:
         lines += [
-            f"Over the {table.ids_total} ids (rliable's IQM and mean, 95 % stratified-bootstrap intervals over seeds "
+            f"Over the {table.ids_total} id{'s' if table.ids_total != 1 else ''} (rliable's IQM and mean, "
+            "95 % stratified-bootstrap intervals over seeds "
             f"within ids, {table.bootstrap['reps']} replications, seed {table.bootstrap['seed']}; a row over fewer ids "
             "is not comparable with the others):",
             "",

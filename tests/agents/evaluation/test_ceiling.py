@@ -99,8 +99,8 @@ def test_a_malformed_file_is_refused_with_the_fix(tmp_path: Path, tiny_run, chan
 
 
 def test_an_id_without_tuned_settings_has_no_ceiling() -> None:
-    with pytest.raises(ValueError, match="no ceiling settings for 'TetherRadialChain-v0'"):
-        load_ceiling_settings("TetherRadialChain-v0")
+    with pytest.raises(ValueError, match="no ceiling settings for 'TetherBeadedChain-v0'"):
+        load_ceiling_settings("TetherBeadedChain-v0")
 
 
 def test_bad_seeds_are_refused() -> None:
@@ -112,7 +112,7 @@ def test_bad_seeds_are_refused() -> None:
 
 def test_the_command_checks_its_arguments_before_any_work(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="--envs: no ceiling for"):
-        command.main(["--envs", "TetherRadialChain-v0", "--serial"])
+        command.main(["--envs", "TetherBeadedChain-v0", "--serial"])
     with pytest.raises(ValueError, match="--file"):
         command.main(["--show", "--file", str(tmp_path / "missing.json")])
 
@@ -134,6 +134,7 @@ def test_the_shipped_ceiling_was_computed_with_today_s_settings_on_held_out_seed
         assert run.settings == dataclasses.asdict(load_ceiling_settings(env_id)), env_id
         assert run.seeds.tolist() == list(range(HELD_OUT_SEED, HELD_OUT_SEED + run.seeds.size)), env_id
         assert run.env_kwargs == {}, env_id
+        assert run.command.startswith("python -m agents.ceiling --envs "), run.command  # pastes into a shell
 
 
 @pytest.mark.slow

@@ -431,3 +431,17 @@ def test_the_command_names_the_file_of_bad_ceiling_data(tmp_path: Path) -> None:
     # A missing file (the shipped one, before it is computed) is named with the option that picks it.
     with pytest.raises(FileNotFoundError, match=r"no ceiling at .*none.json.*--ceiling-file"):
         ceiling_report(str(tmp_path / "none.json"), str(reference))
+
+
+def test_the_shipped_table_aggregates_each_track_apart() -> None:
+    """The hard ids' larger room must not enter the standard track's aggregate: one heading and
+    aggregate per track, each id under its own track's heading."""
+    from agents.evaluation.ceiling import load_ceiling
+    from tether_gym.registration import HARD_TRACK
+
+    text = main(["--ceiling", "--bootstrap-reps", "100"])["ceiling_markdown"]
+    standard, _, hard = text.partition("## Against the reference ceiling: the hard track")
+    assert standard.startswith("## Against the reference ceiling: the standard track") and hard
+    for env_id in load_ceiling():
+        inside, outside = (hard, standard) if env_id in HARD_TRACK else (standard, hard)
+        assert f"| {env_id} |" in inside and f"| {env_id} |" not in outside, env_id
