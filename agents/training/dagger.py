@@ -556,11 +556,12 @@ def train_dagger(
             student = _attached(student_controller(model, statistics, env_id, law_name), env_id, kwargs)
         assert student is not None
         # The student's error on the states it has just visited, before it is refitted on them: what
-        # it had not learnt of the teacher where it goes (NaN at iteration 0, before any fit).
+        # it had not learnt of the teacher where it goes (None at iteration 0, before any fit: JSON
+        # null, as the strict readers that ship a run refuse NaN).
         new_loss = (
             student_loss(model.policy, statistics.normalize_obs(data.observations), data.targets)
             if iteration
-            else float("nan")
+            else None
         )
         all_observations = np.concatenate(observations)
         features = statistics.normalize_obs(all_observations).astype(np.float32)
@@ -601,7 +602,8 @@ def train_dagger(
             print(
                 f"iteration {iteration + 1}/{s.iterations} (beta {beta:.2f}): {s.episodes} episodes, rollout return "
                 f"{data.returns.mean():.2f}, {len(all_observations):,} states, loss {loss:.4g} (targets' variance "
-                f"{entry['target_variance']:.4g}; on the new states before the fit {new_loss:.4g}); eval "
+                f"{entry['target_variance']:.4g}; on the new states before the fit "
+                f"{'n/a' if new_loss is None else f'{new_loss:.4g}'}); eval "
                 f"{entry['mean_return']:.2f} vs {law_name} {law_returns.mean():.2f}: {versus_law.mean:+.2f} "
                 f"[{versus_law.low:+.2f}, {versus_law.high:+.2f}]"
                 + (" (new best)" if new_best else "")

@@ -18,6 +18,7 @@ from gymnasium.vector import AutoresetMode
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from agents.common.reading import json_hooks
 from agents.controllers.mpc import MPCController, MPCSettings
 from agents.controllers.registry import make_baseline
 from agents.policies import TrainedPolicy
@@ -170,12 +171,13 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_a_run_aggregates_the_data_selects_on_the_evaluation_seeds_and_records_its_compute(run: Path) -> None:
-    log = json.loads((run / "best" / "evaluations.json").read_text())
+    # Read as agents.ship reads it: strict JSON, no NaN.
+    log = json.loads((run / "best" / "evaluations.json").read_text(), **json_hooks())
     history = log["evaluations"]
     assert [entry["iteration"] for entry in history] == [0, 1] and [e["beta"] for e in history] == [1.0, 0.0]
     assert history[1]["states"] == 2 * history[0]["states"] == 4 * SHORT["max_episode_steps"]
     assert all(entry["target_variance"] > 0 and entry["loss"] >= 0 for entry in history)
-    assert np.isnan(history[0]["loss_on_new_states"]) and history[1]["loss_on_new_states"] > 0
+    assert history[0]["loss_on_new_states"] is None and history[1]["loss_on_new_states"] > 0
     assert log["seeds"] == [EVAL_SEEDS_START, EVAL_SEEDS_START + 1]
     config = yaml.safe_load((run / "config.yml").read_text())
     assert config["training_seeds"] == [TRAINING_SEEDS_START + 3 * SEEDS_PER_RUN, TRAINING_SEEDS_START + 3 * 800 + 3]
@@ -264,9 +266,9 @@ def test_settings_files_and_runs_without_a_teacher_are_refused(tmp_path: Path) -
     bad.write_text("default: {iterationz: 3}\n")
     with pytest.raises(ValueError, match="unknown DAgger setting.*iterationz"):
         load_dagger_settings("TetherHub-v0", bad)
-    with pytest.raises(ValueError, match="no ceiling settings for 'TetherHub-v0'"):
-        train_dagger("TetherHub-v0", 1, tmp_path, TINY, progress=False)
-    assert not (tmp_path / "TetherHub-v0").exists()  # refused before any work
+    with pytest.raises(ValueError, match="no ceiling settings for 'TetherBeadedChain-v0'"):
+        train_dagger("TetherBeadedChain-v0", 1, tmp_path, TINY, progress=False)
+    assert not (tmp_path / "TetherBeadedChain-v0").exists()  # refused before any work
     without_prior = MPCSettings(samples=3, horizon=2, knots=1)
     with pytest.raises(ValueError, match="residual_on is null .* plans without a prior: name the law"):
         train_dagger(ENV_ID, 1, tmp_path, DAggerSettings(), teacher=without_prior, progress=False)
