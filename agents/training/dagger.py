@@ -559,9 +559,7 @@ def train_dagger(
         # it had not learnt of the teacher where it goes (None at iteration 0, before any fit: JSON
         # null, as the strict readers that ship a run refuse NaN).
         new_loss = (
-            student_loss(model.policy, statistics.normalize_obs(data.observations), data.targets)
-            if iteration
-            else None
+            student_loss(model.policy, statistics.normalize_obs(data.observations), data.targets) if iteration else None
         )
         all_observations = np.concatenate(observations)
         features = statistics.normalize_obs(all_observations).astype(np.float32)
