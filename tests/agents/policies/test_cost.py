@@ -111,7 +111,8 @@ def test_a_network_above_the_limit_or_too_deep_is_refused_by_name() -> None:
             metadata = json.loads((directory / "policy.json").read_text())
             sizes = [math.prod(metadata[key]["shape"]) for key in ("observation_space", "action_space")]
             assert (
-                parameter_count(metadata["algo"], metadata["policy_kwargs"], *sizes, "x") < MAX_POLICY_PARAMETERS / 50
+                parameter_count(metadata["algo"], metadata["policy_kwargs"], *sizes, "x")
+                < MAX_POLICY_PARAMETERS / 40  # the DAgger 256x256 student: 83 k
             )
 
 
