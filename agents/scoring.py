@@ -31,7 +31,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from tether_gym.registration import HARD_TRACK
+from tether_gym.registration import track_of
 
 from .common import cli
 from .common.commands import exit_on_error, program
@@ -125,7 +125,7 @@ def ceiling_report(
         # ids' larger room pull the standard track's figures, as the benchmark never does.
         parts = []
         for track in ("standard", "hard"):
-            runs = {env_id: run for env_id, run in ceiling.items() if (env_id in HARD_TRACK) == (track == "hard")}
+            runs = {env_id: run for env_id, run in ceiling.items() if track_of(env_id) == track}
             if runs:
                 table = ceiling_table(reference, runs, reps=bootstrap_reps)
                 parts.append(ceiling_markdown(table, f"Against the reference ceiling: the {track} track"))

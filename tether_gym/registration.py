@@ -54,6 +54,13 @@ HARD_TRACK: tuple[str, ...] = ("TetherDelayedTetrahedron-v0",)
 #: seeds) for an id to qualify for :data:`HARD_TRACK`: 0.1 is 10 % of the ceiling's cost.
 HARD_TRACK_MIN_EXCESS_COST = 0.10
 
+
+def track_of(env_id: str) -> str:
+    """``"hard"`` for an id of :data:`HARD_TRACK`, else ``"standard"``: the track whose tables
+    and aggregates an id's results belong to (the two are never aggregated together)."""
+    return "hard" if env_id in HARD_TRACK else "standard"
+
+
 #: The paper's case, and the default task.
 DEFAULT_ENV_ID = "TetherTetrahedron-v0"
 

@@ -105,7 +105,7 @@ from typing import Any
 
 import numpy as np
 
-from tether_gym.registration import ENV_IDS, HARD_TRACK
+from tether_gym.registration import ENV_IDS, track_of
 
 from ..common.checks import MAX_NUM_ENVS, check_int
 from ..common.cli import HELD_OUT_SEED, REFERENCE, did_you_mean
@@ -263,12 +263,7 @@ def track_ids(track: str) -> list[str]:
     the hard track is :data:`tether_gym.registration.HARD_TRACK`, the standard track every other id."""
     if track not in TRACKS:
         raise ValueError(f"track must be one of {list(TRACKS)}; got {track!r}")
-    return [env_id for env_id in ENV_IDS if track == "all" or (env_id in HARD_TRACK) == (track == "hard")]
-
-
-def track_of(env_id: str) -> str:
-    """``hard`` for an id of :data:`tether_gym.registration.HARD_TRACK`, else ``standard``."""
-    return "hard" if env_id in HARD_TRACK else "standard"
+    return [env_id for env_id in ENV_IDS if track in ("all", track_of(env_id))]
 
 
 def _check_names(name: str, values: Any, allowed: Sequence[str] | None = None) -> list[str] | None:
