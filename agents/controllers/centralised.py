@@ -106,12 +106,14 @@ class VelocityFeedbackController(Controller):
     Args:
         env: a tether-gym env.
         gain: the gain rate ``g`` in 1/s; None applies the rule.
+        predict_delay: act on the state predicted over a thrust delay (see
+            :class:`~agents.controllers.base.Controller`).
     """
 
     name = "velocity_feedback"
 
-    def __init__(self, env: Any, gain: float | None = None) -> None:
-        super().__init__(env)
+    def __init__(self, env: Any, gain: float | None = None, predict_delay: bool | None = None) -> None:
+        super().__init__(env, predict_delay)
         self.model = LinearModel(self.task, cluster=self.cluster)
         if gain is None:
             gain = self.best_gain()
@@ -249,12 +251,16 @@ class LQRController(Controller):
         thrust_weight: weight of the normalised thrust in the cost (Bryson's rule: 1).
         design: the model the gain is designed on: ``"slack"`` (every cable slack, the
             baseline) or ``"taut"`` (every cable taut, the earlier design, kept for comparison).
+        predict_delay: act on the state predicted over a thrust delay (see
+            :class:`~agents.controllers.base.Controller`).
     """
 
     name = "lqr"
 
-    def __init__(self, env: Any, thrust_weight: float = 1.0, design: str = "slack") -> None:
-        super().__init__(env)
+    def __init__(
+        self, env: Any, thrust_weight: float = 1.0, design: str = "slack", predict_delay: bool | None = None
+    ) -> None:
+        super().__init__(env, predict_delay)
         weight_is_number = isinstance(thrust_weight, (int, float, np.integer, np.floating)) and not isinstance(
             thrust_weight, bool
         )
@@ -346,6 +352,8 @@ class TensionAwareController(Controller):
         gain: velocity-feedback rate ``g`` in 1/s; None applies the velocity-feedback rule.
         strut_stiffness: ``kappa`` in N/m; None uses ``m g^2 / 4`` with the mean thruster mass.
         tether_strut_stiffness: the strut across a tether with mass, N/m (default 0: none).
+        predict_delay: act on the state predicted over a thrust delay (see
+            :class:`~agents.controllers.base.Controller`).
 
     **Tethers with mass.** The law runs on :func:`~agents.controllers.base.equivalent_cluster`:
     a tether is one cable between its satellites, slack while the length along its beads (its
@@ -366,9 +374,11 @@ class TensionAwareController(Controller):
         gain: float | None = None,
         strut_stiffness: float | None = None,
         tether_strut_stiffness: float = 0.0,
+        predict_delay: bool | None = None,
     ) -> None:
-        super().__init__(env)
-        self.velocity_feedback = VelocityFeedbackController(env, gain=gain)
+        super().__init__(env, predict_delay)
+        # The inner law only supplies the gain and the feedback on the state this law decoded.
+        self.velocity_feedback = VelocityFeedbackController(env, gain=gain, predict_delay=False)
         self.gain = self.velocity_feedback.gain
         if strut_stiffness is None:
             strut_stiffness = float(self.masses[self.thrusters].mean()) * self.gain**2 / 4.0

@@ -85,8 +85,8 @@ class LocalController(Controller):
 
     name = "local"
 
-    def __init__(self, env: Any) -> None:
-        super().__init__(env)
+    def __init__(self, env: Any, predict_delay: bool | None = None) -> None:
+        super().__init__(env, predict_delay)
         # With tethers that have mass the law is wired on the equivalent cluster (the base class's
         # ``cluster``): a tether is one cable to the satellite at its far end, whose elongation is
         # the tether's (length along its beads minus L0, from the observation's tether block).
@@ -154,12 +154,14 @@ class LocalVelocityFeedbackController(LocalController):
     Args:
         env: a tether-gym env.
         gain: the rate ``g``, 1/s.
+        predict_delay: act on the state predicted over a thrust delay (see
+            :class:`~agents.controllers.base.Controller`).
     """
 
     name = "local_velocity_feedback"
 
-    def __init__(self, env: Any, gain: float = 0.5) -> None:
-        super().__init__(env)
+    def __init__(self, env: Any, gain: float = 0.5, predict_delay: bool | None = None) -> None:
+        super().__init__(env, predict_delay)
         if not (np.isfinite(gain) and gain >= 0):
             raise ValueError(f"gain must be a finite rate >= 0 in 1/s; got {gain!r}")
         self.gain = float(gain)
@@ -185,14 +187,21 @@ class LocalTensionAwareController(LocalController):
         slack_gain: ``g_slack``, 1/s, its rate while the cable is slack.
         strut_stiffness: ``kappa``, N/m; None: ``mu_c g_slack^2 / 4`` per cable (critical
             damping of the strut against the slack dashpot, as in the centralised law).
+        predict_delay: act on the state predicted over a thrust delay (see
+            :class:`~agents.controllers.base.Controller`).
     """
 
     name = "local_tension_aware"
 
     def __init__(
-        self, env: Any, taut_gain: float = 2.0, slack_gain: float = 1.0, strut_stiffness: float | None = None
+        self,
+        env: Any,
+        taut_gain: float = 2.0,
+        slack_gain: float = 1.0,
+        strut_stiffness: float | None = None,
+        predict_delay: bool | None = None,
     ) -> None:
-        super().__init__(env)
+        super().__init__(env, predict_delay)
         for label, value in (("taut_gain", taut_gain), ("slack_gain", slack_gain)):
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{label} must be a finite rate >= 0 in 1/s; got {value!r}")

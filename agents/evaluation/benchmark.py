@@ -232,6 +232,11 @@ class BenchmarkConfig:
         controllers = _check_names("controllers", self.controllers)
         if self.track not in TRACKS:
             raise ValueError(f"track (--track) must be one of {list(TRACKS)}; got {self.track!r}")
+        if not track_ids(self.track):
+            raise ValueError(
+                f"the {self.track} track has no ids at present (tether_gym.registration.HARD_TRACK says why): "
+                "pass --track standard or all"
+            )
         if env_ids is not None and self.track != "all":
             off_track = [env_id for env_id in env_ids if env_id not in track_ids(self.track)]
             if off_track:

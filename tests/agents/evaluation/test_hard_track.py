@@ -1,6 +1,8 @@
-"""The hard track qualifies: on every hard id the best scripted law, its gains re-tuned for the id,
-costs at least HARD_TRACK_MIN_EXCESS_COST more than the reference ceiling, on the shipped
-held-out seeds and in a fresh quick check."""
+"""The hard track is what qualifies: an id whose laws were re-tuned for it (it has an entry in
+laws.yml) and that has a shipped ceiling is on the hard track exactly when the best scripted law
+costs at least HARD_TRACK_MIN_EXCESS_COST more than the reference ceiling, on the shipped held-out
+seeds and in a fresh quick check. At present no candidate qualifies (the track is empty): the
+delayed tetrahedron's laws predict over its delay and leave no room, which these tests check."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.controllers.registry import BASELINES, make_baseline
+from agents.controllers.registry import BASELINES, load_law_settings, make_baseline
 from agents.evaluation.ceiling import load_ceiling
 from agents.evaluation.ceiling_report import ceiling_table
 from agents.evaluation.rollout import rollout
@@ -20,32 +22,40 @@ from tether_gym.registration import ENV_IDS, HARD_TRACK, HARD_TRACK_MIN_EXCESS_C
 QUICK_SEEDS = 16
 
 
+#: The hard-track candidates: the ids whose laws were re-tuned for them and that have a shipped ceiling.
+CANDIDATES = [env_id for env_id in ENV_IDS if load_law_settings(env_id) and env_id in load_ceiling()]
+
+
 def test_the_hard_track_is_registered_with_its_ceiling_and_reference_scores() -> None:
     ceiling, reference = load_ceiling(), load_reference()
-    assert HARD_TRACK, "the hard track has no id"
+    assert CANDIDATES, "no id has re-tuned laws and a ceiling: nothing is measured for the hard track"
     for env_id in HARD_TRACK:
         assert env_id in ENV_IDS
         assert env_id in ceiling, f"{env_id} has no shipped ceiling: python -m agents.ceiling --envs {env_id}"
         assert env_id in reference["per_id"], f"{env_id} has no reference scores"
+        assert env_id in CANDIDATES, f"{env_id} is on the hard track, but its laws were not re-tuned for it (laws.yml)"
 
 
-@pytest.mark.parametrize("env_id", HARD_TRACK)
-def test_the_best_law_leaves_the_track_s_room_on_the_held_out_seeds(env_id: str) -> None:
+@pytest.mark.parametrize("env_id", CANDIDATES)
+def test_an_id_is_on_the_hard_track_exactly_when_the_best_law_leaves_the_room(env_id: str) -> None:
     """From the shipped data: the lowest mean excess cost of any scripted law over the ceiling,
-    on all of the ceiling's held-out seeds, is at least the track's threshold."""
+    on all of the ceiling's held-out seeds, is at least the track's threshold on a hard id, and
+    below it on a candidate off the track."""
     table = ceiling_table(load_reference(), {env_id: load_ceiling()[env_id]}, reps=100)
     (entry,) = table.ids
-    assert entry.room_left.mean >= HARD_TRACK_MIN_EXCESS_COST, (
-        f"{env_id}: the best law ({entry.best_law}) costs only {100 * entry.room_left.mean:.1f} % more than the "
-        f"ceiling; the hard track needs {100 * HARD_TRACK_MIN_EXCESS_COST:.0f} %"
+    room = entry.room_left.mean
+    assert (room >= HARD_TRACK_MIN_EXCESS_COST) == (env_id in HARD_TRACK), (
+        f"{env_id}: the best law ({entry.best_law}) costs {100 * room:.1f} % more than the ceiling; the hard track "
+        f"needs {100 * HARD_TRACK_MIN_EXCESS_COST:.0f} %, and the id is {'' if env_id in HARD_TRACK else 'not '}on it"
     )
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("env_id", HARD_TRACK)
-def test_a_fresh_quick_check_qualifies_every_hard_id(env_id: str) -> None:
+@pytest.mark.parametrize("env_id", CANDIDATES)
+def test_a_fresh_quick_check_agrees_with_the_track(env_id: str) -> None:
     """Every scripted law (with the id's gains from laws.yml) rerun on the ceiling's first seeds:
-    the best of them still costs at least the threshold more than the shipped ceiling there."""
+    the best of them costs at least the threshold more than the shipped ceiling there on a hard
+    id, and less on a candidate off the track."""
     run = load_ceiling()[env_id]
     seeds = run.seeds[:QUICK_SEEDS].tolist()
     ceiling_returns = run.returns_on(seeds)
@@ -58,4 +68,4 @@ def test_a_fresh_quick_check_qualifies_every_hard_id(env_id: str) -> None:
         envs.close()
         excess[name] = excess_cost(np.nansum(record.rewards, axis=1), ceiling_returns).mean
     best = min(excess, key=excess.__getitem__)
-    assert excess[best] >= HARD_TRACK_MIN_EXCESS_COST, (env_id, best, excess)
+    assert (excess[best] >= HARD_TRACK_MIN_EXCESS_COST) == (env_id in HARD_TRACK), (env_id, best, excess)
