@@ -15,8 +15,10 @@ and learns the planner's correction: its regression targets are ``clip(teacher(s
 **What the student observes.** The env's observation and nothing else: the positions, velocities
 and cable elongations the env gives every controller. The teacher is privileged: it reads the
 env's true state and model (``env.unwrapped.task``), on the delayed-thrust id the commands still in
-flight too, and plans 9 s ahead with them. The student sees none of that; on the delayed id it does
-not see the commands in flight, only their effect on the observed motion.
+flight too, and plans 9 s ahead with them. The student sees none of that but what the observation
+holds: on the delayed id the observation holds the commands in flight (``observe_commands``), so
+the student sees them too, and its law predicts over the delay with them (a student trained
+before the laws predicted learnt the correction to the law without the prediction).
 
 **DAgger** (Ross, Gordon and Bagnell, 2011, "A reduction of imitation learning and structured
 prediction to no-regret online learning"). Iteration 0 rolls the teacher out and labels its own
