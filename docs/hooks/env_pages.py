@@ -408,7 +408,7 @@ def hard_track_table() -> str:
             "once each law was designed for its task: thrusters on two of the tetrahedron's four satellites "
             "7.7 %, a chain with thrusters on its ends about 2 %, and "
             f"[`TetherDelayedTetrahedron-v0`]({ENV_PAGE_DIR}/TetherDelayedTetrahedron-v0.md) 13.8 % until the "
-            "laws predicted the state their command meets over the delay, and none after "
+            "laws predicted the state their command meets over the delay, and 7.7 % after "
             "(`tether_gym.registration.HARD_TRACK` records them).\n"
         )
     return hard_track_meaning() + "\n" + table(("id", "cluster", "registered beyond the preset", "what it is"), rows)

@@ -131,7 +131,8 @@ def test_the_shipped_ceiling_was_computed_with_today_s_settings_on_held_out_seed
     shipped = load_ceiling(CEILING_FILE)
     assert set(shipped) <= set(ceiling_ids(CEILING_SETTINGS_FILE))
     for env_id, run in shipped.items():
-        assert run.settings == dataclasses.asdict(load_ceiling_settings(env_id)), env_id
+        # A field added since a run was computed takes its default, which is the behaviour the run had.
+        assert MPCSettings(**run.settings) == load_ceiling_settings(env_id), env_id
         assert run.seeds.tolist() == list(range(HELD_OUT_SEED, HELD_OUT_SEED + run.seeds.size)), env_id
         assert run.env_kwargs == {}, env_id
         assert run.command.startswith("python -m agents.ceiling --envs "), run.command  # pastes into a shell
