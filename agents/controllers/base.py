@@ -190,6 +190,13 @@ class DelayPredictor:
             satellite observed and massless tethers (beads are not observed whole).
     """
 
+    @staticmethod
+    def applies(task: DampingTask) -> bool:
+        """Whether a predictor can serve ``task``: a thrust delay, its commands in flight
+        observed, and no tether with mass (whose beads are observed only as a summary)."""
+        config = task.config
+        return bool(config.thrust_delay and config.observe_commands and not task.cluster.num_beads)
+
     def __init__(self, task: DampingTask) -> None:
         config = task.config
         if not (config.thrust_delay and config.observe_commands):
@@ -222,23 +229,22 @@ class DelayPredictor:
         )
         self._models: dict[int, tuple[DampingTask, list[np.random.Generator]]] = {}
 
-    def model(self, batch: int) -> DampingTask:
-        """The model task of ``batch`` clusters (built once per batch size)."""
+    def model(self, batch: int) -> tuple[DampingTask, list[np.random.Generator]]:
+        """The model task of ``batch`` clusters and its generators (built once per batch size)."""
         if batch not in self._models:
             # The model draws nothing (no randomisation, disturbance or noise); reset wants a generator per cluster.
             self._models[batch] = (
                 DampingTask(self.cluster, batch, self.config),
                 [np.random.default_rng(0) for _ in range(batch)],
             )
-        return self._models[batch][0]
+        return self._models[batch]
 
     def predict(self, positions: np.ndarray, velocities: np.ndarray, observation: np.ndarray) -> DampingTask:
         """Advance (N, n, 3) positions relative to the centre of mass (m) and (N, n, 3) velocities
         (m/s) over the delay with the commands in flight of (N, obs_size) ``observation``; returns
         the model task, whose ``observation`` ((N, model obs_size) float64) is the predicted one."""
         batch = positions.shape[0]
-        model = self.model(batch)
-        rngs = self._models[batch][1]
+        model, rngs = self.model(batch)
         model.reset(rngs, np.arange(batch), positions + self.centre_of_mass, velocities)
         in_flight = observation[:, self.command].reshape(batch, self.delay, self.action_size)
         for step in range(self.delay):
@@ -300,8 +306,7 @@ class Controller:
         if predict_delay is not None and not isinstance(predict_delay, bool):
             raise ValueError(f"predict_delay must be True, False or None; got {predict_delay!r}")
         if predict_delay is None:
-            config = task.config
-            predict_delay = bool(config.thrust_delay and config.observe_commands and not task.cluster.num_beads)
+            predict_delay = DelayPredictor.applies(task)
         #: The Smith predictor the law acts through, or None: it acts on the observed state.
         self.delay_predictor = DelayPredictor(task) if predict_delay else None
 

@@ -39,7 +39,7 @@ from tether_gym.analysis import tether_mode_errors
 from tether_gym.envs import TetherClusterEnv
 from tether_gym.envs.contract import TETHER_FEATURE_MEANINGS, TETHER_FEATURES
 from tether_gym.presets import PRESETS
-from tether_gym.registration import ENV_DOCS, ENV_IDS, HARD_TRACK, HARD_TRACK_MIN_EXCESS_COST
+from tether_gym.registration import ENV_DOCS, ENV_IDS, HARD_TRACK, HARD_TRACK_MIN_EXCESS_COST, track_of
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV_PAGE_DIR = "envs"
@@ -374,11 +374,6 @@ def table(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def track(env_id: str) -> str:
-    """``"hard"`` for an id of :data:`~tether_gym.registration.HARD_TRACK`, else ``"standard"``."""
-    return "hard" if env_id in HARD_TRACK else "standard"
-
-
 def hard_track_meaning() -> str:
     """One paragraph: what puts an id on the hard track (from the registry's threshold)."""
     return (
@@ -429,7 +424,7 @@ def env_page(env_id: str) -> str:
         ("Frame", frame_text(cluster)),
         ("Control interval", f"{interval} s"),
         ("Episode", f"{facts.max_episode_steps} steps ({number(facts.episode_seconds)} s), then truncated"),
-        ("Track", f"[{track(env_id)}]({HARD_TRACK_LINK})"),
+        ("Track", f"[{track_of(env_id)}]({HARD_TRACK_LINK})"),
         ("Thrusters", thrust_text(facts)),
         (
             "Initial conditions (std per component)",
@@ -574,7 +569,7 @@ def ids_table() -> str:
                 str(action),
                 str(observation),
                 f"{steps} × {number(interval)} s",
-                track(env_id),
+                track_of(env_id),
                 env_doc(env_id).summary,
             )
         )
