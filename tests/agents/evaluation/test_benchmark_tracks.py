@@ -35,8 +35,9 @@ from agents.evaluation.plots import plot_excess_costs
 from tether_gym.registration import ENV_IDS
 
 STANDARD_ID = "TetherTetrahedron-v0"
-#: The hard track these tests run the machinery on. No id qualifies at present and the registry's
-#: track is empty, so the tests put the id that was on it back for the module.
+#: The hard track these tests run the machinery on: the massless id that was once on it stands in
+#: for the registry's track for the module, as an episode of tethers with mass costs several times
+#: the compute.
 HARD_TRACK = ("TetherDelayedTetrahedron-v0",)
 
 

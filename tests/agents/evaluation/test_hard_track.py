@@ -1,8 +1,9 @@
 """The hard track is what qualifies: an id whose laws were re-tuned for it (it has an entry in
 laws.yml) and that has a shipped ceiling is on the hard track exactly when the best scripted law
 costs at least HARD_TRACK_MIN_EXCESS_COST more than the reference ceiling, on the shipped held-out
-seeds and in a fresh quick check. At present no candidate qualifies (the track is empty): the
-delayed tetrahedron's laws predict over its delay and leave no room, which these tests check."""
+seeds and in a fresh quick check. The beaded tetrahedron with 4-segment lines qualifies; the
+delayed tetrahedron's laws predict over its delay and leave too little room, and these tests check
+both."""
 
 from __future__ import annotations
 
