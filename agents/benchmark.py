@@ -8,9 +8,10 @@ score (0 = passive, 100 = ``mpc``), across the ids of each track rliable's IQM a
 normalised scores, and every controller's excess cost over the shipped reference ceiling, which
 it reads (``--ceiling-file``) instead of rerunning the planner.
 
-**Run time.** The full run (every id, 64 episodes, ``mpc`` included) takes about 1 h 35 min on a
-2-core machine, most of it ``mpc`` (39 min for the 8 massless standard ids, about 25 min for each
-id with beaded tethers); the command prints its estimate before it starts. ``--quick`` is a smoke
+**Run time.** The full run (every id, 64 episodes, ``mpc`` included) takes about 2 h on a
+2-core machine by the cost model, most of it ``mpc`` (39 min for the 8 massless standard ids,
+about 25 min for each id with beaded tethers; the 4-segment one took 8); the command prints its
+estimate before it starts. ``--quick`` is a smoke
 check of 2 to 4 minutes: 8 episodes (the ceiling's first seeds), no ``mpc``, noisier numbers.
 
 :mod:`agents.evaluation.benchmark` defines every statistic and every file it writes to ``--out``;

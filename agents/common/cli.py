@@ -440,8 +440,9 @@ def benchmark_parser() -> argparse.ArgumentParser:
         "baseline, normalised scores (0 = passive, 100 = mpc), rliable's aggregate over the ids of each track, "
         "and every controller's excess cost over the shipped reference ceiling (read, not rerun).",
         epilog="Run time (2-core machine): the full run (every id, 64 episodes, mpc included) takes about "
-        "1 h 35 min (the cost model's estimate: 39 min for the 8 massless standard ids, as measured, 25 min for each "
-        "id with beaded tethers, most of it mpc); it prints its own estimate before it starts. --quick takes about "
+        "2 h (the cost model's estimate: 39 min for the 8 massless standard ids, as measured, 25 min for each "
+        "id with beaded tethers, most of it mpc; the 4-segment one took 8); it prints its own estimate before it "
+        "starts. --quick takes about "
         "2-4 minutes. "
         "Trust: shipped models load without running code; a pickle-based SB3 model path in "
         "--controllers is refused unless --trust-pickle is given.",

@@ -84,7 +84,7 @@ scripted law and its excess cost (the room left), and the track's rliable IQM an
 excess costs with stratified-bootstrap intervals.
 
 **Run time and the quick mode.** Before the rollouts it prints the estimated run time
-(:func:`estimate_seconds`, the cost model :data:`SECONDS_PER_EPISODE_STEP`): about 1 h 35 min for
+(:func:`estimate_seconds`, the cost model :data:`SECONDS_PER_EPISODE_STEP`): about 2 h for
 the full run on a 2-core machine. ``quick`` runs :data:`QUICK_EPISODES` episodes, every baseline
 and shipped model, no ``mpc``, in 2 to 4 minutes, and says so in every output.
 
