@@ -749,6 +749,7 @@ def _ceiling_id_dict(item: CeilingId) -> dict[str, Any]:
                 "ceiling_score": None
                 if row.score is None
                 else {"mean": row.score, "low": row.score_low, "high": row.score_high},
+                "gap_closed": None if row.gap is None else dataclasses.asdict(row.gap),
             }
             for row in item.rows
         },

@@ -12,6 +12,9 @@ anything, and gives per id and controller:
   seed), and the seeds where the controller was cheaper than the ceiling;
 * the normalised score with 0 = passive and 100 = the ceiling, with its paired bootstrap
   interval (the reference's resamples and bootstrap seed);
+* the **gap closed**: the fraction of the best scripted law's excess cost that the controller
+  removes, with its paired bootstrap interval (:func:`~.stats.gap_closed`; the issue's goal for
+  a learned controller on a hard id is half of it);
 
 per id, the ceiling's compute per env and control step, and the **room left**: the lowest mean
 excess cost of any scripted law on those seeds (how much better than every hand-written law the
@@ -33,9 +36,11 @@ import numpy as np
 from .scoring import ReferenceDataError, ceiling_rows, ceiling_seeds_and_returns
 from .stats import (
     ExcessCost,
+    GapClosed,
     aggregate_excess_costs,
     aggregate_scores,
     excess_cost,
+    gap_closed,
     score_with_interval,
     t_interval,
 )
@@ -65,6 +70,8 @@ class CeilingRow:
         score: the normalised score, 0 = passive, 100 = the ceiling (None when the ceiling's
             mean return is not above passive's on these seeds).
         score_low, score_high: its 95 % paired bootstrap interval, or None.
+        gap: the fraction of the id's best scripted law's excess cost it closes
+            (:func:`~.stats.gap_closed`), or None when that law is not above the ceiling's cost.
     """
 
     env_id: str
@@ -77,6 +84,7 @@ class CeilingRow:
     score: float | None
     score_low: float | None
     score_high: float | None
+    gap: GapClosed | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -165,6 +173,15 @@ def _id_table(env_id: str, entry: dict[str, Any], run: Any, reference: dict[str,
             f"the reference scores of {env_id} hold no scripted law besides {zero}: no room left to state"
         )
     best = min(laws, key=lambda row: row.excess.mean)  # min keeps the first of equal values
+    rows = [
+        dataclasses.replace(
+            row,
+            gap=gap_closed(
+                row.returns, best.returns, ceiling_returns, bootstrap["reps"], bootstrap["seed"], confidence
+            ),
+        )
+        for row in rows
+    ]
     return CeilingId(
         env_id=env_id,
         seeds=tuple(int(seed) for seed in seeds.tolist()),
@@ -248,6 +265,12 @@ def _percent(excess: ExcessCost) -> str:
     return f"{100 * excess.mean:+.1f} % [{100 * excess.low:+.1f}, {100 * excess.high:+.1f}]"
 
 
+def _gap(gap: GapClosed | None) -> str:
+    if gap is None:
+        return "—"
+    return f"{100 * gap.fraction:+.0f} % [{100 * gap.low:+.0f}, {100 * gap.high:+.0f}]"
+
+
 def _score(score: float | None, low: float | None, high: float | None) -> str:
     if score is None:
         return "n/a"
@@ -280,7 +303,8 @@ def ceiling_markdown(table: CeilingTable, title: str = "Against the reference ce
     """``table`` as Markdown under the heading ``## <title>``: the room left per id, the
     aggregate over ids, then one table per id of every controller (mean return ± 95 % t
     half-width; excess cost over the ceiling, mean [95 % t interval] in %; seeds cheaper than the
-    ceiling; normalised score [95 % bootstrap interval], 0 = passive, 100 = the ceiling)."""
+    ceiling; normalised score [95 % bootstrap interval], 0 = passive, 100 = the ceiling; the
+    fraction of the best law's gap closed [95 % paired bootstrap interval], in %)."""
     lines = [
         f"## {title}",
         "",
@@ -323,14 +347,16 @@ def ceiling_markdown(table: CeilingTable, title: str = "Against the reference ce
         lines += [
             f"### {item.env_id}",
             "",
-            "| controller | mean return | excess cost over the ceiling | cheaper than the ceiling | normalised score |",
-            "|---|---|---|---|---|",
+            "| controller | mean return | excess cost over the ceiling | cheaper than the ceiling | normalised score "
+            f"| gap to {item.best_law} closed |",
+            "|---|---|---|---|---|---|",
         ]
         for row in item.rows:
             name = f"**{row.controller}**" if row.controller == item.best_law else row.controller
             lines.append(
                 f"| {name} | {row.mean_return:.1f} ± {row.return_ci95:.1f} | {_percent(row.excess)} | "
-                f"{row.excess.beats}/{row.excess.episodes} | {_score(row.score, row.score_low, row.score_high)} |"
+                f"{row.excess.beats}/{row.excess.episodes} | {_score(row.score, row.score_low, row.score_high)} | "
+                f"{_gap(row.gap)} |"
             )
         lines.append("")
     for env_id, reason in table.skipped.items():

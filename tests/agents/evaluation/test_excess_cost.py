@@ -31,6 +31,7 @@ from agents.evaluation.stats import (
     aggregate_scores,
     excess_cost,
     excess_costs,
+    gap_closed,
     rliable_modules,
 )
 from agents.scoring import ceiling_report, main
@@ -54,6 +55,28 @@ def test_excess_costs_and_their_interval_on_a_hand_case() -> None:
     assert cost.half_width == pytest.approx(T_975_DF1 * 0.25, rel=1e-7)
     assert (cost.low, cost.high) == pytest.approx((0.75 - T_975_DF1 * 0.25, 0.75 + T_975_DF1 * 0.25), rel=1e-7)
     assert (cost.beats, cost.episodes) == (0, 2)
+
+
+def test_the_gap_closed_on_a_hand_case() -> None:
+    # Ceiling costs 10, 20, 14. The law's excess costs 12/10 - 1 = 0.2, 26/20 - 1 = 0.3, 17/14 - 1 =
+    # 3/14: mean (0.5 + 3/14) / 3 = 5/21. The controller's 0.1, 0.15, 1/14: mean (0.25 + 1/14) / 3 =
+    # 9/84. Closed: 1 - (9/84) / (5/21) = 1 - 9/20 = 0.55.
+    ceiling, law, controller = [-10.0, -20.0, -14.0], [-12.0, -26.0, -17.0], [-11.0, -23.0, -15.0]
+    gap = gap_closed(controller, law, ceiling, reps=2000, seed=1)
+    assert gap is not None
+    assert (gap.fraction, gap.episodes) == (pytest.approx(0.55, abs=1e-12), 3)
+    # The percentile bootstrap's ends are values the statistic takes on resamples of the 3 seeds:
+    # the law itself closes 0 on every one, the ceiling 1, and the interval holds the estimate.
+    assert gap.low <= gap.fraction <= gap.high
+    # Resampling seed 0 alone (0.1 of 0.2 closed: 0.5) and seed 1 alone (0.15 of 0.3: 0.5) bound it below.
+    assert gap.low == pytest.approx(0.5, abs=1e-9)
+    assert gap_closed(law, law, ceiling, reps=200) == dataclasses.replace(gap, fraction=0.0, low=0.0, high=0.0)
+    assert gap_closed(ceiling, law, ceiling, reps=200).fraction == pytest.approx(1.0, abs=1e-15)
+    # A controller above the law's cost closes a negative part; a law at the ceiling leaves no gap.
+    assert gap_closed([-13.0, -29.0, -19.0], law, ceiling, reps=200).fraction < 0.0
+    assert gap_closed(controller, ceiling, ceiling, reps=200) is None
+    with pytest.raises(ValueError, match="one return per seed"):
+        gap_closed(controller[:2], law, ceiling)
 
 
 def test_excess_cost_counts_the_seeds_that_beat_the_ceiling() -> None:
@@ -353,6 +376,12 @@ def test_the_table_on_a_small_synthetic_pair() -> None:
     assert "| idA | 4 (10..13) | -15.0 ± " in text
     assert "| 0.078 s (a test machine) | law_b | +50.0 % [+50.0, +50.0] |" in text
     assert "| **law_b** | -22.5 ± " in text
+    # The gap to the best law closed: law_b's excess cost 0.5, mpc's 0.25 (half), the model's 0.1
+    # (4/5), law_a's 2.0 (1 - 2.0 / 0.5 = -300 %), the ceiling's all of it.
+    closed = {"law_b": 0.0, "mpc": 0.5, "model": 0.8, "law_a": -3.0, CEILING: 1.0}
+    for name, fraction in closed.items():
+        assert rows[name].gap is not None and rows[name].gap.fraction == pytest.approx(fraction, abs=1e-12), name
+    assert "| gap to law_b closed |" in text and "| 97.5 [97.5, 97.5] | +80 % [+80, +80] |" in text
     assert "| model | 2/2 | +10.0 % [+10.0, +10.0] | +10.0 % [+10.0, +10.0] | 97.5 [97.5, 97.5] |" in text
     assert "Not tabled: idZ: the reference scores hold no returns for it" in text
 
