@@ -101,10 +101,11 @@ def env_ids(count: int, steps: int, safety_factor: float, modes: tuple[str, ...]
     for env_id, (preset, _, task) in ENV_IDS.items():
         for mode in modes:
             kwargs = dict(task, safety_factor=safety_factor, allow_unstable_safety_factor=True)
-            preset_kwargs = None
+            # An id's own preset settings (such as its segment count) stay; the disturbed mode adds to them.
+            preset_kwargs = dict(kwargs.pop("preset_kwargs", None) or {}) or None
             if mode.endswith("disturbed"):
                 kwargs.update(DISTURBED)
-                preset_kwargs = {"breaking_load": 3.0}
+                preset_kwargs = {**(preset_kwargs or {}), "breaking_load": 3.0}
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UnstableSafetyFactorWarning)
                 env = TetherClusterVectorEnv(
