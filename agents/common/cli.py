@@ -422,6 +422,15 @@ def _add_report_arguments(parser: argparse.ArgumentParser, report: str, out: str
     parser.add_argument("--no-plots", action="store_true", help="write the tables only, no PNG plots (no matplotlib)")
     parser.add_argument("--force", action="store_true", help=f"replace an earlier {report} in --out")
     parser.add_argument(
+        "--save-episodes",
+        nargs="+",
+        type=int_at_least(0),
+        default=(),
+        metavar="SEED",
+        help="also record each controller's episode on these seeds, as --out/episodes/<id>/<controller>_seed<S>.npz, "
+        "for tether-gym-view --recording (each is run again, one episode per controller and seed)",
+    )
+    parser.add_argument(
         "--trust-pickle",
         action="store_true",
         help="allow pickle-based SB3 model paths in --controllers (unpickling runs any code they hold)",

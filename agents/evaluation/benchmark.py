@@ -118,6 +118,7 @@ from ..policies.layout import PolicyFormatError
 from ..policies.pickled import PickleNotTrustedError
 from .ceiling import CEILING_FILE, load_ceiling
 from .ceiling_report import CeilingId, ceiling_table
+from .episodes import checked_seeds, save_episodes
 from .plots import plot_aggregate, plot_excess_costs, plot_normalised_scores, plot_paired_differences
 from .report import clock, write_benchmark_tables
 from .rollout import EpisodeRecord, rollout, summarise
@@ -205,6 +206,9 @@ class BenchmarkConfig:
     allow_other_id: bool = False
     """Run a policy directory of ``controllers`` on every id of its observation shape, not only on
     the id it was trained on (with a warning)."""
+    save_episodes: tuple[int, ...] = ()
+    """Seeds whose episodes to record for the viewer, per controller (and id), as
+    ``out/episodes/<id>/<controller>_seed<S>.npz`` (:mod:`agents.evaluation.episodes`)."""
     reference: str = REFERENCE
     """The controller that scores 100 (default ``mpc``). Another name gives a differently
     anchored score, labelled as such in every table."""
@@ -257,6 +261,7 @@ class BenchmarkConfig:
             self, "episodes", check_int("episodes", episodes, 2, MAX_NUM_ENVS)
         )  # two at least, for an interval
         object.__setattr__(self, "seed", check_int("seed", self.seed, 0))
+        object.__setattr__(self, "save_episodes", checked_seeds("save_episodes", self.save_episodes))
         object.__setattr__(self, "bootstrap_reps", check_int("bootstrap_reps", self.bootstrap_reps, 100))
         reference = self.reference
         if not isinstance(reference, str) or not reference or reference == ZERO:
@@ -409,6 +414,11 @@ def benchmark(config: BenchmarkConfig) -> dict[str, Any]:
         for entry in entries:
             print(f"  missing on {env_id}: {entry['controller']} ({entry['reason']})")
     records, wall, rollout_seconds = _run_rollouts(units, ids, seeds, config.env_kwargs)
+    for env_id in ids if config.save_episodes else []:
+        names = [unit.name for unit in units if unit.env_id == env_id]
+        save_episodes(
+            out, env_id, names, config.save_episodes, config.env_kwargs, config.trust_pickle, config.allow_other_id
+        )
     print(
         f"rollouts done in {clock(rollout_seconds)}; statistics (rliable's bootstrap: {config.bootstrap_reps} "
         "replications per row) and files..."

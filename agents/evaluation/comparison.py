@@ -25,6 +25,7 @@ from ..common.cli import HELD_OUT_SEED
 from ..common.files import holds_output_claims, prepare_table_outputs
 from ..controllers.registry import BASELINES
 from ..policies import make_controller, shipped_models
+from .episodes import checked_seeds, save_episodes
 from .plots import plot_displacement, plot_energy
 from .report import write_comparison_tables
 from .rollout import EpisodeRecord, rollout, summarise
@@ -65,8 +66,12 @@ class CompareConfig:
     """Allow pickle-based SB3 model paths in ``controllers``."""
     allow_other_id: bool = False
     """Run a policy trained on another id than ``env_id`` (with a warning), instead of refusing it."""
+    save_episodes: tuple[int, ...] = ()
+    """Seeds whose episodes to record for the viewer, per controller (and id), as
+    ``out/episodes/<id>/<controller>_seed<S>.npz`` (:mod:`agents.evaluation.episodes`)."""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "save_episodes", checked_seeds("save_episodes", self.save_episodes))
         if self.env_id not in ENV_IDS:
             raise ValueError(f"unknown env id {self.env_id!r}; tether-gym ids are {list(ENV_IDS)}")
         object.__setattr__(self, "episodes", check_int("episodes", self.episodes, 2, MAX_NUM_ENVS))
@@ -151,6 +156,10 @@ def compare(config: CompareConfig) -> tuple[list[EpisodeRecord], list[dict[str, 
     table = write_comparison_tables(out, env_id, episodes, seed, records, summaries)
     print()
     print(table)
+    if config.save_episodes:
+        save_episodes(
+            out, env_id, names, config.save_episodes, config.env_kwargs, config.trust_pickle, config.allow_other_id
+        )
     if config.plots:
         plot_energy(records, out / "energy.png", env_id)
         plot_displacement(records, out / "displacement.png", env_id, satellite)

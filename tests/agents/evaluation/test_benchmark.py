@@ -55,7 +55,16 @@ def test_benchmark_command_smoke(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
         "--out",
         str(out),
     ]
-    results = main([*arguments, "--controllers", "velocity_feedback", "tension_aware", "mpc"])
+    results = main(
+        [*arguments, "--controllers", "velocity_feedback", "tension_aware", "mpc", "--save-episodes", "10001"]
+    )
+    from tether_gym.viewer import load_recording
+
+    for env_id in SMOKE_IDS:  # the episodes saved for the viewer: every controller run, on the seed asked for
+        saved = sorted(path.name for path in (out / "episodes" / env_id).iterdir())
+        assert saved == [f"{name}_seed10001.npz" for name in ("passive", "tension_aware", "velocity_feedback")]
+        recording = load_recording(out / "episodes" / env_id / "tension_aware_seed10001.npz")
+        assert (recording.meta["env_id"], recording.meta["seed"], recording.steps) == (env_id, 10001, 300)
     for name in TABLE_FILES:
         assert (out / name).stat().st_size > 0
     for name in PLOT_FILES:

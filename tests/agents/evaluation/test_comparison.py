@@ -41,11 +41,35 @@ def test_the_config_keeps_checked_values_and_is_frozen() -> None:
         ({"satellite": -1}, "satellite must be an integer >= 0; got -1"),
         ({"controllers": "lqr"}, "controllers must be a list of names or paths"),
         ({"controllers": ["lqr", ""]}, "controllers must be a list of names or paths"),
+        ({"save_episodes": [3, -1]}, "save_episodes must be an integer >= 0; got -1"),
+        ({"save_episodes": 3}, "save_episodes must be a list of seeds"),
     ],
 )
 def test_bad_settings_are_refused_with_their_name(settings: dict[str, object], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         CompareConfig(**settings)  # type: ignore[arg-type]
+
+
+def test_saved_episodes_are_the_comparisons_own_episodes_to_the_bit(tmp_path: Path) -> None:
+    """--save-episodes reruns a seed one episode at a time; for the scripted laws (whose actions
+    do not depend on the batch) that is the episode of the table, reward for reward."""
+    from tether_gym.viewer import load_recording
+
+    names = ["passive", "lqr", "local_tension_aware"]
+    config = CompareConfig(
+        controllers=names,
+        episodes=3,
+        seed=50,
+        plots=False,
+        out=tmp_path,
+        save_episodes=(51,),
+        env_kwargs={"max_episode_steps": 40},
+    )
+    records, _ = compare(config)
+    for name, record in zip(names, records, strict=True):
+        recording = load_recording(tmp_path / "episodes" / "TetherTetrahedron-v0" / f"{name}_seed51.npz")
+        np.testing.assert_array_equal(recording.reward[1:], record.rewards[1], err_msg=name)
+        np.testing.assert_array_equal(recording.energy, record.energy[1], err_msg=name)
 
 
 @pytest.mark.slow
