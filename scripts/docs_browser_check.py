@@ -28,22 +28,16 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from tether_gym.viewer.browser import HEADLESS_CHROMIUM_FLAGS, READY
+
 ROOT = Path(__file__).resolve().parents[1]
 
-#: Chromium's flags for a quiet, isolated, headless run: no GPU, sandbox, QUIC, first-run UI,
-#: background traffic, component updates or sync, and shared memory in /tmp rather than
-#: /dev/shm (a container's is often too small for a renderer). Playwright adds ``--headless``
-#: and the ``--user-data-dir`` (a fresh temporary one) itself.
-CHROMIUM_FLAGS = (
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--disable-dev-shm-usage",
-)
+#: Chromium's flags for a quiet, isolated, headless run (tether_gym.viewer.browser): no sandbox,
+#: QUIC, first-run UI, background traffic, component updates or sync, shared memory in /tmp
+#: rather than /dev/shm (a container's is often too small for a renderer), and WebGL on
+#: SwiftShader, for the env pages' embedded viewer. Playwright adds ``--headless`` and the
+#: ``--user-data-dir`` (a fresh temporary one) itself.
+CHROMIUM_FLAGS = HEADLESS_CHROMIUM_FLAGS
 #: Pages screenshotted, relative to the site root (the env page is the default id's).
 SCREENSHOTS = {
     "index.html": "index.png",
@@ -52,6 +46,7 @@ SCREENSHOTS = {
     "benchmark.html": "benchmark.png",
     "tutorial.html": "tutorial.png",
     "api/tether_gym.html": "api_tether_gym.png",
+    "viewer/TetherTetrahedron-v0.html": "viewer_TetherTetrahedron-v0.png",
 }
 #: JavaScript: how far the page reaches past the window's width, px (a wide table or image that
 #: escapes the content column makes the whole page scroll sideways).
@@ -151,6 +146,8 @@ def check_page(context: Any, base: str, page_path: str, out: Path) -> list[str]:
             )
         if page_path == "index.html":
             problems += check_search(page)
+        if page_path.startswith("viewer/"):
+            problems += check_viewer(page, page_path)
         if page_path in SCREENSHOTS:
             path = out / SCREENSHOTS[page_path]
             page.screenshot(path=str(path), full_page=True)
@@ -158,6 +155,32 @@ def check_page(context: Any, base: str, page_path: str, out: Path) -> list[str]:
     finally:
         page.close()
     return problems
+
+
+def check_viewer(page: Any, page_path: str) -> list[str]:
+    """An embedded viewer page (docs/hooks/env_pages.py): it starts, holds its episode and draws
+    its scene (the canvas is not left at the background colour)."""
+    try:
+        page.wait_for_function(READY, timeout=60_000)
+    except Exception as error:  # Playwright's TimeoutError: reported, not raised
+        return [f"{page_path}: the viewer did not start ({type(error).__name__})"]
+    drawn = page.evaluate(
+        """() => {
+            const canvas = document.getElementById("scene");
+            const probe = document.createElement("canvas");
+            probe.width = canvas.width; probe.height = canvas.height;
+            const g = probe.getContext("2d");
+            g.drawImage(canvas, 0, 0);
+            const data = g.getImageData(0, 0, probe.width, probe.height).data;
+            let differ = 0;
+            for (let i = 0; i < data.length; i += 4) {
+                const off = Math.abs(data[i] - 0xf6) + Math.abs(data[i + 1] - 0xf7) + Math.abs(data[i + 2] - 0xf9);
+                if (off > 24) differ++;
+            }
+            return differ / (data.length / 4);
+        }"""
+    )
+    return [] if drawn > 0.002 else [f"{page_path}: the viewer's scene is blank ({drawn:.4f} of it drawn)"]
 
 
 def check_search(page: Any, attempts: int = 8) -> list[str]:

@@ -332,6 +332,29 @@ def make_env_animations(args: argparse.Namespace) -> None:
             print(line, flush=True)
 
 
+#: The README's still of the viewer: the default id, passive against its best scripted law on
+#: this held-out seed, at this control step (4 s in, while passive still swings and cables go slack).
+VIEWER_STILL_SEED = 10_000
+VIEWER_STILL_STEP = 40
+
+
+def make_viewer_still(_: argparse.Namespace) -> None:
+    """Export the episode pair with tether-gym-view, then screenshot it in headless Chromium."""
+    import json
+
+    from tether_gym.registration import DEFAULT_ENV_ID
+    from tether_gym.viewer.browser import screenshot
+
+    scores = json.loads((ROOT / "agents" / "reference" / "reference_scores.json").read_text(encoding="utf-8"))
+    law = scores["per_id"][DEFAULT_ENV_ID]["best_baseline"]
+    WORK.mkdir(parents=True, exist_ok=True)
+    page = WORK / "viewer_still.html"
+    run([sys.executable, "-m", "tether_gym.view", "--env", DEFAULT_ENV_ID, "--controller", "passive", law,
+         "--seed", str(VIEWER_STILL_SEED), "--export", str(page)])  # fmt: skip
+    screenshot(page, WORK / "viewer.png", frame=VIEWER_STILL_STEP)
+    copy(WORK / "viewer.png", "viewer.png")
+
+
 FIGURES: dict[str, Figure] = {
     "paper": Figure(
         ("paper_fig3.png", "substeps.png", "energy.png"),
@@ -371,6 +394,12 @@ FIGURES: dict[str, Figure] = {
         (("tutorial.md", "getting_started output"),),
         make_tutorial,
         "examples/getting_started.py's output, into docs/tutorial.md",
+    ),
+    "viewer": Figure(
+        ("viewer.png",),
+        (),
+        make_viewer_still,
+        "the README's still of the viewer: passive and the default id's best law side by side (headless Chromium)",
     ),
     "benchmark": Figure(
         ("benchmark_scores.png", "benchmark_paired.png"),

@@ -63,7 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--port", type=int, default=8765, help="the port (default 8765; 0: any free port)")
     parser.add_argument("--no-browser", action="store_true", help="do not open a browser tab")
     parser.add_argument(
-        "--exaggeration", type=float, default=100.0, help="initial displacement exaggeration (default 100)"
+        "--exaggeration",
+        type=float,
+        help="initial displacement exaggeration (default: live 100; recorded, the largest that keeps them in view)",
     )
     return parser
 
@@ -157,6 +159,8 @@ def serve(server: ViewerServer, open_browser: bool, session: LiveSession | None)
 
 
 def run(args: argparse.Namespace) -> None:
+    if args.exaggeration is not None and not 0.0 < args.exaggeration <= 1e6:
+        raise ValueError(f"--exaggeration must be a number in (0, 1e6]; got {args.exaggeration}")
     if args.recording:
         if args.controller:
             raise ValueError("--controller steps a live env: use it with --env, not with --recording")

@@ -48,6 +48,9 @@ HARD_TRACK_MARKER = re.compile(r"<!-- hard-track-table\b.*?-->")
 #: Where the site explains the tracks, from an env page (``envs/<id>.md``).
 HARD_TRACK_LINK = "../environments.md#the-hard-track"
 NAV_SECTION = "Environments"
+#: Where the env pages' embedded viewer exports go in the site, and the held-out seed they show.
+VIEWER_DIR = "viewer"
+VIEWER_SEED = 10_000
 
 #: The task settings a page reports, by their ``gym.make`` keyword names.
 REPORTED_SETTINGS = (
@@ -487,7 +490,7 @@ def env_page(env_id: str) -> str:
             + "\nAny argument below can be passed to `gym.make` or `gym.make_vec`.\n"
         ),
     }
-    page = [f"# {env_id}\n", doc.summary + "\n", table(("", ""), glance), animation(facts)]
+    page = [f"# {env_id}\n", doc.summary + "\n", table(("", ""), glance), animation(facts), viewer_embed(env_id)]
     for title, body in shared.items():
         page.append(f"## {title}\n")
         if title == "Version History":
@@ -538,6 +541,45 @@ def animation(facts: EnvFacts) -> str:
         f"{figures.ANIMATION_SEED}), {figures.ANIMATION_STEPS} control steps of {interval} s, one frame each; "
         f"blue cables are taut, orange dashed ones slack, red arrows the thrust. Drawn by "
         f"`bash scripts/figures.sh`.*\n"
+    )
+
+
+def best_law(env_id: str) -> str:
+    """The id's best scripted law on the benchmark's held-out seeds (the shipped reference scores)."""
+    import json
+
+    scores = json.loads((ROOT / "agents" / "reference" / "reference_scores.json").read_text(encoding="utf-8"))
+    entry = scores["per_id"].get(env_id)
+    if entry is None:
+        raise DocsBuildError(f"{env_id} has no reference scores: run the benchmark on it (docs/benchmark.md)")
+    return str(entry["best_baseline"])
+
+
+@functools.cache
+def viewer_export(env_id: str) -> str:
+    """The self-contained viewer page of ``env_id``: its best scripted law on seed VIEWER_SEED,
+    made as ``tether-gym-view --export`` makes it."""
+    from agents.controllers.registry import make_baseline
+    from tether_gym.viewer import record_episode
+    from tether_gym.viewer.page import page_html, recordings_config, suggested_exaggeration, title_of
+
+    law = best_law(env_id)
+    recording = record_episode(env_id, VIEWER_SEED, lambda env: make_baseline(law, env), law)
+    return page_html(recordings_config([recording], suggested_exaggeration([recording])), title_of([recording]))
+
+
+def viewer_embed(env_id: str) -> str:
+    """The env page's embedded viewer and its caption, in Markdown relative to the page."""
+    law = best_law(env_id)
+    path = f"../{VIEWER_DIR}/{env_id}.html"
+    return (
+        f'<iframe class="viewer" src="{path}" title="{env_id}: {law} on seed {VIEWER_SEED}" '
+        'loading="lazy"></iframe>\n\n'
+        f"*The viewer: the best scripted law on the benchmark's held-out seeds, `{law}`, on seed {VIEWER_SEED}. "
+        f"Drag to orbit, scroll to zoom; play, step or slide through the episode; the exaggeration slider scales "
+        f"the displacements. [Open it on its own page]({path}). Made when the site was built, as "
+        f"`tether-gym-view --env {env_id} --controller {law} --seed {VIEWER_SEED} --export {env_id}.html` makes it "
+        f"([the viewer](../viewer.md)).*\n"
     )
 
 
@@ -600,6 +642,7 @@ def on_files(files: Any, config: Any) -> Any:
 
     for env_id in ENV_IDS:
         files.append(File.generated(config, f"{ENV_PAGE_DIR}/{env_id}.md", content=env_page(env_id)))
+        files.append(File.generated(config, f"{VIEWER_DIR}/{env_id}.html", content=viewer_export(env_id)))
     return files
 
 

@@ -1,7 +1,5 @@
-"""Headless Chromium for the viewer's tests: Debian's /usr/bin/chromium, driven by Playwright.
-
-WebGL in a headless browser without a GPU runs on SwiftShader, Chromium's software renderer,
-which recent versions enable only when asked (``--enable-unsafe-swiftshader``)."""
+"""Headless Chromium for the viewer's tests: Debian's /usr/bin/chromium, driven by Playwright,
+with the flags that let it draw WebGL without a GPU (tether_gym.viewer.browser)."""
 
 from __future__ import annotations
 
@@ -14,15 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-#: Chromium's flags: no sandbox (containers), shared memory in /tmp, WebGL on SwiftShader.
-FLAGS = (
-    "--no-sandbox",
-    "--disable-dev-shm-usage",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-)
+from tether_gym.viewer.browser import HEADLESS_CHROMIUM_FLAGS, READY
+
 #: The scene's background colour (viewer/src/main.js, BACKGROUND), RGB.
 BACKGROUND = (0xF6, 0xF7, 0xF9)
 
@@ -39,7 +30,9 @@ def browser_page() -> Iterator[tuple[Any, list[str]]]:
 
     errors: list[str] = []
     with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=chromium, headless=True, args=list(FLAGS))
+        browser = playwright.chromium.launch(
+            executable_path=chromium, headless=True, args=list(HEADLESS_CHROMIUM_FLAGS)
+        )
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 800})
             page.on("console", lambda m: errors.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
@@ -63,4 +56,4 @@ def drawn_fraction(pixels: np.ndarray) -> float:
 
 
 def wait_ready(page: Any) -> None:
-    page.wait_for_function("window.tetherViewer && window.tetherViewer.ready", timeout=30_000)
+    page.wait_for_function(READY, timeout=30_000)

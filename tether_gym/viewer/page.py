@@ -21,7 +21,11 @@ import numpy as np
 
 from .recording import EpisodeRecording
 
-__all__ = ["episode_meta", "export_html", "frames_chunk", "page_html"]
+__all__ = ["episode_meta", "export_html", "frames_chunk", "page_html", "suggested_exaggeration"]
+
+#: The exaggeration of the live view, whose displacements are not known ahead (the envs'
+#: ``render_exaggeration`` default).
+LIVE_EXAGGERATION = 100.0
 
 #: Each array the page reads per frame, and its wire type (see viewer/src/main.js, FIELDS).
 WIRE_TYPES = {
@@ -112,6 +116,22 @@ def recordings_config(recordings: Sequence[EpisodeRecording], exaggeration: floa
     return {"mode": "static", "exaggeration": exaggeration, "episodes": episodes}
 
 
+def suggested_exaggeration(recordings: Sequence[EpisodeRecording], reach: float = 0.4, most: float = 100.0) -> float:
+    """The displacement exaggeration that draws the largest deviation from the nominal shape in
+    ``recordings`` (centre-of-mass frame, as the page draws) within ``reach`` of the cluster's
+    half-size: 1, 2 or 5 times a power of ten, at most ``most``."""
+    ceiling = most
+    for recording in recordings:
+        nominal = np.asarray(recording.meta["nominal"], dtype=float)
+        nominal = nominal - nominal.mean(axis=0)
+        positions = recording.positions - recording.positions.mean(axis=1, keepdims=True)
+        largest = float(np.linalg.norm(positions - nominal, axis=2).max(initial=0.0))
+        half_size = 0.5 * float(np.ptp(nominal, axis=0).max())
+        ceiling = min(ceiling, reach * half_size / max(largest, 1e-12))
+    nice = [m * 10.0**k for k in range(-3, 4) for m in (1, 2, 5) if m * 10.0**k <= ceiling]
+    return max(nice, default=0.001)
+
+
 def title_of(recordings: Sequence[EpisodeRecording]) -> str:
     """The page title: the id and the controllers on their seeds."""
     first = recordings[0].meta
@@ -120,12 +140,15 @@ def title_of(recordings: Sequence[EpisodeRecording]) -> str:
 
 
 def export_html(
-    recordings: Sequence[EpisodeRecording], path: str | os.PathLike[str], exaggeration: float = 100.0
+    recordings: Sequence[EpisodeRecording], path: str | os.PathLike[str], exaggeration: float | None = None
 ) -> Path:
     """Write ``recordings`` (one, or several side by side on one time slider) to a self-contained
-    HTML file that opens offline in any browser, with no server. Returns the path written."""
+    HTML file that opens offline in any browser, with no server; ``exaggeration`` is the initial
+    displacement exaggeration (None: :func:`suggested_exaggeration`). Returns the path written."""
     if not recordings:
         raise ValueError("export_html needs at least one recording")
+    if exaggeration is None:
+        exaggeration = suggested_exaggeration(recordings)
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     html = page_html(recordings_config(recordings, exaggeration), title_of(recordings))

@@ -25,7 +25,15 @@ import urllib.parse
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .page import episode_meta, frames_chunk, page_html, recordings_config, title_of
+from .page import (
+    LIVE_EXAGGERATION,
+    episode_meta,
+    frames_chunk,
+    page_html,
+    recordings_config,
+    suggested_exaggeration,
+    title_of,
+)
 from .recording import EpisodeRecording, EpisodeStepper
 
 __all__ = ["LEAD_SECONDS", "LiveSession", "ViewerError", "ViewerServer"]
@@ -197,7 +205,8 @@ class ViewerServer(http.server.ThreadingHTTPServer):
         port: the port; 0 picks a free one (:attr:`url` says which).
         session: a :class:`LiveSession`, or None to serve ``recordings``.
         recordings: recorded episodes, shown side by side (ignored with a session).
-        exaggeration: the page's initial displacement exaggeration.
+        exaggeration: the page's initial displacement exaggeration (None: 100 live, and for
+            recordings the one that keeps them in view, :func:`~tether_gym.viewer.page.suggested_exaggeration`).
 
     Raises:
         ViewerError: the port is in use, or the address cannot be bound.
@@ -211,16 +220,18 @@ class ViewerServer(http.server.ThreadingHTTPServer):
         port: int = 8765,
         session: LiveSession | None = None,
         recordings: Sequence[EpisodeRecording] = (),
-        exaggeration: float = 100.0,
+        exaggeration: float | None = None,
     ) -> None:
         self.session = session
         if session is not None:
             first = session.steppers[0].meta
             names = " vs ".join(s.meta["controller"] for s in session.steppers)
-            config: dict[str, Any] = {"mode": "live", "exaggeration": exaggeration}
+            live = LIVE_EXAGGERATION if exaggeration is None else exaggeration
+            config: dict[str, Any] = {"mode": "live", "exaggeration": live}
             self.page = page_html(config, f"tether-gym live: {first['env_id']}, {names}")
         elif recordings:
-            self.page = page_html(recordings_config(recordings, exaggeration), title_of(recordings))
+            shown = suggested_exaggeration(recordings) if exaggeration is None else exaggeration
+            self.page = page_html(recordings_config(recordings, shown), title_of(recordings))
         else:
             raise ValueError("ViewerServer needs a live session or at least one recording")
         try:
