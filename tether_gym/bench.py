@@ -5,6 +5,9 @@ Measures, for the default id (or every id with ``--all-ids``):
   passive env checker, time limit), for zero and uniformly random actions;
 - native vector env steps/s (``gym.make_vec``) at several N, and Gymnasium's ``SyncVectorEnv``
   over single envs at N = 64 for comparison;
+- the roofline (:mod:`tether_gym.roofline`): this CPU's limit for a sub-step's arithmetic on one
+  thread, and the batched advance's measured rate at N = 1 024 as a **fraction of that limit**,
+  for the default id and a beaded one;
 - the share of PPO training time spent in the env (when stable-baselines3 is installed).
 Episodes auto-reset throughout. Compilation is warmed up first and excluded.
 """
@@ -25,6 +28,18 @@ import tether_gym
 from tether_gym._cli import program
 from tether_gym._optional import available, install_line
 from tether_gym.registration import DEFAULT_ENV_ID, ENV_IDS
+
+
+def cpu_model() -> str:
+    """The CPU's model name (Linux's /proc/cpuinfo), else what ``platform`` knows."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as info:
+            for line in info:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 def single_env_steps_per_second(env_id: str, steps: int, policy: str, seed: int = 0) -> float:
@@ -80,6 +95,59 @@ ALL_FAULTS = {
 }
 
 
+#: The ids whose batched advance the roofline section measures: the default, and tethers with mass.
+ROOFLINE_IDS = (DEFAULT_ENV_ID, "TetherBeadedTetrahedron-v0")
+
+
+def advance_rate(env_id: str, batch: int, intervals: int, seed: int = 0) -> tuple[float, Any]:
+    """Cluster sub-steps per second of ``BatchSimulator.advance`` on one thread, over ``intervals``
+    control intervals from the id's own random initial states (zero thrust: the force that holds
+    the nominal shape); returns the rate and the cluster."""
+    import numba
+
+    envs = gym.make_vec(env_id, num_envs=batch)
+    envs.reset(seed=seed)
+    task = envs.unwrapped.task  # type: ignore[attr-defined]
+    sim, interval = task.sim, float(task.config.control_interval)
+    force = np.broadcast_to(task.force, sim.positions_.shape).copy() if hasattr(task, "force") else None
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        sim.advance(interval, force)  # warm-up: compilation or cache load
+        started = time.perf_counter()
+        substeps = 0
+        for _ in range(intervals):
+            substeps += int(sim.advance(interval, force).substeps.sum())
+        seconds = time.perf_counter() - started
+    finally:
+        numba.set_num_threads(threads)
+    cluster = task.cluster
+    envs.close()
+    return substeps / seconds, cluster
+
+
+def print_roofline(repeats: int) -> None:
+    """The roofline section: the limits, then each id's rate as a fraction of its limit."""
+    from tether_gym.roofline import measure_limits, substep_limit_ns
+
+    limits = measure_limits(repeats=max(repeats, 3))
+    print(
+        f"\nroofline, one thread (tether_gym.roofline: the sub-step's arithmetic, {limits.simd} doubles per "
+        f"SIMD instruction, L1-resident data): undamped cable {limits.cable_ns:.2f} ns, damped cable "
+        f"{limits.viscous_cable_ns:.2f} ns, node {limits.node_ns:.2f} ns"
+    )
+    print(f"{'id':<34}{'N':>6}{'sub-steps/s':>14}{'ns/sub-step':>13}{'limit, ns':>11}{'fraction of limit':>19}")
+    for env_id in ROOFLINE_IDS:
+        batch = 1024
+        rate, cluster = max(
+            (advance_rate(env_id, batch, intervals=10 if "Beaded" not in env_id else 2) for _ in range(repeats)),
+            key=lambda pair: pair[0],
+        )
+        measured = 1e9 / rate
+        limit = substep_limit_ns(cluster, limits)
+        print(f"{env_id:<34}{batch:>6}{rate:>14,.0f}{measured:>13.1f}{limit:>11.1f}{100 * limit / measured:>18.1f} %")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         prog=program("tether_gym.bench", "tether-gym-bench"), description=__doc__.split("\n\n")[0]
@@ -87,11 +155,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=30_000, help="timed steps per measurement")
     parser.add_argument("--repeats", type=int, default=3, help="measurements per case (the best is shown)")
     parser.add_argument("--all-ids", action="store_true", help="every registered id, not only the default")
+    parser.add_argument("--roofline-only", action="store_true", help="only the roofline section (about 30 s)")
     args = parser.parse_args(argv)
     print(
         f"tether-gym {tether_gym.__version__}, gymnasium {gym.__version__}, numpy {np.__version__}, "
         f"python {platform.python_version()}, {os.cpu_count()} cores"
     )
+    print(f"CPU: {cpu_model()}")
+    if args.roofline_only:
+        print_roofline(args.repeats)
+        return
     env_ids = list(ENV_IDS) if args.all_ids else [DEFAULT_ENV_ID]
     width = max(len(env_id) for env_id in env_ids) + 2  # the id column fits the longest id
     print(f"single env through gym.make (default wrappers), {args.steps} steps, best of {args.repeats}")
@@ -117,6 +190,7 @@ def main(argv: list[str] | None = None) -> None:
                 for _ in range(args.repeats)
             )
             print(f"{env_id:<{width}}{label:<38}{n:>6}{best:>14,.0f}")
+    print_roofline(args.repeats)
     if not available("stable_baselines3"):
         print(f"\nPPO share: stable-baselines3 is not installed ({install_line('train')})")
         return
