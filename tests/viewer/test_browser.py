@@ -31,6 +31,9 @@ def test_an_exported_episode_draws_offline_and_its_slider_moves_the_scene(tmp_pa
         load_recording(save_recording(record_episode(ENV_ID, 3, SineThrust, "sine"), tmp_path / "a.npz")),
         record_episode("TetherCoarseBeadedTetrahedron-v0", 3, SineThrust, "sine (beaded)", {"max_episode_steps": 300}),
     ]
+    # A cable that breaks half-way (as a fault would break it): drawn as broken from then on.
+    recordings[0].broken[150:, 2] = True
+    recordings[0].slack[150:, 2] = True
     page_file = export_html(recordings, tmp_path / "episode.html")
     html = page_file.read_text()
     loaded = re.findall(r'(?:src|href)="(?!data:)([^"]*)"', html)
@@ -52,6 +55,9 @@ def test_an_exported_episode_draws_offline_and_its_slider_moves_the_scene(tmp_pa
             shown = np.array(page.evaluate(f"tetherViewer.recordedPositions(0, {k})"))
             np.testing.assert_array_equal(shown, recordings[0].positions[k].reshape(-1))
         assert "ended (time limit)" in page.inner_text("#status")
+        assert "broken 1" in page.inner_text("#status")
+        page.evaluate("tetherViewer.setFrame(149)")
+        assert "broken 0" in page.inner_text("#status")
         assert "free space" in page.inner_text("#frame-name")
         assert "tether bead" in page.inner_text("#legend-roles")
         page.locator("#scene").screenshot(path=str(tmp_path / "export.png"))
