@@ -64,6 +64,25 @@ def test_env_benchmark_runs() -> None:
     )
     assert result.returncode == 0, result.stderr
     assert "TetherTetrahedron-v0" in result.stdout and "steps/s" in result.stdout
+    # The roofline section: this CPU's limit and the fraction of it the batched advance reaches.
+    assert "roofline, one thread" in result.stdout and "fraction of limit" in result.stdout
+    rows = [line for line in result.stdout.splitlines() if line.rstrip().endswith("%") and "1024" in line]
+    assert len(rows) == 2, result.stdout
+    for row in rows:
+        assert 0.0 < float(row.split()[-2]) < 100.0, row  # a fraction of the limit: below it
+
+
+def test_viewer_benchmark_runs() -> None:
+    result = subprocess.run(
+        [sys.executable, "benchmarks/viewer_speed.py", "--no-browser", "--controllers", "passive"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
+    assert result.returncode == 0, result.stderr
+    for expected in ("x real time", "export: one episode recorded and written", "RecordVideo", "ms per frame"):
+        assert expected in result.stdout, result.stdout
 
 
 def test_env_demo_runs(tmp_path: Path) -> None:
