@@ -99,25 +99,36 @@ ALL_FAULTS = {
 ROOFLINE_IDS = (DEFAULT_ENV_ID, "TetherBeadedTetrahedron-v0")
 
 
-def advance_rate(env_id: str, batch: int, intervals: int, seed: int = 0) -> tuple[float, Any]:
-    """Cluster sub-steps per second of ``BatchSimulator.advance`` on one thread, over ``intervals``
-    control intervals from the id's own random initial states (zero thrust: the force that holds
-    the nominal shape); returns the rate and the cluster."""
+def advance_rate(env_id: str, batch: int, intervals: int, prototype: bool = False, seed: int = 0) -> tuple[float, Any]:
+    """Cluster sub-steps per second on one thread over ``intervals`` control intervals from the
+    id's own random initial states, holding the force that keeps the nominal shape: of
+    ``BatchSimulator.advance``, or with ``prototype`` of :mod:`tether_gym.portable`'s SIMD-lane
+    kernel on the same state. Returns the rate and the cluster."""
     import numba
+
+    from tether_gym.portable import PortableBatch
 
     envs = gym.make_vec(env_id, num_envs=batch)
     envs.reset(seed=seed)
     task = envs.unwrapped.task  # type: ignore[attr-defined]
     sim, interval = task.sim, float(task.config.control_interval)
-    force = np.broadcast_to(task.force, sim.positions_.shape).copy() if hasattr(task, "force") else None
+    force = np.broadcast_to(task.force, sim.positions_.shape).copy()
+    portable = PortableBatch(sim) if prototype else None
+    if portable is not None:
+        portable.set_force(force)
+
+    def advance() -> int:
+        if portable is None:
+            return int(sim.advance(interval, force).substeps.sum())
+        portable.advance(interval, "lanes")
+        return int(portable.substeps.sum())
+
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        sim.advance(interval, force)  # warm-up: compilation or cache load
+        advance()  # warm-up: compilation or cache load
         started = time.perf_counter()
-        substeps = 0
-        for _ in range(intervals):
-            substeps += int(sim.advance(interval, force).substeps.sum())
+        substeps = sum(advance() for _ in range(intervals))
         seconds = time.perf_counter() - started
     finally:
         numba.set_num_threads(threads)
@@ -136,16 +147,24 @@ def print_roofline(repeats: int) -> None:
         f"SIMD instruction, L1-resident data): undamped cable {limits.cable_ns:.2f} ns, damped cable "
         f"{limits.viscous_cable_ns:.2f} ns, node {limits.node_ns:.2f} ns"
     )
-    print(f"{'id':<34}{'N':>6}{'sub-steps/s':>14}{'ns/sub-step':>13}{'limit, ns':>11}{'fraction of limit':>19}")
+    print(f"{'id':<34}{'kernel':<11}{'N':>6}{'sub-steps/s':>14}{'ns/sub-step':>13}{'limit, ns':>11}{'fraction':>10}")
+    batch = 1024
     for env_id in ROOFLINE_IDS:
-        batch = 1024
-        rate, cluster = max(
-            (advance_rate(env_id, batch, intervals=10 if "Beaded" not in env_id else 2) for _ in range(repeats)),
-            key=lambda pair: pair[0],
-        )
-        measured = 1e9 / rate
-        limit = substep_limit_ns(cluster, limits)
-        print(f"{env_id:<34}{batch:>6}{rate:>14,.0f}{measured:>13.1f}{limit:>11.1f}{100 * limit / measured:>18.1f} %")
+        # The integrator, then tether_gym.portable's SIMD-lane prototype of its hot path on the same states.
+        for kernel in ("advance", "lanes"):
+            rate, cluster = max(
+                (
+                    advance_rate(env_id, batch, 10 if "Beaded" not in env_id else 2, prototype=kernel == "lanes")
+                    for _ in range(repeats)
+                ),
+                key=lambda pair: pair[0],
+            )
+            measured = 1e9 / rate
+            limit = substep_limit_ns(cluster, limits)
+            print(
+                f"{env_id:<34}{kernel:<11}{batch:>6}{rate:>14,.0f}{measured:>13.1f}{limit:>11.1f}"
+                f"{100 * limit / measured:>8.1f} %"
+            )
 
 
 def main(argv: list[str] | None = None) -> None:
