@@ -72,6 +72,19 @@ def test_env_benchmark_runs() -> None:
         assert 0.0 < float(row.split()[-2]) < 100.0, row  # a fraction of the limit: below it
 
 
+def test_thread_scaling_benchmark_runs() -> None:
+    result = subprocess.run(
+        [sys.executable, "benchmarks/thread_scaling.py", "--seconds", "0.5"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
+    assert result.returncode == 0, result.stderr
+    for expected in ("1 thread", "2 threads (parallel kernel)", "2 processes of 1 thread", "threading layer"):
+        assert expected in result.stdout, result.stdout
+
+
 def test_viewer_benchmark_runs() -> None:
     result = subprocess.run(
         [sys.executable, "benchmarks/viewer_speed.py", "--no-browser", "--controllers", "passive"],
