@@ -278,6 +278,8 @@ def _advance_lanes(  # type: ignore[no-untyped-def]  # noqa: C901 - the kernel
     blend = np.zeros(width)
     inverse_h_mid = np.zeros(width)
     omega2_max = np.zeros(width)
+    inverse_lhs = np.zeros(width)
+    rhs_factor = np.zeros(width)
     running = np.zeros(width, dtype=np.bool_)
     from_rest = np.zeros(width, dtype=np.bool_)
     for start in range(0, batch, width):
@@ -321,33 +323,50 @@ def _advance_lanes(  # type: ignore[no-untyped-def]  # noqa: C901 - the kernel
             stop = start + lanes
             # 1-D views over the block's lanes, taken out of the lane loops: with them LLVM
             # vectorises the loops (indexing the 3-D arrays inside them, it did not).
+            any_from_rest = False
+            for lane in range(lanes):
+                any_from_rest = any_from_rest or (from_rest[lane] and h[lane] > 0.0)
             for i in range(n):
                 node_mass = mass[i, start:stop]
                 node_damping = damping[i, start:stop]
+                # Per node, as the scalar kick computes them once for its three axes.
+                for lane in range(lanes):
+                    inertia = node_mass[lane] * inverse_h_mid[lane]
+                    inverse_lhs[lane] = 1.0 / (inertia + 0.5 * node_damping[lane])
+                    rhs_factor[lane] = inertia - 0.5 * node_damping[lane]
                 for d in range(3):
                     vel = v[i, d, start:stop]
                     pos = x[i, d, start:stop]
                     internal = f_int[i, d, start:stop]
                     applied_now = f_applied[i, d, start:stop]
                     applied_before = f_previous[i, d, start:stop]
-                    for lane in range(lanes):
-                        step = h[lane]
-                        velocity = vel[lane]
-                        force = internal[lane]
-                        applied = applied_now[lane]
-                        accelerated = velocity + 0.5 * step * (
-                            (applied - force - node_damping[lane] * velocity) / node_mass[lane]
-                        )
-                        inertia = node_mass[lane] * inverse_h_mid[lane]
-                        inverse_lhs = 1.0 / (inertia + 0.5 * node_damping[lane])
-                        rhs_factor = inertia - 0.5 * node_damping[lane]
-                        p_dual = applied + blend[lane] * (applied_before[lane] - applied)
-                        kicked = (rhs_factor * velocity + p_dual - force) * inverse_lhs
-                        updated = accelerated if from_rest[lane] else kicked
-                        velocity = updated if step > 0.0 else velocity
-                        vel[lane] = velocity
-                        pos[lane] += step * velocity
-                        internal[lane] = 0.0
+                    if any_from_rest:  # the first sub-step after a reset, in some lane: both kicks
+                        for lane in range(lanes):
+                            step = h[lane]
+                            velocity = vel[lane]
+                            force = internal[lane]
+                            applied = applied_now[lane]
+                            accelerated = velocity + 0.5 * step * (
+                                (applied - force - node_damping[lane] * velocity) / node_mass[lane]
+                            )
+                            p_dual = applied + blend[lane] * (applied_before[lane] - applied)
+                            kicked = (rhs_factor[lane] * velocity + p_dual - force) * inverse_lhs[lane]
+                            updated = accelerated if from_rest[lane] else kicked
+                            velocity = updated if step > 0.0 else velocity
+                            vel[lane] = velocity
+                            pos[lane] += step * velocity
+                            internal[lane] = 0.0
+                    else:
+                        for lane in range(lanes):
+                            step = h[lane]
+                            velocity = vel[lane]
+                            applied = applied_now[lane]
+                            p_dual = applied + blend[lane] * (applied_before[lane] - applied)
+                            kicked = (rhs_factor[lane] * velocity + p_dual - internal[lane]) * inverse_lhs[lane]
+                            velocity = kicked if step > 0.0 else velocity
+                            vel[lane] = velocity
+                            pos[lane] += step * velocity
+                            internal[lane] = 0.0
             for lane in range(lanes):
                 omega2_max[lane] = 0.0
             for c in range(cables):
