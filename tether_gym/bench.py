@@ -47,14 +47,17 @@ def single_env_steps_per_second(env_id: str, steps: int, policy: str, seed: int 
     env = gym.make(env_id)
     rng = np.random.default_rng(seed)
     shape = tuple(env.action_space.shape or ())
-    actions = (
-        np.zeros((steps,) + shape, dtype=np.float32)
-        if policy == "zero"
-        else rng.uniform(-1, 1, (steps,) + shape).astype(np.float32)
-    )
+    if isinstance(env.action_space, gym.spaces.Discrete):  # CartPole, measured beside for scale
+        actions: Any = rng.integers(0, int(env.action_space.n), steps)
+    elif policy == "zero":
+        actions = np.zeros((steps,) + shape, dtype=np.float32)
+    else:
+        actions = rng.uniform(-1, 1, (steps,) + shape).astype(np.float32)
     env.reset(seed=seed)
     for action in actions[:50]:  # warm-up: compilation or cache load
-        env.step(action)
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
     env.reset(seed=seed)
     start = time.perf_counter()
     for action in actions:
@@ -93,6 +96,46 @@ ALL_FAULTS = {
     "thrust_delay": 1,
     "thruster_failure_probability": 0.5,
 }
+
+
+def single_env_breakdown(env_id: str, steps: int, seed: int = 0) -> tuple[float, float, float]:
+    """Seconds per step of one env, zero actions: through ``gym.make`` (its wrappers), of the
+    unwrapped env, and of its compiled task step alone (forces, integration, observation and
+    reward in one numba call, timed inside the same steps). The rest of the unwrapped step is the
+    Python around that call: argument checks, the info dict, the observation's copy."""
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    action = np.zeros(env.action_space.shape, np.float32)
+    from tether_gym.envs import _task_kernels
+
+    unwrapped: Any = env.unwrapped
+    kernel = _task_kernels.step_serial
+    inside = [0.0]
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        began = time.perf_counter()
+        result = kernel(*args, **kwargs)
+        inside[0] += time.perf_counter() - began
+        return result
+
+    def run(stepper: Any) -> float:
+        env.reset(seed=seed)
+        began = time.perf_counter()
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = stepper(action)
+            if terminated or truncated:
+                env.reset()
+        return (time.perf_counter() - began) / steps
+
+    run(env.step)  # warm-up
+    wrapped = run(env.step)
+    bare = run(unwrapped.step)
+    _task_kernels.step_serial = timed
+    try:
+        run(unwrapped.step)
+    finally:
+        _task_kernels.step_serial = kernel
+    return wrapped, bare, inside[0] / steps
 
 
 #: The ids whose batched advance the roofline section measures: the default, and tethers with mass.
@@ -192,6 +235,19 @@ def main(argv: list[str] | None = None) -> None:
         for policy in ("zero", "random"):
             best = max(single_env_steps_per_second(env_id, args.steps, policy, seed) for seed in range(args.repeats))
             print(f"{env_id:<{width}}{policy:<10}{best:>12,.0f}")
+    cartpole = max(
+        single_env_steps_per_second("CartPole-v1", args.steps, "random", seed) for seed in range(args.repeats)
+    )
+    print(f"{'CartPole-v1 (same run)':<{width}}{'random':<10}{cartpole:>12,.0f}")
+    wrapped, bare, kernel = min(
+        (single_env_breakdown(DEFAULT_ENV_ID, args.steps // 3, seed) for seed in range(args.repeats)),
+        key=lambda times: times[0],
+    )
+    print(
+        f"{DEFAULT_ENV_ID}, one step (zero actions): {1e6 * wrapped:.1f} us through gym.make, {1e6 * bare:.1f} us "
+        f"unwrapped, of which {1e6 * kernel:.1f} us in the compiled task step: {1e6 * (bare - kernel):.1f} us of "
+        f"Python around it, {1e6 * (wrapped - bare):.1f} us in gym's wrappers"
+    )
     print()
     print(f"vector envs, random actions, env steps/s (sub-env steps summed), best of {args.repeats}")
     print(f"{'id':<{width}}{'vectorisation':<38}{'N':>6}{'steps/s':>14}")
