@@ -105,7 +105,7 @@ def single_env_breakdown(env_id: str, steps: int, seed: int = 0) -> tuple[float,
     Python around that call: argument checks, the info dict, the observation's copy."""
     env = gym.make(env_id)
     env.reset(seed=seed)
-    action = np.zeros(env.action_space.shape, np.float32)
+    action = np.zeros(tuple(env.action_space.shape or ()), np.float32)
     from tether_gym.envs import _task_kernels
 
     unwrapped: Any = env.unwrapped
