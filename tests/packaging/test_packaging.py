@@ -238,7 +238,12 @@ def test_the_agents_work_under_their_installed_name(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("module", "script"), [("tether_gym.bench", "tether-gym-bench"), ("tether_gym.compile", "tether-gym-compile")]
+    ("module", "script"),
+    [
+        ("tether_gym.bench", "tether-gym-bench"),
+        ("tether_gym.compile", "tether-gym-compile"),
+        ("tether_gym.view", "tether-gym-view"),
+    ],
 )
 def test_the_core_commands_name_themselves_as_the_user_ran_them(
     module: str, script: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]

@@ -56,6 +56,7 @@ def all_parsers() -> dict[str, argparse.ArgumentParser]:
     parsers = {script: cli.build_parser(command) for command, script in commands.SCRIPTS.items()}
     parsers["tether-gym-bench"] = _core_parser("tether_gym.bench")
     parsers["tether-gym-compile"] = _core_parser("tether_gym.compile")
+    parsers["tether-gym-view"] = _core_parser("tether_gym.view")
     assert set(parsers) == set(SCRIPTS)
     return parsers
 
