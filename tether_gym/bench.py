@@ -197,7 +197,7 @@ def print_roofline(repeats: int) -> None:
         for kernel in ("advance", "lanes"):
             rate, cluster = max(
                 (
-                    advance_rate(env_id, batch, 10 if "Beaded" not in env_id else 2, prototype=kernel == "lanes")
+                    advance_rate(env_id, batch, 100 if "Beaded" not in env_id else 10, prototype=kernel == "lanes")
                     for _ in range(repeats)
                 ),
                 key=lambda pair: pair[0],
