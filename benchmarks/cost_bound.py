@@ -25,26 +25,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 
 from tether_gym.analysis import CostBoundScopeError, cost_lower_bound
+from tether_gym.bench import cpu_model
 
 REFERENCE = Path(__file__).resolve().parents[1] / "agents" / "reference" / "reference_scores.json"
-
-
-def _cpu_model() -> str:
-    """The CPU's model name (Linux), else the platform's machine type."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.machine()
 
 
 def main() -> None:
@@ -54,7 +43,7 @@ def main() -> None:
     args = parser.parse_args()
     data = json.loads(args.reference.read_text())
     print(f"reference scores: {args.reference.name} (commit {data.get('commit')}); substeps {args.substeps}")
-    print(f"machine: {_cpu_model()}\n")
+    print(f"machine: {cpu_model()}\n")
     print("| id | bound (mean) | passive | best scripted law | mpc | mpc / bound | smallest margin |")
     print("|---|---|---|---|---|---|---|")
     outside: list[str] = []

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
-import platform
 import time
 
 import numpy as np
@@ -58,10 +57,9 @@ def main() -> None:
     args = parser.parse_args()
     import numba
 
-    cpu = next(
-        (line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
-        platform.processor(),
-    )
+    from tether_gym.bench import cpu_model
+
+    cpu = cpu_model()
     one = rate(1, args.seconds)
     two = rate(2, args.seconds)
     context = multiprocessing.get_context("spawn")

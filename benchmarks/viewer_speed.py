@@ -24,7 +24,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -33,19 +32,10 @@ import gymnasium as gym
 import numpy as np
 
 import tether_gym
+from tether_gym.bench import cpu_model
 from tether_gym.view import make_steppers_for, run_to_end
 from tether_gym.viewer import LiveSession, ViewerServer, export_html
 from tether_gym.viewer.browser import HEADLESS_CHROMIUM_FLAGS, READY
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def simulation_rate(env_id: str, controller: str) -> tuple[float, float]:

@@ -73,29 +73,15 @@ def test_env_benchmark_runs() -> None:
 
 
 def test_thread_scaling_benchmark_runs() -> None:
-    result = subprocess.run(
-        [sys.executable, "benchmarks/thread_scaling.py", "--seconds", "0.5"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        cwd=ROOT,
-    )
-    assert result.returncode == 0, result.stderr
+    out = run("benchmarks/thread_scaling.py", "--seconds", "0.5")
     for expected in ("1 thread", "2 threads (parallel kernel)", "2 processes of 1 thread", "threading layer"):
-        assert expected in result.stdout, result.stdout
+        assert expected in out, out
 
 
 def test_viewer_benchmark_runs() -> None:
-    result = subprocess.run(
-        [sys.executable, "benchmarks/viewer_speed.py", "--no-browser", "--controllers", "passive"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        cwd=ROOT,
-    )
-    assert result.returncode == 0, result.stderr
+    out = run("benchmarks/viewer_speed.py", "--no-browser", "--controllers", "passive")
     for expected in ("x real time", "export: one episode recorded and written", "RecordVideo", "ms per frame"):
-        assert expected in result.stdout, result.stdout
+        assert expected in out, out
 
 
 def test_env_demo_runs(tmp_path: Path) -> None:
