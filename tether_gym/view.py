@@ -34,7 +34,14 @@ from typing import Any
 from tether_gym._cli import program
 from tether_gym._optional import needs_extra
 from tether_gym.viewer.page import export_html
-from tether_gym.viewer.recording import EpisodeRecording, EpisodeStepper, RecordingError, load_recording, save_recording
+from tether_gym.viewer.recording import (
+    EpisodeRecording,
+    EpisodeStepper,
+    RecordingError,
+    load_recording,
+    recording_file_name,
+    save_recording,
+)
 from tether_gym.viewer.server import LiveSession, ViewerError, ViewerServer
 
 __all__ = ["build_parser", "main"]
@@ -120,8 +127,8 @@ def save_all(recordings: Sequence[EpisodeRecording], folder: str) -> list[Path]:
     """Save each recording as ``folder/<controller>_seed<S>.npz``."""
     paths = []
     for recording in recordings:
-        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in str(recording.meta["controller"]))
-        paths.append(save_recording(recording, Path(folder) / f"{safe}_seed{recording.meta['seed']}.npz"))
+        name = recording_file_name(str(recording.meta["controller"]), int(recording.meta["seed"]))
+        paths.append(save_recording(recording, Path(folder) / name))
     return paths
 
 

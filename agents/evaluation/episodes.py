@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from tether_gym.viewer import record_episode, save_recording
+from tether_gym.viewer import record_episode, recording_file_name, save_recording
 
 from ..common.checks import check_int
 from ..policies import make_controller
@@ -33,8 +33,7 @@ def checked_seeds(field: str, seeds: Any) -> tuple[int, ...]:
 
 def episode_path(out: str | Path, env_id: str, name: str, seed: int) -> Path:
     """Where the episode of controller ``name`` on ``seed`` goes (a path-safe file name)."""
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).name or name)
-    return Path(out) / "episodes" / env_id / f"{safe}_seed{seed}.npz"
+    return Path(out) / "episodes" / env_id / recording_file_name(name, seed)
 
 
 def save_episodes(

@@ -579,17 +579,10 @@ def score_policy(
 
 
 def machine_description() -> str:
-    """This machine in a line: CPU model (from ``/proc/cpuinfo`` on Linux), logical cores, OS."""
-    model = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as stream:
-            for line in stream:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return f"{model}, {os.cpu_count()} logical cores, {platform.system()} {platform.machine()}"
+    """This machine in a line: CPU model (:func:`tether_gym.bench.cpu_model`), logical cores, OS."""
+    from tether_gym.bench import cpu_model
+
+    return f"{cpu_model()}, {os.cpu_count()} logical cores, {platform.system()} {platform.machine()}"
 
 
 def _require(mapping: Any, keys: Sequence[str], where: str) -> None:

@@ -86,9 +86,11 @@ __all__ = [
     "TRAINING_SEEDS_START",
     "DAggerSettings",
     "Labelled",
+    "StudentFit",
     "build_student",
     "collect",
     "fit_student",
+    "held_out_rows",
     "load_dagger_settings",
     "measure_compute",
     "observation_statistics",
@@ -134,6 +136,12 @@ class DAggerSettings:
     """States per minibatch."""
     eval_episodes: int = 32
     """Evaluation episodes after each iteration (seeds 1 000 000 up)."""
+    validation_every: int = 0
+    """Early stopping: every ``validation_every``-th labelled episode (counted over the run) is
+    held out of the fit, and each fit keeps the weights of the epoch with the lowest error on the
+    held-out episodes' states (the previous weights if no epoch improves on them), ``epochs``
+    being the most passes. 0: no episode held out, every fit runs all ``epochs`` (the runs before
+    this setting existed)."""
 
     def __post_init__(self) -> None:
         if self.residual_on is not None and self.residual_on not in BASELINES:
@@ -142,6 +150,7 @@ class DAggerSettings:
                 f"got {self.residual_on!r}"
             )
         counts = {"iterations": (1, SEEDS_PER_RUN), "epochs": (1, 100_000), "batch_size": (1, 1_000_000)}
+        counts |= {"validation_every": (0, SEEDS_PER_RUN)}
         # The episodes of an iteration and of an evaluation run as one vector env: at most MAX_NUM_ENVS;
         # an evaluation needs 2 episodes for its paired interval.
         counts |= {"episodes": (1, MAX_NUM_ENVS), "eval_episodes": (2, MAX_NUM_ENVS)}
@@ -160,6 +169,10 @@ class DAggerSettings:
         decay = self.beta_decay
         if isinstance(decay, bool) or not isinstance(decay, int | float) or not 0.0 <= decay < 1.0:
             raise ValueError(f"dagger setting beta_decay must be a number in [0, 1); got {decay!r}")
+        if self.validation_every == 1:
+            raise ValueError(
+                "dagger setting validation_every must be 0 (off) or at least 2: 1 would hold out every episode"
+            )
         rate = self.learning_rate
         if isinstance(rate, bool) or not isinstance(rate, int | float) or not (np.isfinite(rate) and 0 < rate <= 1):
             raise ValueError(f"dagger setting learning_rate must be a number in (0, 1]; got {rate!r}")
@@ -193,6 +206,7 @@ class Labelled:
 
     Attributes:
         observations: (N, O) float32 observations the episodes visited (each episode up to its end).
+        episodes: (N,) int the episode of each row (0 .. E-1, in the order of the iteration's seeds).
         targets: (N, A) float32 ``clip(teacher - law, -1, 1)`` on each of them, normalised thrust.
         teacher_actions, law_actions: (N, A) float32 the teacher's and the law's actions there.
         returns: (E,) return of each episode under the policy that acted.
@@ -200,6 +214,7 @@ class Labelled:
     """
 
     observations: np.ndarray
+    episodes: np.ndarray
     targets: np.ndarray
     teacher_actions: np.ndarray
     law_actions: np.ndarray
@@ -239,12 +254,14 @@ def collect(
     alive = np.ones(count, dtype=bool)
     returns = np.zeros(count)
     visited: list[np.ndarray] = []
+    episode_rows: list[np.ndarray] = []
     teacher_rows: list[np.ndarray] = []
     law_rows: list[np.ndarray] = []
     while alive.any():
         teacher_action, _ = teacher.predict(observation)
         law_action, _ = law.predict(observation)
         visited.append(observation[alive].astype(np.float32))
+        episode_rows.append(np.flatnonzero(alive))
         teacher_rows.append(np.asarray(teacher_action, dtype=np.float32)[alive])
         law_rows.append(np.asarray(law_action, dtype=np.float32)[alive])
         if student is None:
@@ -261,6 +278,7 @@ def collect(
     targets = np.clip(teacher_actions - law_actions, -1.0, 1.0).astype(np.float32)
     return Labelled(
         np.concatenate(visited),
+        np.concatenate(episode_rows),
         targets,
         teacher_actions,
         law_actions,
@@ -329,6 +347,25 @@ def student_loss(policy: Any, features: np.ndarray, targets: np.ndarray) -> floa
         return float(torch.nn.functional.mse_loss(_student_outputs(policy, x).clamp(-1.0, 1.0), y))
 
 
+@dataclasses.dataclass(frozen=True)
+class StudentFit:
+    """What one :func:`fit_student` call did.
+
+    Attributes:
+        loss: mean squared error of the clipped outputs on the fitted data afterwards (normalised
+            thrust squared).
+        validation_loss: the same on the held-out data with the weights kept; None without them.
+        validation_loss_before: on the held-out data before the fit; None without them.
+        epochs_kept: the passes whose weights were kept (all of them without held-out data; 0 when
+            no pass improved on the weights before the fit).
+    """
+
+    loss: float
+    validation_loss: float | None = None
+    validation_loss_before: float | None = None
+    epochs_kept: int = 0
+
+
 def fit_student(
     policy: Any,
     features: np.ndarray,
@@ -337,11 +374,16 @@ def fit_student(
     learning_rate: float,
     batch_size: int,
     seed: int,
-) -> float:
+    validation: tuple[np.ndarray, np.ndarray] | None = None,
+) -> StudentFit:
     """Train ``policy``'s actor (its MLP and action head, in place) on (N, O) normalised
     observations ``features`` and (N, A) ``targets`` with Adam on the mean squared error, for
-    ``epochs`` passes in minibatches shuffled by ``seed``; returns the mean squared error of the
-    clipped outputs on all the data afterwards (normalised thrust squared)."""
+    ``epochs`` passes in minibatches shuffled by ``seed``.
+
+    With ``validation`` ((M, O) normalised observations and (M, A) targets of episodes left out
+    of ``features``), the error on them is measured before the first pass and after each, and
+    the weights of the lowest are kept (early stopping): the student's states come from episodes
+    it will never see again, and an error on the fitted states alone rewards memorising them."""
     x = torch.as_tensor(np.asarray(features, dtype=np.float32))
     y = torch.as_tensor(np.asarray(targets, dtype=np.float32))
     if x.ndim != 2 or y.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] == 0:
@@ -352,12 +394,24 @@ def fit_student(
             f"the student takes {sizes[0]} observation values and gives {sizes[1]} actions; got features of "
             f"{x.shape[1]} and targets of {y.shape[1]}: pass data of the student's id"
         )
+    if validation is not None:
+        held_x, held_y = (np.asarray(part, dtype=np.float32) for part in validation)
+        if held_x.ndim != 2 or held_y.shape != (held_x.shape[0], sizes[1]) or held_x.shape[1:] != (sizes[0],):
+            raise ValueError(
+                f"validation must be (M, {sizes[0]}) features and (M, {sizes[1]}) targets with M >= 1 rows alike; "
+                f"got {held_x.shape}, {held_y.shape}"
+            )
+        if held_x.shape[0] == 0:
+            raise ValueError("validation holds no rows: pass None to fit without held-out data")
     parameters = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
     optimizer = torch.optim.Adam(parameters, lr=learning_rate)
     generator = torch.Generator().manual_seed(seed)
+    best_loss = before = student_loss(policy, held_x, held_y) if validation is not None else None
+    best_weights = [parameter.detach().clone() for parameter in parameters] if validation is not None else None
+    kept = 0
     policy.set_training_mode(True)
     with _one_torch_thread():
-        for _ in range(epochs):
+        for epoch in range(epochs):
             order = torch.randperm(x.shape[0], generator=generator)
             for start in range(0, x.shape[0], batch_size):
                 rows = order[start : start + batch_size]
@@ -365,8 +419,29 @@ def fit_student(
                 optimizer.zero_grad()
                 loss.backward()
                 optimizer.step()
+            if validation is None:
+                kept = epoch + 1
+                continue
+            held_loss = student_loss(policy, held_x, held_y)
+            if held_loss < best_loss:
+                best_loss, kept = held_loss, epoch + 1
+                best_weights = [parameter.detach().clone() for parameter in parameters]
+        if best_weights is not None:
+            with torch.no_grad():
+                for parameter, weights in zip(parameters, best_weights, strict=True):
+                    parameter.copy_(weights)
         policy.set_training_mode(False)
-    return student_loss(policy, features, targets)
+    return StudentFit(student_loss(policy, features, targets), best_loss, before, kept)
+
+
+def held_out_rows(episodes: np.ndarray, every: int) -> np.ndarray:
+    """(N,) bool: the rows of the episodes held out of the fit for early stopping, every
+    ``every``-th episode of the run (``episodes``: (N,) the episode of each row, counted over the
+    run); none for ``every`` 0."""
+    episodes = np.asarray(episodes)
+    if every == 0:
+        return np.zeros(episodes.shape, dtype=bool)
+    return episodes % every == every - 1
 
 
 def student_controller(model: Any, statistics: NormalizationStatistics, env_id: str, residual_on: str) -> TrainedPolicy:
@@ -542,6 +617,7 @@ def train_dagger(
     statistics: NormalizationStatistics | None = None
     observations: list[np.ndarray] = []
     targets: list[np.ndarray] = []
+    episode_ids: list[np.ndarray] = []  # per row, its episode counted over the run
     teacher_seconds, teacher_steps, timesteps = 0.0, 0, 0
     best_iteration = -1
     for iteration in range(s.iterations):
@@ -553,6 +629,7 @@ def train_dagger(
         timesteps += len(data.observations)
         observations.append(data.observations)
         targets.append(data.targets)
+        episode_ids.append(iteration * s.episodes + data.episodes)
         if statistics is None:  # fixed from the teacher's own states of iteration 0
             statistics = observation_statistics(data.observations)
             student = _attached(student_controller(model, statistics, env_id, law_name), env_id, kwargs)
@@ -566,15 +643,18 @@ def train_dagger(
         all_observations = np.concatenate(observations)
         features = statistics.normalize_obs(all_observations).astype(np.float32)
         all_targets = np.concatenate(targets)
-        loss = fit_student(
+        held_out = held_out_rows(np.concatenate(episode_ids), s.validation_every)
+        fit = fit_student(
             model.policy,
-            features,
-            all_targets,
+            features[~held_out],
+            all_targets[~held_out],
             s.epochs,
             s.learning_rate,
             s.batch_size,
             seed=seed * 1000 + iteration,
+            validation=(features[held_out], all_targets[held_out]) if held_out.any() else None,
         )
+        loss = fit.loss
         returns = episode_returns(student, env_id, eval_seeds, kwargs)
         versus_law = paired_difference(returns, law_returns)
         entry, _, new_best = log.add(
@@ -585,6 +665,10 @@ def train_dagger(
             states=int(len(all_observations)),
             loss=loss,
             loss_on_new_states=new_loss,
+            validation_states=int(held_out.sum()),
+            validation_loss=fit.validation_loss,
+            validation_loss_before=fit.validation_loss_before,
+            epochs_kept=fit.epochs_kept,
             # The loss against the targets' own spread: the fraction of the correction not learnt.
             target_variance=float(all_targets.var(axis=0).mean()),
             rollout_return=float(data.returns.mean()),
@@ -603,7 +687,14 @@ def train_dagger(
                 f"iteration {iteration + 1}/{s.iterations} (beta {beta:.2f}): {s.episodes} episodes, rollout return "
                 f"{data.returns.mean():.2f}, {len(all_observations):,} states, loss {loss:.4g} (targets' variance "
                 f"{entry['target_variance']:.4g}; on the new states before the fit "
-                f"{'n/a' if new_loss is None else f'{new_loss:.4g}'}); eval "
+                f"{'n/a' if new_loss is None else f'{new_loss:.4g}'}"
+                + (
+                    ""
+                    if fit.validation_loss is None
+                    else f"; on {int(held_out.sum()):,} held-out states {fit.validation_loss:.4g} after "
+                    f"{fit.epochs_kept} of {s.epochs} epochs"
+                )
+                + "); eval "
                 f"{entry['mean_return']:.2f} vs {law_name} {law_returns.mean():.2f}: {versus_law.mean:+.2f} "
                 f"[{versus_law.low:+.2f}, {versus_law.high:+.2f}]"
                 + (" (new best)" if new_best else "")
@@ -629,6 +720,8 @@ def train_dagger(
         observations=np.concatenate(observations),
         targets=np.concatenate(targets),
         iteration=np.concatenate([np.full(len(rows), k) for k, rows in enumerate(observations)]),
+        episode=np.concatenate(episode_ids),
+        held_out=held_out_rows(np.concatenate(episode_ids), s.validation_every),
     )
     if best_iteration < 0:  # never above the law: best/ is the law itself (a zero action head)
         with torch.no_grad():

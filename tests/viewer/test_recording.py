@@ -17,6 +17,7 @@ from tether_gym.viewer import (
     RecordingError,
     load_recording,
     record_episode,
+    recording_file_name,
     save_recording,
 )
 
@@ -142,3 +143,19 @@ def test_bad_files_are_refused_with_the_problem_named(tmp_path: Path) -> None:
 def test_a_bad_seed_is_refused() -> None:
     with pytest.raises(ValueError, match="seed must be an integer >= 0"):
         record_episode("TetherTetrahedron-v0", -1, SineThrust, "sine")
+
+
+@pytest.mark.parametrize(
+    ("controller", "expected"),
+    [
+        ("lqr", "lqr_seed7.npz"),
+        ("runs/TetherTetrahedron-v0/ppo_seed0", "ppo_seed0_seed7.npz"),
+        ("runs/x/", "x_seed7.npz"),
+        ("my policy: v2*", "my_policy__v2__seed7.npz"),
+        ("..", ".._seed7.npz"),
+    ],
+)
+def test_a_recording_file_name_is_one_safe_name(controller: str, expected: str) -> None:
+    name = recording_file_name(controller, 7)
+    assert name == expected
+    assert "/" not in name and "\\" not in name

@@ -39,6 +39,7 @@ from tether_gym.viewer.recording import (
     RecordingError,
     load_recording,
     record_episode,
+    recording_file_name,
     save_recording,
 )
 from tether_gym.viewer.server import LiveSession, ViewerError, ViewerServer
@@ -55,5 +56,6 @@ __all__ = [
     "export_html",
     "load_recording",
     "record_episode",
+    "recording_file_name",
     "save_recording",
 ]

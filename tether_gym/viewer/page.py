@@ -45,6 +45,11 @@ def static_text(name: str) -> str:
     return resources.files("tether_gym.viewer").joinpath("static").joinpath(name).read_text(encoding="utf-8")
 
 
+def _finite(value: Any) -> Any:
+    """JSON has no NaN: the page reads null where a number is not finite (frame 0's reward)."""
+    return value if not (isinstance(value, float) and not np.isfinite(value)) else None
+
+
 def episode_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
     """What the page needs of a recording's metadata (the flat forms it indexes)."""
     nominal = np.asarray(meta["nominal"], dtype=float)
@@ -62,7 +67,7 @@ def episode_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
         "thrusters": meta["thrusters"],
         "max_thrust": float(max(meta["max_thrust"], default=1.0)),
         "end_reason": meta["end_reason"],
-        "return": meta["return"],
+        "return": _finite(meta["return"]),
     }
 
 
@@ -77,7 +82,13 @@ def frames_chunk(
     for name, wire in WIRE_TYPES.items():
         values = np.ascontiguousarray(np.asarray(arrays[name][start:stop]).astype(wire, copy=False))
         frames[name] = base64.b64encode(values.tobytes()).decode("ascii")
-    return {"count": count, "done": done, "end_reason": meta["end_reason"], "return": meta["return"], "frames": frames}
+    return {
+        "count": count,
+        "done": done,
+        "end_reason": meta["end_reason"],
+        "return": _finite(meta["return"]),
+        "frames": frames,
+    }
 
 
 def recording_payload(recording: EpisodeRecording) -> dict[str, Any]:
@@ -102,17 +113,9 @@ def page_html(config: Mapping[str, Any], title: str) -> str:
     )
 
 
-def _finite(value: Any) -> Any:
-    """JSON has no NaN: the page reads null where a number is not finite (frame 0's reward)."""
-    return value if not (isinstance(value, float) and not np.isfinite(value)) else None
-
-
 def recordings_config(recordings: Sequence[EpisodeRecording], exaggeration: float) -> dict[str, Any]:
     """The page's configuration for ``recordings`` shown side by side."""
     episodes = [recording_payload(recording) for recording in recordings]
-    for episode in episodes:
-        episode["return"] = _finite(episode["return"])
-        episode["meta"]["return"] = _finite(episode["meta"]["return"])
     return {"mode": "static", "exaggeration": exaggeration, "episodes": episodes}
 
 

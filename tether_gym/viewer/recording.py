@@ -33,6 +33,7 @@ __all__ = [
     "RecordingError",
     "load_recording",
     "record_episode",
+    "recording_file_name",
     "save_recording",
 ]
 
@@ -274,6 +275,15 @@ def _jsonable(value: Any) -> Any:
         return json.loads(json.dumps(value, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
     except (TypeError, ValueError) as error:
         raise RecordingError(f"env_kwargs cannot be recorded as JSON data: {error}") from None
+
+
+def recording_file_name(controller: str, seed: int) -> str:
+    """The file name of ``controller``'s episode on ``seed``: ``<controller>_seed<seed>.npz``, the
+    controller's last path component (a model's folder) with every character that is not a
+    letter, a digit or ``-_.`` replaced by ``_``, so that any name is one safe file name."""
+    stem = Path(controller).name or controller
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in stem)
+    return f"{safe}_seed{int(seed)}.npz"
 
 
 def save_recording(recording: EpisodeRecording, path: str | os.PathLike[str]) -> Path:

@@ -46,7 +46,14 @@ LAW = "local_tension_aware"  # the tiny teacher's prior
 SHORT = {"max_episode_steps": 40}
 TEACHER = MPCSettings(samples=3, horizon=2, knots=1, noise=0.3, prior=LAW)
 TINY = DAggerSettings(
-    residual_on=LAW, iterations=2, episodes=2, epochs=3, batch_size=32, eval_episodes=2, net_arch=(8, 8)
+    residual_on=LAW,
+    iterations=2,
+    episodes=2,
+    epochs=3,
+    batch_size=32,
+    eval_episodes=2,
+    net_arch=(8, 8),
+    validation_every=2,  # the second episode of each iteration held out for early stopping
 )
 
 
@@ -143,6 +150,34 @@ def test_the_saved_student_loads_and_acts_as_the_one_in_memory_to_the_bit(tmp_pa
     assert metadata["policy_kwargs"]["net_arch"] == {"pi": [8, 8], "vf": []}
 
 
+def test_early_stopping_keeps_the_epoch_best_on_the_held_out_states() -> None:
+    rng = np.random.default_rng(2)
+    features = rng.normal(size=(320, 30)).astype(np.float32)
+    targets = np.tanh(features[:, :12] * 0.5).astype(np.float32)
+    fitted, held = slice(0, 256), slice(256, 320)
+    # Held-out states that follow the same rule: the fit helps there, and the best epoch is kept.
+    model = build_student(ENV_ID, (16,), 0)
+    fit = fit_student(model.policy, features[fitted], targets[fitted], 30, 1e-2, 32, 0, (features[held], targets[held]))
+    assert fit.validation_loss is not None and fit.validation_loss_before is not None
+    assert 0 < fit.epochs_kept <= 30 and fit.validation_loss < 0.5 * fit.validation_loss_before
+    assert fit.validation_loss == pytest.approx(dagger.student_loss(model.policy, features[held], targets[held]))
+    # Held-out states that contradict the fitted ones: no epoch improves on them, so the weights
+    # before the fit are kept, to the bit.
+    model = build_student(ENV_ID, (16,), 0)
+    start = [p.detach().numpy().copy() for p in model.policy.action_net.parameters()]
+    fit = fit_student(
+        model.policy, features[fitted], targets[fitted], 10, 1e-2, 32, 0, (features[fitted], -targets[fitted])
+    )
+    assert fit.epochs_kept == 0 and fit.validation_loss == fit.validation_loss_before
+    assert all(
+        np.array_equal(a, p.detach().numpy()) for a, p in zip(start, model.policy.action_net.parameters(), strict=True)
+    )
+    with pytest.raises(ValueError, match="validation must be"):
+        fit_student(model.policy, features, targets, 1, 1e-2, 32, 0, (features[:, 1:], targets))
+    assert dagger.held_out_rows(np.array([0, 1, 2, 3, 4, 5, 9, 9]), 5).tolist() == [0, 0, 0, 0, 1, 0, 1, 1]
+    assert not dagger.held_out_rows(np.arange(10), 0).any()
+
+
 def test_fitting_lowers_the_error_and_depends_on_the_seed() -> None:
     rng = np.random.default_rng(1)
     features = rng.normal(size=(256, 30)).astype(np.float32)
@@ -150,7 +185,8 @@ def test_fitting_lowers_the_error_and_depends_on_the_seed() -> None:
     model = build_student(ENV_ID, (16,), 0)
     before = fit_student(model.policy, features, targets, 0, 1e-2, 32, 0)
     after = fit_student(model.policy, features, targets, 30, 1e-2, 32, 0)
-    assert after < 0.25 * before
+    assert after.loss < 0.25 * before.loss and (before.epochs_kept, after.epochs_kept) == (0, 30)
+    assert after.validation_loss is None and after.validation_loss_before is None
     weights = []
     for seed in (1, 2):
         other = build_student(ENV_ID, (16,), 0)
@@ -178,6 +214,10 @@ def test_a_run_aggregates_the_data_selects_on_the_evaluation_seeds_and_records_i
     assert history[1]["states"] == 2 * history[0]["states"] == 4 * SHORT["max_episode_steps"]
     assert all(entry["target_variance"] > 0 and entry["loss"] >= 0 for entry in history)
     assert history[0]["loss_on_new_states"] is None and history[1]["loss_on_new_states"] > 0
+    # validation_every 2: the second episode of each iteration is held out of the fits.
+    assert [entry["validation_states"] for entry in history] == [SHORT["max_episode_steps"] * k for k in (1, 2)]
+    assert all(entry["validation_loss"] <= entry["validation_loss_before"] for entry in history)
+    assert all(0 <= entry["epochs_kept"] <= TINY.epochs for entry in history)
     assert log["seeds"] == [EVAL_SEEDS_START, EVAL_SEEDS_START + 1]
     config = yaml.safe_load((run / "config.yml").read_text())
     assert config["training_seeds"] == [TRAINING_SEEDS_START + 3 * SEEDS_PER_RUN, TRAINING_SEEDS_START + 3 * 800 + 3]
@@ -203,6 +243,8 @@ def test_a_run_aggregates_the_data_selects_on_the_evaluation_seeds_and_records_i
     with np.load(run / dagger.DATASET_FILE, allow_pickle=False) as data:
         assert data["observations"].shape == (history[1]["states"], 30) and data["targets"].shape[1] == 12
         assert np.bincount(data["iteration"]).tolist() == [2 * SHORT["max_episode_steps"]] * 2
+        assert np.bincount(data["episode"]).tolist() == [SHORT["max_episode_steps"]] * 4
+        assert data["held_out"].tolist() == (data["episode"] % 2 == 1).tolist()
 
 
 def test_selection_evaluates_on_the_evaluation_seeds_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -253,6 +295,8 @@ def test_the_same_seed_trains_the_same_bits(run: Path, tmp_path: Path) -> None:
         ({"net_arch": []}, "net_arch must be a list of 1 to 16"),
         ({"net_arch": [64, 0]}, "net_arch entry must be an integer in 1..4096"),
         ({"net_arch": "64"}, "net_arch must be a list"),
+        ({"validation_every": 1}, "validation_every must be 0 .off. or at least 2"),
+        ({"validation_every": -1}, "validation_every must be an integer in 0..800"),
     ],
 )
 def test_bad_settings_are_named(overrides: dict[str, Any], message: str) -> None:
