@@ -34,9 +34,11 @@ __all__ = [
     "OtherIdError",
     "OtherIdWarning",
     "TrainedPolicy",
+    "actor_mean_actions",
     "check_actions_fit",
     "env_action_space",
     "env_id_of",
+    "gaussian_actor",
     "is_shipped",
     "make_controller",
     "shipped_models",
@@ -213,6 +215,8 @@ class TrainedPolicy:
         #: A shared decentralised policy's multi-agent options (agents.controllers.decentralised), or None.
         self.multiagent: dict[str, Any] | None = self.spec.multiagent
         self.observer: Any = None
+        #: Whether deterministic actions come from :func:`actor_mean_actions` rather than SB3's predict.
+        self.direct_actions = gaussian_actor(self.policy)
 
     @classmethod
     def from_parts(
@@ -342,7 +346,12 @@ class TrainedPolicy:
         raw = obs
         if self.normalizer is not None:
             obs = self.normalizer.normalize_obs(obs).astype(np.float32)
-        actions, state = self.policy.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        if deterministic and state is None and self.direct_actions:
+            actions = actor_mean_actions(self.policy, obs)
+        else:
+            actions, state = self.policy.predict(
+                obs, state=state, episode_start=episode_start, deterministic=deterministic
+            )
         if self.residual_on is None:
             return actions, state
         if self.baseline is None:
@@ -373,6 +382,48 @@ class TrainedPolicy:
         local, single = self.observer.observe(observation)
         joint = self.act_local(local, deterministic).reshape(local.shape[0], -1)
         return joint[0] if single else joint
+
+
+def gaussian_actor(policy: Any) -> bool:
+    """Whether ``policy`` is an SB3 ``ActorCriticPolicy`` whose deterministic action is its
+    diagonal Gaussian's mean, clipped to a ``Box`` (PPO's, A2C's, the DAgger student's):
+    :func:`actor_mean_actions` then computes SB3's ``predict`` directly."""
+    from stable_baselines3.common.distributions import DiagGaussianDistribution
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    return (
+        isinstance(policy, ActorCriticPolicy)
+        and isinstance(policy.action_dist, DiagGaussianDistribution)
+        and isinstance(policy.action_space, gymnasium.spaces.Box)
+        and isinstance(policy.observation_space, gymnasium.spaces.Box)
+        and not policy.squash_output
+    )
+
+
+def actor_mean_actions(policy: Any, observation: np.ndarray) -> np.ndarray:
+    """``policy.predict(observation, deterministic=True)[0]`` of a :func:`gaussian_actor`, to the
+    bit: the same torch operations on the same float32 rows (features, the actor's MLP, its
+    action head, then the clip to the action space), without what ``predict`` does besides on
+    every call (switching every module to evaluation mode, building a distribution object).
+    Those cost several times the arithmetic of a small network acting on one observation.
+
+    ``observation``: (obs_dim,) or (N, obs_dim) float32, as the network takes it (normalised);
+    returns (act_dim,) or (N, act_dim)."""
+    import torch
+    from stable_baselines3.common.policies import BasePolicy
+
+    if policy.training:  # dropout or batch norm would act otherwise; SB3's predict switches too
+        policy.set_training_mode(False)
+    # A fresh copy, as predict makes: torch's matrix kernels can round differently on rows that
+    # start at another memory alignment (a row inside a larger array).
+    rows = np.array(observation).reshape((-1, *policy.observation_space.shape))
+    with torch.no_grad():
+        features = BasePolicy.extract_features(policy, torch.as_tensor(rows), policy.pi_features_extractor)
+        means = policy.action_net(policy.mlp_extractor.forward_actor(features))
+    actions = np.clip(
+        means.cpu().numpy().reshape((-1, *policy.action_space.shape)), policy.action_space.low, policy.action_space.high
+    )
+    return actions if np.ndim(observation) > 1 else actions.squeeze(axis=0)
 
 
 def shipped_models(env_id: str) -> dict[str, Path]:

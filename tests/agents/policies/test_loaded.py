@@ -48,6 +48,29 @@ def test_shipped_models_give_their_reference_actions(env_id: str, name: str) -> 
     assert not list(directory.glob("*.zip")) and not list(directory.glob("*.pkl"))
 
 
+@pytest.mark.parametrize(("env_id", "name"), SHIPPED)
+def test_direct_actions_are_sb3_predicts_to_the_bit(env_id: str, name: str) -> None:
+    """TrainedPolicy.predict computes a Gaussian actor's deterministic action without SB3's
+    predict (agents.policies.loaded.actor_mean_actions, for speed); on every shipped model it gives
+    predict's actions to the bit, batched and one observation at a time, and through
+    TrainedPolicy.predict too."""
+    policy = TrainedPolicy(shipped_models(env_id)[name])
+    rng = np.random.default_rng(7)
+    rows = rng.normal(0.0, 2.0, (33, policy.observation_size)).astype(np.float32)
+    if not agents.policies.loaded.gaussian_actor(policy.policy):
+        pytest.skip(f"{env_id} {name} is not a Gaussian actor: it acts through SB3's predict")
+    assert policy.direct_actions
+    batched = agents.policies.loaded.actor_mean_actions(policy.policy, rows)
+    np.testing.assert_array_equal(batched, policy.policy.predict(rows, deterministic=True)[0], strict=True)
+    for row in rows[:5]:  # rows inside a larger array: other memory alignments
+        single = agents.policies.loaded.actor_mean_actions(policy.policy, row)
+        np.testing.assert_array_equal(single, policy.policy.predict(row, deterministic=True)[0], strict=True)
+    if policy.residual_on is None and policy.multiagent is None:
+        through = policy.predict(rows * 0.1)[0]
+        raw = policy.normalizer.normalize_obs(rows * 0.1).astype(np.float32) if policy.normalizer else rows * 0.1
+        np.testing.assert_array_equal(through, policy.policy.predict(raw, deterministic=True)[0], strict=True)
+
+
 @pytest.fixture
 def fake_models_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """A copy of the shipped models, standing in for agents/models."""
