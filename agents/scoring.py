@@ -11,7 +11,9 @@ per-episode returns on the way::
 
 A benchmark of new ids alone (``python -m agents.benchmark --envs ...``) is added to the shipped
 file with ``--add-to agents/reference/reference_scores.json --force``: the other ids keep their
-numbers and their run (:func:`agents.evaluation.scoring.merge_reference`).
+numbers and their run (:func:`agents.evaluation.scoring.merge_reference`). A rerun of every id of
+the file's aggregate (``--track standard``, after shipping new models) is added the same way: it
+becomes the file's own run and aggregate, and the ids added earlier keep theirs.
 
 ``--ceiling`` prints instead, from the shipped data alone (nothing runs), every controller of the
 reference scores against the reference ceiling on the ceiling's seeds: mean return, excess cost
@@ -29,6 +31,8 @@ score_policy``, the documented path of earlier releases); its module is
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 from typing import Any
 
 from tether_gym.registration import track_of
@@ -135,6 +139,11 @@ def ceiling_report(
     return "\n".join(parts)
 
 
+def _benchmark_ids(benchmark_json: str) -> list[str]:
+    """The ids of a benchmark's ``benchmark.json`` (already checked by :func:`write_reference`)."""
+    return list(json.loads(Path(benchmark_json).read_text(encoding="utf-8"))["per_id"])
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run the command with ``argv`` (default: the process's arguments); returns the reference
     scores it wrote, or with ``--ceiling`` ``{"ceiling_markdown": the table it printed}``."""
@@ -160,6 +169,15 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         args.benchmark_json, args.commit, args.out, args.date, args.machine, args.force, add_to=args.add_to
     )
     controllers = sum(len(entry["controllers"]) for entry in data["per_id"].values())
+    # merge_reference makes a benchmark that holds every id of the aggregate the file's own run.
+    added_ids = {env_id for entry in data.get("additions", []) for env_id in entry["ids"]}
+    if args.add_to is not None and not added_ids & set(_benchmark_ids(args.benchmark_json)):
+        print(
+            f"wrote {args.out}: {', '.join(data['aggregate_ids'])} rerun (commit {data['commit']}, {data['date']}) as "
+            f"the file's own run and aggregate, {len(data['additions'])} additions of other ids kept; every statistic "
+            "matches its returns"
+        )
+        return data
     if args.add_to is not None:
         added = data["additions"][-1]
         print(

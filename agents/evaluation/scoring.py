@@ -741,9 +741,14 @@ def merge_reference(base: dict[str, Any], addition: dict[str, Any]) -> dict[str,
     the other ids. The merged file keeps ``base``'s run and its aggregate, which covers only the
     ids it was computed over (``aggregate_ids``), and lists each addition's run and ids under
     ``additions``; :func:`run_of` says which run gave an id. An addition's ids replace those of an
-    earlier addition; the ids of the aggregate cannot be replaced this way (rerun the benchmark on
-    every id for that). Raises :class:`ReferenceDataError` when a shared setting differs (the
-    scores would not be comparable) or an addition would replace an id of the aggregate."""
+    earlier addition.
+
+    An addition that holds every id of ``base``'s aggregate is a rerun of it (new shipped models,
+    say): its run and aggregate become the merged file's own, and ``base``'s additions of other
+    ids are kept, so a track is rerun without rerunning the ids added to it. Raises
+    :class:`ReferenceDataError` when a shared setting differs (the scores would not be
+    comparable) or an addition holds some of the aggregate's ids but not all (the aggregate
+    over ids would then mix two runs)."""
     for key in _SHARED_SETTINGS:
         if base.get(key) != addition.get(key):
             raise ReferenceDataError(
@@ -753,13 +758,15 @@ def merge_reference(base: dict[str, Any], addition: dict[str, Any]) -> dict[str,
     if addition.get("additions"):
         raise ReferenceDataError("the addition is itself a merged file: add the benchmark of each run on its own")
     aggregate_ids = list(base.get("aggregate_ids", base["per_id"]))
-    replaced = sorted(set(addition["per_id"]) & set(aggregate_ids))
-    if replaced:
-        raise ReferenceDataError(
-            f"{replaced} are ids of the reference's aggregate: an addition cannot replace them; rerun the benchmark "
-            "on every id and write the reference from it"
-        )
     new_ids = list(addition["per_id"])
+    replaced = sorted(set(new_ids) & set(aggregate_ids))
+    rerun = set(aggregate_ids) <= set(new_ids)
+    if replaced and not rerun:
+        missing = [env_id for env_id in aggregate_ids if env_id not in new_ids]
+        raise ReferenceDataError(
+            f"{replaced} are ids of the reference's aggregate, but the addition lacks {missing}: an addition replaces "
+            "the aggregate's ids only all together; rerun the benchmark on every one of them"
+        )
     earlier = []
     for entry in base.get("additions", []):
         kept = [env_id for env_id in entry["ids"] if env_id not in new_ids]
@@ -770,12 +777,15 @@ def merge_reference(base: dict[str, Any], addition: dict[str, Any]) -> dict[str,
     # In the order of the registry, as a benchmark of every id lists them (ids it does not know last).
     rank = {env_id: k for k, env_id in enumerate(ENV_IDS)}
     per_id = dict(sorted(per_id.items(), key=lambda item: rank.get(item[0], len(rank))))
-    merged = {
-        **base,
-        "aggregate_ids": aggregate_ids,
-        "additions": [*earlier, {"ids": new_ids, **{key: addition[key] for key in _RUN_KEYS}}],
-        "per_id": per_id,
-    }
+    if rerun:
+        merged = {**addition, "aggregate_ids": new_ids, "additions": earlier, "per_id": per_id}
+    else:
+        merged = {
+            **base,
+            "aggregate_ids": aggregate_ids,
+            "additions": [*earlier, {"ids": new_ids, **{key: addition[key] for key in _RUN_KEYS}}],
+            "per_id": per_id,
+        }
     _check_statistics(merged)
     return merged
 

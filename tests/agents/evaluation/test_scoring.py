@@ -280,8 +280,17 @@ def test_a_benchmark_of_new_ids_is_added_with_its_own_run(
     again = merge_reference(merged, {**addition, "commit": "0123abc"})
     assert [entry["ids"] for entry in again["additions"]] == [["TetherChain-v0"]]
     assert run_of(again, "TetherChain-v0")["commit"] == "0123abc"
-    with pytest.raises(ReferenceDataError, match=r"\['TetherTetrahedron-v0'\] are ids of the reference's aggregate"):
-        merge_reference(merged, small_reference)
+    # A rerun of every id of the aggregate becomes the file's own run and keeps the other ids' additions.
+    rerun = merge_reference(merged, {**small_reference, "commit": "fedcba9"})
+    assert (rerun["commit"], rerun["aggregate_ids"], rerun["aggregate"]) == ("fedcba9", [ENV_ID], merged["aggregate"])
+    assert [entry["ids"] for entry in rerun["additions"]] == [["TetherChain-v0"]]
+    assert rerun["per_id"] == merged["per_id"] and run_of(rerun, "TetherChain-v0")["commit"] == "def5678"
+    assert run_of(rerun, ENV_ID)["commit"] == "fedcba9"
+    # Replacing some of the aggregate's ids but not all would mix two runs in one aggregate.
+    two_ids = {**merged, "aggregate_ids": [ENV_ID, "TetherChain-v0"], "additions": []}
+    partial = r"\['TetherTetrahedron-v0'\] are ids of the reference's aggregate, but "
+    with pytest.raises(ReferenceDataError, match=partial):
+        merge_reference(two_ids, small_reference)
     with pytest.raises(ReferenceDataError, match="the addition's episodes is 4, the reference's 8"):
         merge_reference(small_reference, {**addition, "episodes": 4})
     with pytest.raises(ReferenceDataError, match="is itself a merged file"):
@@ -294,7 +303,10 @@ def test_a_benchmark_of_new_ids_is_added_with_its_own_run(
 
 
 def test_the_command_adds_a_benchmark_to_a_reference_file(
-    small_benchmark: Path, other_id_reference: tuple[Path, dict[str, Any]], tmp_path: Path
+    small_benchmark: Path,
+    other_id_reference: tuple[Path, dict[str, Any]],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
     bench, _ = other_id_reference
     out = tmp_path / "reference.json"
@@ -302,3 +314,8 @@ def test_the_command_adds_a_benchmark_to_a_reference_file(
     merged = main([str(bench), "--commit", "def5678", "--out", str(out), "--add-to", str(out), "--force"])
     assert load_reference(out) == merged and list(merged["per_id"]) == [ENV_ID, "TetherChain-v0"]
     assert merged["per_id"][ENV_ID] == base["per_id"][ENV_ID]
+    assert "added TetherChain-v0 (commit def5678" in capsys.readouterr().out
+    # The aggregate's ids rerun: the file's own run, the addition of the other id kept, and said so.
+    rerun = main([str(small_benchmark), "--commit", "fedcba9", "--out", str(out), "--add-to", str(out), "--force"])
+    assert (rerun["commit"], [entry["ids"] for entry in rerun["additions"]]) == ("fedcba9", [["TetherChain-v0"]])
+    assert f"{ENV_ID} rerun (commit fedcba9" in capsys.readouterr().out
