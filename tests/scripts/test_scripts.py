@@ -89,3 +89,11 @@ def test_env_demo_runs(tmp_path: Path) -> None:
     assert (tmp_path / "env_energy.png").stat().st_size > 10_000
     assert (tmp_path / "env_demo.gif").stat().st_size > 1_000
     assert "velocity feedback" in out
+
+
+def test_student_compute_benchmark_runs() -> None:
+    out = run("benchmarks/student_compute.py", "--envs", "TetherChain-v0")
+    rows = [line for line in out.splitlines() if line.startswith("| TetherChain-v0 |")]
+    assert len(rows) == 1 and "CPU:" in out, out
+    speedups = [float(cell.strip().rstrip("x").replace(",", "")) for cell in rows[0].split("|")[4:7:2]]
+    assert all(speedup > 1.0 for speedup in speedups), rows  # the student is faster than the planner
