@@ -41,7 +41,7 @@ from typing import Any
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import config, njit, prange
 from numpy.typing import ArrayLike
 
 from tether_gym import _compilation  # noqa: F401 - announces each kernel group as it compiles
@@ -170,9 +170,10 @@ DRIFT_ROUND_OFF = 1e-9
 #: sub-step budget puts them back.
 SAVED_NODE_COLUMNS = INTERNAL_FORCE + 3 - POSITION
 
-#: Chunks the parallel drivers split a batch into: enough to even out clusters that sub-step more
-#: over any likely number of threads, few enough that the per-chunk call costs nothing.
-PARALLEL_CHUNKS = 64
+#: The fewest chunks the parallel drivers split a batch into (see :func:`parallel_chunks`): two
+#: per thread that numba may run, to even out chunks that sub-step more.  Read once, at import, and
+#: compiled in as a constant: it only sets how the work is shared, never the bits.
+PARALLEL_MIN_CHUNKS = 2 * int(config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set at import by numba
 
 
 def kernel_operand(values: ArrayLike, dtype: type | None = None) -> np.ndarray:
@@ -926,6 +927,304 @@ def _advance_pair(
         )
 
 
+# ---------------------------------------------------------------------------------------------
+# The same integrator over blocks of clusters in SIMD lanes.  The tables keep a cluster's numbers
+# together (a cluster per row), so each block is gathered into arrays with the block's clusters
+# innermost (``[node, axis, lane]``), sub-stepped there with every loop over nodes, axes and
+# cables branch-free across the lanes, so that one vector instruction updates several clusters,
+# and scattered back.  Each lane keeps its own step; a lane that has finished its interval (or
+# was flagged) takes a zero step and every write it would make is a select that keeps the old
+# value, so a cluster goes through exactly the operations of :func:`_advance_pair`: the same bits,
+# whatever block it shares.  The start and the end of the interval (saving for a roll-back, the
+# velocity synchronisation, the energy books) are the scalar pieces, run per cluster.
+
+#: Clusters per block of :func:`_advance_lanes`: 64 measured best on the tetrahedron and on the
+#: beaded tetrahedron at N = 1 024 (docs/speed.md, the roofline).
+LANE_WIDTH = 64
+#: The fewest lane-ready clusters a call integrates in lanes; fewer go in pairs, which have no
+#: gather and scatter to pay and no partly filled vectors (the single env is one cluster).
+LANE_MIN_CLUSTERS = 8
+
+# The block's numbers live in three flat arrays, a row of LANE_WIDTH lanes per number.  Every
+# offset within a node's, a cable's or the lanes' own rows is a compile-time constant, so LLVM
+# sees that two rows never overlap and vectorises the loops without run-time alias checks
+# (with a separate array per number it gave up on the cable loop: too many checks).
+# A node's rows: position (3), half-step velocity (3), internal force (3), applied force (3),
+# the previous interval's applied force (3), mass, damping.
+_L_POSITION, _L_VELOCITY, _L_FORCE, _L_APPLIED, _L_PREVIOUS, _L_MASS, _L_DAMPING = 0, 3, 6, 9, 12, 15, 16
+_L_NODE_ROWS = 17
+# A cable's rows.
+_L_STIFFNESS, _L_REST, _L_PRETENSION, _L_INVERSE_MASS, _L_BREAKING, _L_INTACT, _L_TENSION, _L_PEAK = range(8)
+_L_CABLE_ROWS = 8
+# The lanes' own rows: the sub-step and its books, and the cable loop's per-lane results.
+_L_H, _L_H_LAST, _L_H_DAMPING, _L_ELAPSED, _L_BLEND, _L_INVERSE_H_MID, _L_OMEGA2 = range(7)
+_L_WORK, _L_DISSIPATED, _L_H_LO, _L_H_HI, _L_INVERSE_LHS, _L_RHS_FACTOR, _L_SPEED2, _L_OMEGA2_MAX = range(7, 15)
+_L_RELEASED, _L_LENGTH_SUM, _L_SHORTEST, _L_PULL, _L_FROM_REST = 15, 16, 17, 18, 21  # _L_PULL: 3 rows
+_L_LANE_ROWS = 22
+
+
+@njit(inline="always", error_model="numpy")
+def _lane_ready(cables: np.ndarray, cluster: np.ndarray) -> bool:
+    """Whether :func:`_advance_lanes` integrates this cluster: an inertial frame and no axial
+    damping (the lanes carry neither the frame's terms nor the Kelvin-Voigt force)."""
+    if cluster[FRAME_RATE] != 0.0 or _largest_tidal(cluster) != 0.0:
+        return False
+    for c in range(cables.shape[0]):
+        if cables[c, AXIAL_DAMPING] > 0.0:
+            return False
+    return True
+
+
+@njit(inline="always")
+def parallel_chunks(batch: int) -> int:
+    """How many chunks the parallel drivers split ``batch`` clusters into: chunks of
+    :data:`LANE_WIDTH` clusters where the batch has enough, so that each fills its SIMD lanes
+    (chunks of 16, from a fixed 64 chunks at N = 1 024, ran their lanes at the scalar rate), and
+    at least :data:`PARALLEL_MIN_CHUNKS`."""
+    return min(batch, max(batch // LANE_WIDTH, PARALLEL_MIN_CHUNKS))
+
+
+@njit(error_model="numpy")  # called, not inlined: once per call of the driver
+def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the pair has
+    duration: float,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
+    counters: np.ndarray,
+    step_record: np.ndarray,
+    members: np.ndarray,
+) -> None:
+    """:func:`_advance_pair` for the clusters ``members`` (K,) int64 of the tables, every one
+    healthy, active and :func:`_lane_ready` (exact elongation), in blocks of :data:`LANE_WIDTH`
+    SIMD lanes: bit for bit the same results, every table and ``step_record`` included."""
+    n, m, w = nodes.shape[1], cables.shape[1], LANE_WIDTH
+    node_lanes = np.zeros((n, _L_NODE_ROWS, w))
+    cable_lanes = np.zeros((m, _L_CABLE_ROWS, w))
+    lane = np.zeros((_L_LANE_ROWS, w))
+    no_roll_back = np.empty((0, SAVED_NODE_COLUMNS))  # _end_advance's roll-back copy, never read here
+    count = np.zeros(w, dtype=np.int64)
+    running = np.zeros(w, dtype=np.bool_)
+    last = np.zeros(w, dtype=np.bool_)
+    recorded = step_record.shape[1]
+    # The lanes' own rows, as 1-D views: the loops index them by the lane alone.
+    h_row, h_last_row, h_damping_row, elapsed_row = lane[_L_H], lane[_L_H_LAST], lane[_L_H_DAMPING], lane[_L_ELAPSED]
+    blend_row, inverse_h_mid_row, omega2_row = lane[_L_BLEND], lane[_L_INVERSE_H_MID], lane[_L_OMEGA2]
+    work_row, dissipated_row = lane[_L_WORK], lane[_L_DISSIPATED]
+    h_lo_row, h_hi_row, inverse_lhs_row, rhs_factor_row = (
+        lane[_L_H_LO],
+        lane[_L_H_HI],
+        lane[_L_INVERSE_LHS],
+        lane[_L_RHS_FACTOR],
+    )
+    speed2_row, omega2_max_row, released_row = lane[_L_SPEED2], lane[_L_OMEGA2_MAX], lane[_L_RELEASED]
+    length_sum_row, shortest_row, from_rest_row = lane[_L_LENGTH_SUM], lane[_L_SHORTEST], lane[_L_FROM_REST]
+    pull_x, pull_y, pull_z = lane[_L_PULL], lane[_L_PULL + 1], lane[_L_PULL + 2]
+    for start in range(0, members.shape[0], w):
+        lanes = min(w, members.shape[0] - start)
+        for k in range(lanes):
+            b = members[start + k]
+            # _begin_advance's values, without its copy for a roll-back: the tables keep the
+            # interval's start until the scatter, which a refused interval skips.
+            h_damping_row[k] = _damping_step(nodes[b], settings[SAFETY_FACTOR])
+            omega2_row[k] = clusters[b, OMEGA2]
+            elapsed_row[k], count[k], h_lo_row[k], h_hi_row[k] = 0.0, 0, math.inf, 0.0
+            work_row[k], dissipated_row[k], h_last_row[k] = (
+                clusters[b, WORK],
+                clusters[b, DISSIPATED],
+                clusters[b, LAST_STEP],
+            )
+            running[k] = True
+            for i in range(n):
+                node_lanes[i, _L_MASS, k], node_lanes[i, _L_DAMPING, k] = nodes[b, i, MASS], nodes[b, i, DAMPING]
+                for d in range(3):
+                    node_lanes[i, _L_POSITION + d, k] = nodes[b, i, POSITION + d]
+                    node_lanes[i, _L_VELOCITY + d, k] = nodes[b, i, HALF_STEP_VELOCITY + d]
+                    node_lanes[i, _L_FORCE + d, k] = nodes[b, i, INTERNAL_FORCE + d]
+                    node_lanes[i, _L_APPLIED + d, k] = nodes[b, i, APPLIED_FORCE + d]
+                    node_lanes[i, _L_PREVIOUS + d, k] = nodes[b, i, PREVIOUS_FORCE + d]
+            for c in range(m):
+                cable_lanes[c, _L_STIFFNESS, k] = cables[b, c, STIFFNESS]
+                cable_lanes[c, _L_REST, k] = cables[b, c, REST_LENGTH]
+                cable_lanes[c, _L_PRETENSION, k] = cables[b, c, PRETENSION]
+                cable_lanes[c, _L_INVERSE_MASS, k] = cables[b, c, INV_SPLIT_MASS_SUM]
+                cable_lanes[c, _L_BREAKING, k] = cables[b, c, BREAKING_LOAD]
+                cable_lanes[c, _L_INTACT, k] = cables[b, c, INTACT]
+                cable_lanes[c, _L_TENSION, k] = cables[b, c, TENSION]
+                cable_lanes[c, _L_PEAK, k] = cables[b, c, TENSION]  # each peak starts at the tension
+        active = lanes
+        while active > 0:
+            # Step sizes, lane by lane (the scalar _step_size); h = 0 marks a lane that does not step.
+            any_from_rest = False
+            for k in range(lanes):
+                if not running[k]:
+                    h_row[k] = 0.0
+                    continue
+                h_last = h_last_row[k]
+                h, last[k] = _step_size(omega2_row[k], h_damping_row[k], settings, duration - elapsed_row[k], count[k])
+                h_row[k] = h
+                if h == 0.0:
+                    counters[members[start + k], STATUS] = STATUS_TOO_MANY_SUBSTEPS
+                    running[k] = False
+                    active -= 1
+                    continue
+                from_rest_row[k] = 1.0 if h_last == 0.0 else 0.0
+                any_from_rest = any_from_rest or h_last == 0.0
+                blend_row[k] = h_last / (h_last + h) if count[k] == 0 else 0.0
+                inverse_h_mid_row[k] = 1.0 / (0.5 * (h_last + h))
+            # Kick and drift, node by node (each node's update reads that node only), with the
+            # drift's work and damping losses; the internal forces are zeroed for the cables'.
+            for i in range(n):
+                mass_row, damping_row = node_lanes[i, _L_MASS], node_lanes[i, _L_DAMPING]
+                for k in range(lanes):
+                    inertia = mass_row[k] * inverse_h_mid_row[k]
+                    inverse_lhs_row[k] = 1.0 / (inertia + 0.5 * damping_row[k])
+                    rhs_factor_row[k] = inertia - 0.5 * damping_row[k]
+                    speed2_row[k] = 0.0
+                for d in range(3):
+                    velocity, force = node_lanes[i, _L_VELOCITY + d], node_lanes[i, _L_FORCE + d]
+                    applied, previous = node_lanes[i, _L_APPLIED + d], node_lanes[i, _L_PREVIOUS + d]
+                    position = node_lanes[i, _L_POSITION + d]
+                    # Two copies of the loop, so that the common one carries no branch on the lanes.
+                    if any_from_rest:  # uniformly accelerated from a fresh state, in some lane
+                        for k in range(lanes):
+                            h = h_row[k]
+                            v_old, f, p = velocity[k], force[k], applied[k]
+                            p_dual = p + blend_row[k] * (previous[k] - p)
+                            kicked = (rhs_factor_row[k] * v_old + p_dual - f) * inverse_lhs_row[k]
+                            accelerated = v_old + 0.5 * h * ((p - f - damping_row[k] * v_old) / mass_row[k])
+                            kicked = accelerated if from_rest_row[k] != 0.0 else kicked
+                            v_new = kicked if h > 0.0 else v_old
+                            dx = h * v_new
+                            velocity[k] = v_new
+                            position[k] = position[k] + dx if h > 0.0 else position[k]
+                            work_row[k] = work_row[k] + p * dx if h > 0.0 else work_row[k]
+                            speed2_row[k] += v_new * v_new
+                            force[k] = 0.0 if h > 0.0 else f
+                    else:
+                        for k in range(lanes):
+                            h = h_row[k]
+                            v_old, f, p = velocity[k], force[k], applied[k]
+                            p_dual = p + blend_row[k] * (previous[k] - p)
+                            kicked = (rhs_factor_row[k] * v_old + p_dual - f) * inverse_lhs_row[k]
+                            v_new = kicked if h > 0.0 else v_old
+                            dx = h * v_new
+                            velocity[k] = v_new
+                            position[k] = position[k] + dx if h > 0.0 else position[k]
+                            work_row[k] = work_row[k] + p * dx if h > 0.0 else work_row[k]
+                            speed2_row[k] += v_new * v_new
+                            force[k] = 0.0 if h > 0.0 else f
+                for k in range(lanes):
+                    lost = h_row[k] * damping_row[k] * speed2_row[k]
+                    dissipated_row[k] = dissipated_row[k] + lost if h_row[k] > 0.0 else dissipated_row[k]
+            # Cable forces at the new positions (the undamped cable_forces, breaking included):
+            # tensions and their books, then the forces on the cable's two nodes.
+            for k in range(lanes):
+                omega2_max_row[k] = 0.0
+                released_row[k] = 0.0
+                length_sum_row[k] = 0.0
+                shortest_row[k] = math.inf
+            for c in range(m):
+                i, j = topology[c, 0], topology[c, 1]
+                xi0, xi1, xi2 = (
+                    node_lanes[i, _L_POSITION],
+                    node_lanes[i, _L_POSITION + 1],
+                    node_lanes[i, _L_POSITION + 2],
+                )
+                xj0, xj1, xj2 = (
+                    node_lanes[j, _L_POSITION],
+                    node_lanes[j, _L_POSITION + 1],
+                    node_lanes[j, _L_POSITION + 2],
+                )
+                stiffness, rest, pretension = (
+                    cable_lanes[c, _L_STIFFNESS],
+                    cable_lanes[c, _L_REST],
+                    cable_lanes[c, _L_PRETENSION],
+                )
+                inverse_mass, breaking = cable_lanes[c, _L_INVERSE_MASS], cable_lanes[c, _L_BREAKING]
+                intact, tension, peak = cable_lanes[c, _L_INTACT], cable_lanes[c, _L_TENSION], cable_lanes[c, _L_PEAK]
+                for k in range(lanes):
+                    stepping = h_row[k] > 0.0
+                    whole = intact[k] != 0.0
+                    counted = stepping & whole
+                    dx = xj0[k] - xi0[k]
+                    dy = xj1[k] - xi1[k]
+                    dz = xj2[k] - xi2[k]
+                    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    length_sum_row[k] = length_sum_row[k] + length if counted else length_sum_row[k]
+                    shortest_row[k] = length if counted & (length < shortest_row[k]) else shortest_row[k]
+                    inverse_length = 1.0 / length
+                    n_taut = pretension[k] + stiffness[k] * (length - rest[k])
+                    n_cable = n_taut if (n_taut > 0.0) & whole else 0.0
+                    geometric = n_cable * inverse_length
+                    k_max = stiffness[k] if stiffness[k] >= geometric else geometric
+                    w2 = k_max * inverse_mass[k]
+                    omega2_max_row[k] = w2 if counted & (w2 > omega2_max_row[k]) else omega2_max_row[k]
+                    peak[k] = n_cable if stepping & (n_cable > peak[k]) else peak[k]
+                    breaks = counted & (n_cable > breaking[k])
+                    elastic = n_taut if n_taut > 0.0 else 0.0
+                    freed = 0.5 * elastic * elastic / stiffness[k]
+                    released_row[k] = released_row[k] + freed if breaks else released_row[k]
+                    intact[k] = 0.0 if breaks else intact[k]
+                    n_cable = 0.0 if breaks else n_cable
+                    tension[k] = n_cable if stepping else tension[k]
+                    pulls = stepping & (n_cable != 0.0)
+                    pull_x[k] = n_cable * (dx * inverse_length) if pulls else 0.0
+                    pull_y[k] = n_cable * (dy * inverse_length) if pulls else 0.0
+                    pull_z[k] = n_cable * (dz * inverse_length) if pulls else 0.0
+                for d in range(3):
+                    pull = lane[_L_PULL + d]
+                    force_i, force_j = node_lanes[i, _L_FORCE + d], node_lanes[j, _L_FORCE + d]
+                    for k in range(lanes):
+                        pulls = (tension[k] != 0.0) & (h_row[k] > 0.0)
+                        force_i[k] = force_i[k] - pull[k] if pulls else force_i[k]
+                        force_j[k] = force_j[k] + pull[k] if pulls else force_j[k]
+            # The sub-step's books, lane by lane (the scalar _substep's).
+            for k in range(lanes):
+                h = h_row[k]
+                if h == 0.0:
+                    continue
+                b = members[start + k]
+                if count[k] < recorded:
+                    step_record[b, count[k]] = h
+                count[k] += 1
+                h_last_row[k] = h
+                h_lo_row[k] = min(h_lo_row[k], h)
+                h_hi_row[k] = max(h_hi_row[k], h)
+                omega2_row[k] = omega2_max_row[k]
+                dissipated_row[k] += h * 0.0 + released_row[k]  # no viscous power in these lanes
+                if not (math.isfinite(length_sum_row[k]) and shortest_row[k] > 0.0):
+                    counters[b, STATUS] = STATUS_NON_FINITE
+                    running[k] = False
+                    active -= 1
+                elif last[k]:
+                    running[k] = False
+                    active -= 1
+                else:
+                    elapsed_row[k] += h
+        for k in range(lanes):
+            b = members[start + k]
+            if counters[b, STATUS] == STATUS_TOO_MANY_SUBSTEPS:  # refused: the tables hold its start
+                _hold_cluster(cables[b], clusters[b], counters[b])
+                continue
+            for i in range(n):
+                for d in range(3):
+                    nodes[b, i, POSITION + d] = node_lanes[i, _L_POSITION + d, k]
+                    nodes[b, i, HALF_STEP_VELOCITY + d] = node_lanes[i, _L_VELOCITY + d, k]
+                    nodes[b, i, INTERNAL_FORCE + d] = node_lanes[i, _L_FORCE + d, k]
+            for c in range(m):
+                cables[b, c, TENSION] = cable_lanes[c, _L_TENSION, k]
+                cables[b, c, INTACT] = cable_lanes[c, _L_INTACT, k]
+                cables[b, c, PEAK_TENSION] = cable_lanes[c, _L_PEAK, k]
+            clusters[b, OMEGA2] = omega2_row[k]
+            fixed = (0.0, False, False, h_damping_row[k], omega2_row[k], no_roll_back)
+            ended = (
+                elapsed_row[k], count[k], h_lo_row[k], h_hi_row[k], work_row[k], dissipated_row[k], h_last_row[k],
+            )  # fmt: skip
+            _end_advance(duration, settings, topology, nodes[b], cables[b], clusters[b], counters[b], fixed, ended)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _advance_clusters(
     duration: float,
@@ -939,40 +1238,46 @@ def _advance_clusters(
     step_record: np.ndarray,
 ) -> None:
     """Advance every cluster of the given tables (a batch, or a chunk of one) by ``duration`` s:
-    those ``active`` and healthy (or whose last interval was refused for its sub-step budget) by
-    :func:`_advance_pair`, two at a time, the others held.  ``step_record``
-    (B, R) receives the first R sub-steps of each cluster.
+    those ``active`` and healthy (or whose last interval was refused for its sub-step budget), the
+    others held.  With at least :data:`LANE_MIN_CLUSTERS` of them :func:`_lane_ready` (and the
+    exact elongation), those go through :func:`_advance_lanes`, and the rest through
+    :func:`_advance_pair`, two at a time: the same bits either way, so a cluster's trajectory
+    does not depend on the batch it shares.  ``step_record`` (B, R) receives the first R
+    sub-steps of each cluster.
 
     It is the one-thread driver, and :func:`advance_parallel` calls it on chunks: compiled once
     for both (inlined into the parallel driver, it made that take seconds longer to compile), and
     one call per chunk (a call per cluster cost more than a short interval's work)."""
-    # One call site of the pair, whose two inlined sub-steps are most of the integrator's code.
     batch = nodes.shape[0]
-    # np.int64 rather than the literal -1: numba types a literal as a type of its own until the
-    # loop's values widen it, and would compile the called pair once more for that first guess.
-    waiting = np.int64(-1)  # a healthy cluster waiting for a partner
-    for b in range(batch + 1):
-        if b < batch and active[b] and counters[b, STATUS] == STATUS_TOO_MANY_SUBSTEPS:
+    exact = settings[LINEARISED] == 0.0
+    in_lanes = np.empty(batch, dtype=np.int64)
+    in_pairs = np.empty(batch, dtype=np.int64)
+    lane_count = 0
+    pair_count = 0
+    for b in range(batch):
+        if active[b] and counters[b, STATUS] == STATUS_TOO_MANY_SUBSTEPS:
             counters[b, STATUS] = STATUS_OK  # its refused interval left it as it was: it may try again
-        if b < batch and not (active[b] and counters[b, STATUS] == STATUS_OK):
+        if not (active[b] and counters[b, STATUS] == STATUS_OK):
             _hold_cluster(cables[b], clusters[b], counters[b])
-        elif b < batch and waiting < 0:
-            waiting = b
-        elif waiting >= 0:  # a partner, or the end of the batch: the waiting cluster goes alone
-            partner = b if b < batch else -1
-            _advance_pair(
-                duration,
-                settings,
-                topology,
-                nodes,
-                cables,
-                clusters,
-                counters,
-                step_record,
-                waiting,
-                partner,
-            )
-            waiting = -1
+        elif exact and _lane_ready(cables[b], clusters[b]):
+            in_lanes[lane_count] = b
+            lane_count += 1
+        else:
+            in_pairs[pair_count] = b
+            pair_count += 1
+    if lane_count >= LANE_MIN_CLUSTERS:
+        _advance_lanes(
+            duration, settings, topology, nodes, cables, clusters, counters, step_record, in_lanes[:lane_count]
+        )
+    else:
+        in_pairs[pair_count : pair_count + lane_count] = in_lanes[:lane_count]
+        pair_count += lane_count
+    # One call site of the pair, whose two inlined sub-steps are most of the integrator's code.
+    for k in range(0, pair_count, 2):
+        partner = in_pairs[k + 1] if k + 1 < pair_count else np.int64(-1)
+        _advance_pair(
+            duration, settings, topology, nodes, cables, clusters, counters, step_record, in_pairs[k], partner
+        )
 
 
 #: The integrator on one thread, for small batches (its start-up cost is lower).
@@ -991,9 +1296,10 @@ def advance_parallel(
     counters: np.ndarray,
     step_record: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """:func:`advance_serial` on all threads, a chunk of clusters each (the same bits)."""
+    """:func:`advance_serial` on all threads, a chunk of clusters each (the same bits, whatever
+    the chunks: see :func:`parallel_chunks`)."""
     batch = nodes.shape[0]
-    chunks = min(batch, PARALLEL_CHUNKS)
+    chunks = parallel_chunks(batch)
     for k in prange(chunks):
         lo, hi = k * batch // chunks, (k + 1) * batch // chunks
         _advance_clusters(

@@ -33,7 +33,6 @@ from tether_gym._kernels import (
     FRAME_TIDAL,
     INTACT,
     MASS,
-    PARALLEL_CHUNKS,
     PEAK_TENSION,
     POSITION,
     PRETENSION,
@@ -466,7 +465,7 @@ def _evaluate_cluster(
 FOREIGN_LAYOUT = (
     _kernels.SOURCE_SHA256,
     _kernels.LAYOUT,
-    PARALLEL_CHUNKS,
+    _kernels.PARALLEL_MIN_CHUNKS,
     _kernels.STATUS_OK,
     tuple((column.name, int(column)) for column in Scalar),
     tuple((reason.name, int(reason)) for reason in EndReason),
@@ -638,7 +637,7 @@ def _compile_parallel_task(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
         nodes, cables, clusters, counters = simulator_tables
         task_nodes, task_clusters, propellant, end_reason = task_tables
         batch = nodes.shape[0]
-        chunks = min(batch, PARALLEL_CHUNKS)
+        chunks = _kernels.parallel_chunks(batch)
         for k in prange(chunks):
             lo, hi = k * batch // chunks, (k + 1) * batch // chunks
             if evaluate_only:
