@@ -170,7 +170,10 @@ DRIFT_ROUND_OFF = 1e-9
 #: sub-step budget puts them back.
 SAVED_NODE_COLUMNS = INTERNAL_FORCE + 3 - POSITION
 
-#: The fewest chunks the parallel drivers split a batch into (see :func:`parallel_chunks`): two
+#: Chunks the parallel drivers split a batch into: enough to even out clusters that sub-step more
+#: over any likely number of threads, few enough that the per-chunk call costs nothing.
+PARALLEL_CHUNKS = 64
+#: The fewest chunks the lane drivers split a batch into (see :func:`parallel_chunks`): two
 #: per thread that numba may run, to even out chunks that sub-step more.  Read once, at import, and
 #: compiled in as a constant: it only sets how the work is shared, never the bits.
 PARALLEL_MIN_CHUNKS = 2 * int(config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set at import by numba
@@ -942,8 +945,12 @@ def _advance_pair(
 #: beaded tetrahedron at N = 1 024 (docs/speed.md, the roofline).
 LANE_WIDTH = 64
 #: The fewest lane-ready clusters a call integrates in lanes; fewer go in pairs, which have no
-#: gather and scatter to pay and no partly filled vectors (the single env is one cluster).
+#: gather and scatter to pay and no partly filled vectors.
 LANE_MIN_CLUSTERS = 8
+#: The smallest batch the simulator and the vector env advance in lanes (with
+#: :func:`advance_parallel_in_lanes`): chunks of at least 32 clusters on two threads, which fill the
+#: vector loops (AVX-512 runs 8 lanes, 4 loops interleaved); smaller batches gain little.
+LANE_MIN_BATCH = 128
 
 # The block's numbers live in three flat arrays, a row of LANE_WIDTH lanes per number.  Every
 # offset within a node's, a cable's or the lanes' own rows is a compile-time constant, so LLVM
@@ -1056,7 +1063,6 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
         active = lanes
         while active > 0:
             # Step sizes, lane by lane (the scalar _step_size); h = 0 marks a lane that does not step.
-            any_from_rest = False
             for k in range(lanes):
                 if not running[k]:
                     h_row[k] = 0.0
@@ -1070,7 +1076,6 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                     active -= 1
                     continue
                 from_rest_row[k] = 1.0 if h_last == 0.0 else 0.0
-                any_from_rest = any_from_rest or h_last == 0.0
                 blend_row[k] = h_last / (h_last + h) if count[k] == 0 else 0.0
                 inverse_h_mid_row[k] = 1.0 / (0.5 * (h_last + h))
             # Kick and drift, node by node (each node's update reads that node only), with the
@@ -1086,35 +1091,21 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                     velocity, force = node_lanes[i, _L_VELOCITY + d], node_lanes[i, _L_FORCE + d]
                     applied, previous = node_lanes[i, _L_APPLIED + d], node_lanes[i, _L_PREVIOUS + d]
                     position = node_lanes[i, _L_POSITION + d]
-                    # Two copies of the loop, so that the common one carries no branch on the lanes.
-                    if any_from_rest:  # uniformly accelerated from a fresh state, in some lane
-                        for k in range(lanes):
-                            h = h_row[k]
-                            v_old, f, p = velocity[k], force[k], applied[k]
-                            p_dual = p + blend_row[k] * (previous[k] - p)
-                            kicked = (rhs_factor_row[k] * v_old + p_dual - f) * inverse_lhs_row[k]
-                            accelerated = v_old + 0.5 * h * ((p - f - damping_row[k] * v_old) / mass_row[k])
-                            kicked = accelerated if from_rest_row[k] != 0.0 else kicked
-                            v_new = kicked if h > 0.0 else v_old
-                            dx = h * v_new
-                            velocity[k] = v_new
-                            position[k] = position[k] + dx if h > 0.0 else position[k]
-                            work_row[k] = work_row[k] + p * dx if h > 0.0 else work_row[k]
-                            speed2_row[k] += v_new * v_new
-                            force[k] = 0.0 if h > 0.0 else f
-                    else:
-                        for k in range(lanes):
-                            h = h_row[k]
-                            v_old, f, p = velocity[k], force[k], applied[k]
-                            p_dual = p + blend_row[k] * (previous[k] - p)
-                            kicked = (rhs_factor_row[k] * v_old + p_dual - f) * inverse_lhs_row[k]
-                            v_new = kicked if h > 0.0 else v_old
-                            dx = h * v_new
-                            velocity[k] = v_new
-                            position[k] = position[k] + dx if h > 0.0 else position[k]
-                            work_row[k] = work_row[k] + p * dx if h > 0.0 else work_row[k]
-                            speed2_row[k] += v_new * v_new
-                            force[k] = 0.0 if h > 0.0 else f
+                    for k in range(lanes):
+                        h = h_row[k]
+                        v_old, f, p = velocity[k], force[k], applied[k]
+                        p_dual = p + blend_row[k] * (previous[k] - p)
+                        kicked = (rhs_factor_row[k] * v_old + p_dual - f) * inverse_lhs_row[k]
+                        # The first half step from a fresh state: uniformly accelerated motion.
+                        accelerated = v_old + 0.5 * h * ((p - f - damping_row[k] * v_old) / mass_row[k])
+                        kicked = accelerated if from_rest_row[k] != 0.0 else kicked
+                        v_new = kicked if h > 0.0 else v_old
+                        dx = h * v_new
+                        velocity[k] = v_new
+                        position[k] = position[k] + dx if h > 0.0 else position[k]
+                        work_row[k] = work_row[k] + p * dx if h > 0.0 else work_row[k]
+                        speed2_row[k] += v_new * v_new
+                        force[k] = 0.0 if h > 0.0 else f
                 for k in range(lanes):
                     lost = h_row[k] * damping_row[k] * speed2_row[k]
                     dissipated_row[k] = dissipated_row[k] + lost if h_row[k] > 0.0 else dissipated_row[k]
@@ -1238,16 +1229,60 @@ def _advance_clusters(
     step_record: np.ndarray,
 ) -> None:
     """Advance every cluster of the given tables (a batch, or a chunk of one) by ``duration`` s:
-    those ``active`` and healthy (or whose last interval was refused for its sub-step budget), the
-    others held.  With at least :data:`LANE_MIN_CLUSTERS` of them :func:`_lane_ready` (and the
-    exact elongation), those go through :func:`_advance_lanes`, and the rest through
-    :func:`_advance_pair`, two at a time: the same bits either way, so a cluster's trajectory
-    does not depend on the batch it shares.  ``step_record`` (B, R) receives the first R
-    sub-steps of each cluster.
+    those ``active`` and healthy (or whose last interval was refused for its sub-step budget) by
+    :func:`_advance_pair`, two at a time, the others held.  ``step_record``
+    (B, R) receives the first R sub-steps of each cluster.
 
     It is the one-thread driver, and :func:`advance_parallel` calls it on chunks: compiled once
     for both (inlined into the parallel driver, it made that take seconds longer to compile), and
     one call per chunk (a call per cluster cost more than a short interval's work)."""
+    # One call site of the pair, whose two inlined sub-steps are most of the integrator's code.
+    batch = nodes.shape[0]
+    # np.int64 rather than the literal -1: numba types a literal as a type of its own until the
+    # loop's values widen it, and would compile the called pair once more for that first guess.
+    waiting = np.int64(-1)  # a healthy cluster waiting for a partner
+    for b in range(batch + 1):
+        if b < batch and active[b] and counters[b, STATUS] == STATUS_TOO_MANY_SUBSTEPS:
+            counters[b, STATUS] = STATUS_OK  # its refused interval left it as it was: it may try again
+        if b < batch and not (active[b] and counters[b, STATUS] == STATUS_OK):
+            _hold_cluster(cables[b], clusters[b], counters[b])
+        elif b < batch and waiting < 0:
+            waiting = b
+        elif waiting >= 0:  # a partner, or the end of the batch: the waiting cluster goes alone
+            partner = b if b < batch else -1
+            _advance_pair(
+                duration,
+                settings,
+                topology,
+                nodes,
+                cables,
+                clusters,
+                counters,
+                step_record,
+                waiting,
+                partner,
+            )
+            waiting = -1
+
+
+@njit(nogil=True, error_model="numpy")  # not cached: only compiled kernels call it, each caching it within
+def _advance_clusters_in_lanes(
+    duration: float,
+    active: np.ndarray,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
+    counters: np.ndarray,
+    step_record: np.ndarray,
+) -> None:
+    """:func:`_advance_clusters`, with the clusters that are :func:`_lane_ready` (and the exact
+    elongation) in SIMD lanes (:func:`_advance_lanes`) when they number at least
+    :data:`LANE_MIN_CLUSTERS`, and the rest in pairs: the same bits either way, so a cluster's
+    trajectory does not depend on the batch it shares.  The parallel drivers run it on chunks.
+    Apart from :func:`_advance_clusters`, so that the single env, which never has a block to
+    fill, does not compile the lanes (they double the integrator's first compilation)."""
     batch = nodes.shape[0]
     exact = settings[LINEARISED] == 0.0
     in_lanes = np.empty(batch, dtype=np.int64)
@@ -1296,13 +1331,45 @@ def advance_parallel(
     counters: np.ndarray,
     step_record: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """:func:`advance_serial` on all threads, a chunk of clusters each (the same bits, whatever
-    the chunks: see :func:`parallel_chunks`)."""
+    """:func:`advance_serial` on all threads, a chunk of clusters each (the same bits)."""
+    batch = nodes.shape[0]
+    chunks = min(batch, PARALLEL_CHUNKS)
+    for k in prange(chunks):
+        lo, hi = k * batch // chunks, (k + 1) * batch // chunks
+        _advance_clusters(
+            duration,
+            active[lo:hi],
+            settings,
+            topology,
+            nodes[lo:hi],
+            cables[lo:hi],
+            clusters[lo:hi],
+            counters[lo:hi],
+            step_record[lo:hi],
+        )
+
+
+@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def advance_parallel_in_lanes(
+    duration: float,
+    active: np.ndarray,
+    settings: np.ndarray,
+    topology: np.ndarray,
+    nodes: np.ndarray,
+    cables: np.ndarray,
+    clusters: np.ndarray,
+    counters: np.ndarray,
+    step_record: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """:func:`_advance_clusters_in_lanes` on all threads, a chunk of clusters each (the same bits
+    as :func:`advance_serial`, whatever the chunks: see :func:`parallel_chunks`).  For batches of
+    :data:`LANE_MIN_BATCH` clusters or more: a kernel apart from :func:`advance_parallel`, so that
+    smaller batches do not compile the lanes (about 10 s once, on this 2-core machine)."""
     batch = nodes.shape[0]
     chunks = parallel_chunks(batch)
     for k in prange(chunks):
         lo, hi = k * batch // chunks, (k + 1) * batch // chunks
-        _advance_clusters(
+        _advance_clusters_in_lanes(
             duration,
             active[lo:hi],
             settings,

@@ -31,6 +31,7 @@ import tether_gym
 from tether_gym import _kernels
 from tether_gym._cli import program
 from tether_gym._compilation import COMPILATIONS, GROUPS, group_of
+from tether_gym._kernels import LANE_MIN_BATCH
 from tether_gym.envs import _task_kernels
 from tether_gym.envs.config import TaskConfig
 from tether_gym.envs.task import DampingTask
@@ -80,6 +81,11 @@ def _parallel_task() -> None:
     task.step(np.zeros((PARALLEL_MIN_BATCH, task.action_size)), rngs=[np.random.default_rng(0)] * PARALLEL_MIN_BATCH)
 
 
+def _parallel_task_in_lanes() -> None:
+    task = DampingTask(make_cluster(_CLUSTER), LANE_MIN_BATCH, TaskConfig())
+    task.step(np.zeros((LANE_MIN_BATCH, task.action_size)), rngs=[np.random.default_rng(0)] * LANE_MIN_BATCH)
+
+
 #: What to compile, in order: (kernel, its qualified name, by which ``tether_gym._compilation``
 #: finds its group, a call that needs it and little else, its stage).  Each line compiles what it
 #: names: the fused step after the kernels it calls, the parallel kernels after the serial ones
@@ -101,6 +107,13 @@ KERNELS: tuple[tuple[str, str, Callable[[], None], str], ...] = (
     ),
     ("step_serial", "_compile_step.<locals>.step_clusters", _task(1, step=True), "last"),
     ("parallel_task", "_compile_parallel_task.<locals>.parallel_task", _parallel_task, "last"),
+    ("advance_parallel_in_lanes", "advance_parallel_in_lanes", _advance(LANE_MIN_BATCH), "alongside"),
+    (
+        "parallel_task_in_lanes",
+        "_compile_parallel_task.<locals>.parallel_task_in_lanes",
+        _parallel_task_in_lanes,
+        "last",
+    ),
 )
 
 #: A line of the second process that carries one kernel's result: ``<tag> <index> <compiled> <seconds>``.

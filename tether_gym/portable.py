@@ -19,9 +19,11 @@ budget and the status flags. :class:`PortableBatch` refuses a cluster that needs
 A third target, ``"lanes"``, runs the same scheme on the CPU over blocks of clusters in SIMD lanes
 (:func:`_advance_lanes`): every loop over nodes, axes and cables has the block's clusters
 innermost and branch-free, each lane with its own step, a lane that has finished its interval
-masked. It also reproduces ``BatchSimulator`` to the bit, and shows what the layout is worth on
-this CPU before the rest of the integrator (the energy books, breaking, the status flags) is
-carried over (docs/speed.md, the roofline).
+masked. It also reproduces ``BatchSimulator`` to the bit. The integrator itself now runs large
+batches this way (``tether_gym._kernels._advance_lanes``, with breaking cables, the energy books,
+the sub-step budget and the status flags, on the simulator's own tables); this target stays as
+the bare hot path on arrays already in the lane layout: what the layout is worth without the
+rest (docs/speed.md, the roofline).
 
 Status: tested on the CPU, compiled by ``njit`` and run by the CUDA simulator
 (``NUMBA_ENABLE_CUDASIM=1``) on tiny batches, against ``BatchSimulator``; not run on a GPU

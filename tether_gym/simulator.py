@@ -984,7 +984,12 @@ class BatchSimulator:
         applied force finite, ``active`` a (B,) bool array, ``step_sizes`` None or a (B, R)
         float64 array that receives the first R sub-steps.
         """
-        kernel = _kernels.advance_parallel if self.num_clusters >= PARALLEL_MIN_BATCH else _kernels.advance_serial
+        if self.num_clusters >= _kernels.LANE_MIN_BATCH:
+            kernel = _kernels.advance_parallel_in_lanes
+        elif self.num_clusters >= PARALLEL_MIN_BATCH:
+            kernel = _kernels.advance_parallel
+        else:
+            kernel = _kernels.advance_serial
         kernel(
             duration,
             active,

@@ -80,7 +80,9 @@ def test_the_lanes_reproduce_the_pairs_bit_for_bit(preset: str, settings: dict[s
         active = rng.random(BATCH) > 0.1
         together.applied_force[...] = force
         alone.applied_force[...] = force
-        k.advance_serial(0.1, active, together.kernel_settings, together.cables, *tables(together), record_together)
+        k._advance_clusters_in_lanes(
+            0.1, active, together.kernel_settings, together.cables, *tables(together), record_together
+        )
         advance_alone(alone, 0.1, active, record_alone)
         for mine, theirs in zip(tables(together), tables(alone), strict=True):
             np.testing.assert_array_equal(as_bits(mine), as_bits(theirs))
@@ -106,7 +108,9 @@ def test_a_collapsed_cable_is_flagged_in_its_lane_alone() -> None:
             nodes[b, :, k.DAMPING] = 0.0
     active = np.ones(BATCH, dtype=bool)
     record_together, record_alone = np.zeros((BATCH, 30)), np.zeros((BATCH, 30))
-    k.advance_serial(0.1, active, together.kernel_settings, together.cables, *tables(together), record_together)
+    k._advance_clusters_in_lanes(
+        0.1, active, together.kernel_settings, together.cables, *tables(together), record_together
+    )
     advance_alone(alone, 0.1, active, record_alone)
     status = together.counter_table[:, k.STATUS]
     assert (status[[0, 10, 40]] == k.STATUS_NON_FINITE).all()

@@ -33,6 +33,7 @@ from tether_gym._kernels import (
     FRAME_TIDAL,
     INTACT,
     MASS,
+    PARALLEL_CHUNKS,
     PEAK_TENSION,
     POSITION,
     PRETENSION,
@@ -465,6 +466,7 @@ def _evaluate_cluster(
 FOREIGN_LAYOUT = (
     _kernels.SOURCE_SHA256,
     _kernels.LAYOUT,
+    PARALLEL_CHUNKS,
     _kernels.PARALLEL_MIN_CHUNKS,
     _kernels.STATUS_OK,
     tuple((column.name, int(column)) for column in Scalar),
@@ -566,15 +568,17 @@ def _compile_command_forces(foreign_layout: tuple) -> Callable[..., Any]:  # a n
     return command_forces
 
 
-def _compile_step(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
+def _compile_step(foreign_layout: tuple, in_lanes: bool) -> Callable[..., Any]:  # a numba dispatcher
     """Compile one whole task step of every cluster of some tables: the thrust commands, the
     advance and the evaluation, on one thread (the parallel driver calls it on chunks).  The same
     bits as the three kernels called one after the other (each cluster's arithmetic is unchanged
     and clusters do not interact), in one call, while a chunk's tables are in cache: on one
     thread it ran an N = 1 024 step in 1.56 ms against 1.94 ms for the three kernels.
-    ``foreign_layout`` as for :func:`_compile_command_forces`."""
+    ``foreign_layout`` as for :func:`_compile_command_forces`; ``in_lanes`` advances with
+    :func:`~tether_gym._kernels._advance_clusters_in_lanes` (the parallel driver's chunks) rather
+    than :func:`~tether_gym._kernels._advance_clusters` (the single env's step, which then does
+    not compile the lanes).  A constant of the closure: numba compiles only the branch it picks."""
 
-    @njit(cache=True, nogil=True, error_model="numpy")
     def step_clusters(
         duration: float,
         actions: np.ndarray,
@@ -599,17 +603,25 @@ def _compile_step(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispa
         command_forces(
             task_settings, actions, thrusters, max_thrust, active, task_nodes, nodes, task_clusters, propellant
         )
-        _kernels._advance_clusters(
-            duration, active, simulator_settings, topology, nodes, cables, clusters, counters, step_record
-        )
+        if in_lanes:
+            _kernels._advance_clusters_in_lanes(
+                duration, active, simulator_settings, topology, nodes, cables, clusters, counters, step_record
+            )
+        else:
+            _kernels._advance_clusters(
+                duration, active, simulator_settings, topology, nodes, cables, clusters, counters, step_record
+            )
         _evaluate_clusters(
             task_settings, topology, observed, nodes, cables, clusters, counters, task_nodes, task_clusters, end_reason
         )
 
-    return step_clusters
+    if in_lanes:  # called only within the parallel kernel, which caches it in its own code
+        step_clusters.__qualname__ += "_in_lanes"
+        return njit(nogil=True, error_model="numpy")(step_clusters)
+    return njit(cache=True, nogil=True, error_model="numpy")(step_clusters)
 
 
-def _compile_parallel_task(foreign_layout: tuple) -> Callable[..., Any]:  # a numba dispatcher
+def _compile_parallel_task(foreign_layout: tuple, in_lanes: bool) -> Callable[..., Any]:  # a numba dispatcher
     """Compile the task's kernel on all threads, a chunk of clusters each (the same bits): the
     whole step of :data:`step_serial` (one parallel region per step, where separate command,
     advance and evaluation kernels made two), or with ``evaluate_only`` the evaluation of
@@ -617,9 +629,10 @@ def _compile_parallel_task(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
     each parallel kernel about a second of compilation of its own, and the flag, read once per
     chunk, costs nothing.  Each region wakes the worker threads, which tether-gym's
     ``GOMP_SPINCOUNT`` lets sleep between regions so that they do not starve other jobs.
-    ``foreign_layout`` as for :func:`_compile_command_forces`."""
+    ``foreign_layout`` as for :func:`_compile_command_forces`; ``in_lanes`` steps chunks of
+    :func:`~tether_gym._kernels.parallel_chunks` with :data:`step_in_lanes` (for batches of
+    ``LANE_MIN_BATCH`` or more), otherwise :data:`PARALLEL_CHUNKS` chunks with :data:`step_serial`."""
 
-    @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
     def parallel_task(
         evaluate_only: bool,
         duration: float,
@@ -637,7 +650,7 @@ def _compile_parallel_task(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
         nodes, cables, clusters, counters = simulator_tables
         task_nodes, task_clusters, propellant, end_reason = task_tables
         batch = nodes.shape[0]
-        chunks = _kernels.parallel_chunks(batch)
+        chunks = _kernels.parallel_chunks(batch) if in_lanes else min(batch, PARALLEL_CHUNKS)
         for k in prange(chunks):
             lo, hi = k * batch // chunks, (k + 1) * batch // chunks
             if evaluate_only:
@@ -653,6 +666,17 @@ def _compile_parallel_task(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
                     task_clusters[lo:hi],
                     end_reason[lo:hi],
                 )
+            elif in_lanes:
+                step_in_lanes(
+                    duration,
+                    actions[lo:hi],
+                    active[lo:hi],
+                    settings,
+                    indices,
+                    (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi]),
+                    (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi]),
+                    step_record[lo:hi],
+                )
             else:
                 step_serial(
                     duration,
@@ -665,19 +689,25 @@ def _compile_parallel_task(foreign_layout: tuple) -> Callable[..., Any]:  # a nu
                     step_record[lo:hi],
                 )
 
-    return parallel_task
+    if in_lanes:
+        parallel_task.__qualname__ += "_in_lanes"
+    return njit(cache=True, nogil=True, error_model="numpy", parallel=True)(parallel_task)
 
 
 #: The task's thrust commands, on one thread: a parallel version measured slower at N = 1024, as
 #: each parallel region wakes the worker threads, which the default GOMP_SPINCOUNT lets sleep.
 command_forces = _compile_command_forces(FOREIGN_LAYOUT)
 #: A whole task step (commands, advance, evaluation) without disturbances, on one thread.
-step_serial = _compile_step(FOREIGN_LAYOUT)
+step_serial = _compile_step(FOREIGN_LAYOUT, in_lanes=False)
+#: The same step with the clusters in SIMD lanes where a chunk has enough: the parallel driver's.
+step_in_lanes = _compile_step(FOREIGN_LAYOUT, in_lanes=True)
 #: The task's evaluation on one thread, for small batches (its start-up cost is lower).
 evaluate_serial = _evaluate_clusters
 #: The task's step and evaluation on all threads, behind :func:`step_parallel` and
 #: :func:`evaluate_parallel`.
-parallel_task = _compile_parallel_task(FOREIGN_LAYOUT)
+parallel_task = _compile_parallel_task(FOREIGN_LAYOUT, in_lanes=False)
+#: The task's step on all threads in SIMD lanes, for batches of ``LANE_MIN_BATCH`` or more.
+parallel_task_in_lanes = _compile_parallel_task(FOREIGN_LAYOUT, in_lanes=True)
 
 # What the evaluation passes for the step's arguments it does not read: empty, writable and of
 # the step's types, so that both share the one compiled variant of ``parallel_task``.
@@ -698,9 +728,10 @@ def step_parallel(
     task_tables: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     step_record: np.ndarray,
 ) -> None:
-    """:data:`step_serial` on all threads, one parallel region per step (the same bits); the
-    arguments as for :data:`step_serial`."""
-    parallel_task(False, duration, actions, active, settings, indices, simulator_tables, task_tables, step_record)
+    """:data:`step_serial` on all threads, one parallel region per step (the same bits), in SIMD
+    lanes for ``LANE_MIN_BATCH`` clusters or more; the arguments as for :data:`step_serial`."""
+    kernel = parallel_task_in_lanes if actions.shape[0] >= _kernels.LANE_MIN_BATCH else parallel_task
+    kernel(False, duration, actions, active, settings, indices, simulator_tables, task_tables, step_record)
 
 
 def evaluate_parallel(
