@@ -53,6 +53,14 @@ FAULTY = dict(
             dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1}, max_deviation=1.0),
         ),
         ("TetherSpinningTriangle-v0", 20, FAULTY),
+        # 128 (LANE_MIN_BATCH) runs the lane kernels: the tetrahedra in SIMD lanes, the spinning
+        # triangles (turning frames) through the lane driver's pairs
+        (
+            "TetherTetrahedron-v0",
+            128,
+            dict(max_episode_steps=40, observation_noise=0.01, randomize={"masses": 0.1}, max_deviation=1.0),
+        ),
+        ("TetherSpinningTriangle-v0", 128, FAULTY),
         # The hard track's ids on their own settings: passive satellites, a delay line across resets.
         *[(env_id, 3, dict(max_episode_steps=40)) for env_id in tg.HARD_TRACK],
     ],
