@@ -37,7 +37,10 @@ GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("the integrator, one thread", ("_advance_clusters",)),
     ("the integrator, all threads", ("advance_parallel",)),
     ("a vector env's step and evaluation, all threads", ("_compile_parallel_task.<locals>.parallel_task",)),
-    ("the integrator in SIMD lanes, all threads (batches of 128 or more)", ("advance_parallel_in_lanes",)),
+    (
+        "the integrator in SIMD lanes, all threads (batches of 128 or more)",
+        ("advance_parallel_in_lanes", "_advance_lanes", "_advance_clusters_in_lanes"),
+    ),
     (
         "a vector env's step in SIMD lanes, all threads (128 envs or more)",
         ("_compile_parallel_task.<locals>.parallel_task_in_lanes",),

@@ -991,7 +991,10 @@ def parallel_chunks(batch: int) -> int:
     return min(batch, max(batch // LANE_WIDTH, PARALLEL_MIN_CHUNKS))
 
 
-@njit(error_model="numpy")  # called, not inlined: once per call of the driver
+# Cached, as the pairs' driver is: a kernel that calls a cached kernel links the code numba loads
+# from its cache, while an uncached callee is compiled again in each process and optimised again
+# inside each caller (the lanes kernels then took about 28 s each to compile, against 12-16 s).
+@njit(cache=True, nogil=True, error_model="numpy")
 def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the pair has
     duration: float,
     settings: np.ndarray,
@@ -1265,7 +1268,7 @@ def _advance_clusters(
             waiting = -1
 
 
-@njit(nogil=True, error_model="numpy")  # not cached: only compiled kernels call it, each caching it within
+@njit(cache=True, nogil=True, error_model="numpy")
 def _advance_clusters_in_lanes(
     duration: float,
     active: np.ndarray,
@@ -1279,39 +1282,29 @@ def _advance_clusters_in_lanes(
 ) -> None:
     """:func:`_advance_clusters`, with the clusters that are :func:`_lane_ready` (and the exact
     elongation) in SIMD lanes (:func:`_advance_lanes`) when they number at least
-    :data:`LANE_MIN_CLUSTERS`, and the rest in pairs: the same bits either way, so a cluster's
-    trajectory does not depend on the batch it shares.  The parallel drivers run it on chunks.
-    Apart from :func:`_advance_clusters`, so that the single env, which never has a block to
-    fill, does not compile the lanes (they double the integrator's first compilation)."""
+    :data:`LANE_MIN_CLUSTERS`, and the rest by :func:`_advance_clusters`: the same bits either
+    way, so a cluster's trajectory does not depend on the batch it shares.  The parallel drivers
+    run it on chunks.  Apart from :func:`_advance_clusters`, so that the single env, which never
+    has a block to fill, does not compile the lanes."""
     batch = nodes.shape[0]
     exact = settings[LINEARISED] == 0.0
     in_lanes = np.empty(batch, dtype=np.int64)
-    in_pairs = np.empty(batch, dtype=np.int64)
+    in_pairs = active.copy()
     lane_count = 0
-    pair_count = 0
     for b in range(batch):
         if active[b] and counters[b, STATUS] == STATUS_TOO_MANY_SUBSTEPS:
             counters[b, STATUS] = STATUS_OK  # its refused interval left it as it was: it may try again
-        if not (active[b] and counters[b, STATUS] == STATUS_OK):
-            _hold_cluster(cables[b], clusters[b], counters[b])
-        elif exact and _lane_ready(cables[b], clusters[b]):
+        if active[b] and counters[b, STATUS] == STATUS_OK and exact and _lane_ready(cables[b], clusters[b]):
             in_lanes[lane_count] = b
             lane_count += 1
-        else:
-            in_pairs[pair_count] = b
-            pair_count += 1
+    if lane_count >= LANE_MIN_CLUSTERS:
+        in_pairs[in_lanes[:lane_count]] = False
+    # First the pairs, which hold every cluster they do not advance: the lanes then write all
+    # that holding wrote (sub-step counts, step sizes, peak tensions) for theirs.
+    _advance_clusters(duration, in_pairs, settings, topology, nodes, cables, clusters, counters, step_record)
     if lane_count >= LANE_MIN_CLUSTERS:
         _advance_lanes(
             duration, settings, topology, nodes, cables, clusters, counters, step_record, in_lanes[:lane_count]
-        )
-    else:
-        in_pairs[pair_count : pair_count + lane_count] = in_lanes[:lane_count]
-        pair_count += lane_count
-    # One call site of the pair, whose two inlined sub-steps are most of the integrator's code.
-    for k in range(0, pair_count, 2):
-        partner = in_pairs[k + 1] if k + 1 < pair_count else np.int64(-1)
-        _advance_pair(
-            duration, settings, topology, nodes, cables, clusters, counters, step_record, in_pairs[k], partner
         )
 
 
@@ -1319,67 +1312,49 @@ def _advance_clusters_in_lanes(
 advance_serial = _advance_clusters
 
 
-@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def advance_parallel(
-    duration: float,
-    active: np.ndarray,
-    settings: np.ndarray,
-    topology: np.ndarray,
-    nodes: np.ndarray,
-    cables: np.ndarray,
-    clusters: np.ndarray,
-    counters: np.ndarray,
-    step_record: np.ndarray,
-) -> None:  # pragma: no cover - compiled
-    """:func:`advance_serial` on all threads, a chunk of clusters each (the same bits)."""
-    batch = nodes.shape[0]
-    chunks = min(batch, PARALLEL_CHUNKS)
-    for k in prange(chunks):
-        lo, hi = k * batch // chunks, (k + 1) * batch // chunks
-        _advance_clusters(
-            duration,
-            active[lo:hi],
-            settings,
-            topology,
-            nodes[lo:hi],
-            cables[lo:hi],
-            clusters[lo:hi],
-            counters[lo:hi],
-            step_record[lo:hi],
-        )
+def _compile_parallel_advance(in_lanes: bool) -> Callable[..., Any]:  # a numba dispatcher
+    """Compile the integrator on all threads: :func:`advance_serial`'s driver on a chunk of
+    clusters per thread, or with ``in_lanes`` :func:`_advance_clusters_in_lanes` on the chunks of
+    :func:`parallel_chunks` (for batches of :data:`LANE_MIN_BATCH` or more: a kernel apart, so
+    that smaller batches do not compile the lanes, about 30 s once on a 2-core machine).  The same
+    bits either way, whatever the chunks.  ``in_lanes`` is a constant of the closure: numba
+    compiles only the driver it picks (a dispatcher held in the closure instead kept numba from
+    finding the kernel in its cache again)."""
+
+    def advance_parallel(
+        duration: float,
+        active: np.ndarray,
+        settings: np.ndarray,
+        topology: np.ndarray,
+        nodes: np.ndarray,
+        cables: np.ndarray,
+        clusters: np.ndarray,
+        counters: np.ndarray,
+        step_record: np.ndarray,
+    ) -> None:  # pragma: no cover - compiled
+        """The integrator on all threads, a chunk of clusters each (the same bits as
+        :func:`advance_serial`); the arguments as for it."""
+        batch = nodes.shape[0]
+        chunks = parallel_chunks(batch) if in_lanes else min(batch, PARALLEL_CHUNKS)
+        for k in prange(chunks):
+            lo, hi = k * batch // chunks, (k + 1) * batch // chunks
+            tables = (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi])
+            if in_lanes:
+                _advance_clusters_in_lanes(duration, active[lo:hi], settings, topology, *tables, step_record[lo:hi])
+            else:
+                _advance_clusters(duration, active[lo:hi], settings, topology, *tables, step_record[lo:hi])
+
+    # Named for numba's cache files and the compilation log (tether_gym._compilation).
+    advance_parallel.__qualname__ = advance_parallel.__name__ = (
+        "advance_parallel_in_lanes" if in_lanes else "advance_parallel"
+    )
+    return njit(cache=True, nogil=True, error_model="numpy", parallel=True)(advance_parallel)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def advance_parallel_in_lanes(
-    duration: float,
-    active: np.ndarray,
-    settings: np.ndarray,
-    topology: np.ndarray,
-    nodes: np.ndarray,
-    cables: np.ndarray,
-    clusters: np.ndarray,
-    counters: np.ndarray,
-    step_record: np.ndarray,
-) -> None:  # pragma: no cover - compiled
-    """:func:`_advance_clusters_in_lanes` on all threads, a chunk of clusters each (the same bits
-    as :func:`advance_serial`, whatever the chunks: see :func:`parallel_chunks`).  For batches of
-    :data:`LANE_MIN_BATCH` clusters or more: a kernel apart from :func:`advance_parallel`, so that
-    smaller batches do not compile the lanes (about 10 s once, on this 2-core machine)."""
-    batch = nodes.shape[0]
-    chunks = parallel_chunks(batch)
-    for k in prange(chunks):
-        lo, hi = k * batch // chunks, (k + 1) * batch // chunks
-        _advance_clusters_in_lanes(
-            duration,
-            active[lo:hi],
-            settings,
-            topology,
-            nodes[lo:hi],
-            cables[lo:hi],
-            clusters[lo:hi],
-            counters[lo:hi],
-            step_record[lo:hi],
-        )
+#: :func:`advance_serial` on all threads, a chunk of clusters each (the same bits).
+advance_parallel = _compile_parallel_advance(in_lanes=False)
+#: The same in SIMD lanes, for batches of :data:`LANE_MIN_BATCH` clusters or more.
+advance_parallel_in_lanes = _compile_parallel_advance(in_lanes=True)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -81,6 +81,14 @@ def _parallel_task() -> None:
     task.step(np.zeros((PARALLEL_MIN_BATCH, task.action_size)), rngs=[np.random.default_rng(0)] * PARALLEL_MIN_BATCH)
 
 
+def _lanes() -> None:
+    """The lanes' block kernel alone, with the argument types the lane driver passes."""
+    sim = BatchSimulator(make_cluster(_CLUSTER), 1)
+    members = np.zeros(1, dtype=np.int64)
+    tables = (sim.node_table, sim.cable_table, sim.cluster_table, sim.counter_table)
+    _kernels._advance_lanes(1e-3, sim.kernel_settings, sim.cables, *tables, np.zeros((1, 0)), members)
+
+
 def _parallel_task_in_lanes() -> None:
     task = DampingTask(make_cluster(_CLUSTER), LANE_MIN_BATCH, TaskConfig())
     task.step(np.zeros((LANE_MIN_BATCH, task.action_size)), rngs=[np.random.default_rng(0)] * LANE_MIN_BATCH)
@@ -107,7 +115,8 @@ KERNELS: tuple[tuple[str, str, Callable[[], None], str], ...] = (
     ),
     ("step_serial", "_compile_step.<locals>.step_clusters", _task(1, step=True), "last"),
     ("parallel_task", "_compile_parallel_task.<locals>.parallel_task", _parallel_task, "last"),
-    ("advance_parallel_in_lanes", "advance_parallel_in_lanes", _advance(LANE_MIN_BATCH), "alongside"),
+    ("advance_lanes", "_advance_lanes", _lanes, "alongside"),
+    ("advance_parallel_in_lanes", "advance_parallel_in_lanes", _advance(LANE_MIN_BATCH), "here"),
     (
         "parallel_task_in_lanes",
         "_compile_parallel_task.<locals>.parallel_task_in_lanes",

@@ -666,28 +666,33 @@ def _compile_parallel_task(foreign_layout: tuple, in_lanes: bool) -> Callable[..
                     task_clusters[lo:hi],
                     end_reason[lo:hi],
                 )
-            elif in_lanes:
-                step_in_lanes(
-                    duration,
-                    actions[lo:hi],
-                    active[lo:hi],
-                    settings,
-                    indices,
-                    (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi]),
-                    (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi]),
-                    step_record[lo:hi],
-                )
             else:
-                step_serial(
-                    duration,
-                    actions[lo:hi],
-                    active[lo:hi],
-                    settings,
-                    indices,
-                    (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi]),
-                    (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi]),
-                    step_record[lo:hi],
-                )
+                chunk = (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi])
+                task_chunk = (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi])
+                # A branch on a constant of the closure, not a dispatcher held in it: numba could
+                # not find a kernel that holds a dispatcher in its cache again.
+                if in_lanes:
+                    step_in_lanes(
+                        duration,
+                        actions[lo:hi],
+                        active[lo:hi],
+                        settings,
+                        indices,
+                        chunk,
+                        task_chunk,
+                        step_record[lo:hi],
+                    )
+                else:
+                    step_serial(
+                        duration,
+                        actions[lo:hi],
+                        active[lo:hi],
+                        settings,
+                        indices,
+                        chunk,
+                        task_chunk,
+                        step_record[lo:hi],
+                    )
 
     if in_lanes:
         parallel_task.__qualname__ += "_in_lanes"
