@@ -993,7 +993,7 @@ def parallel_chunks(batch: int) -> int:
 
 # Cached, as the pairs' driver is: a kernel that calls a cached kernel links the code numba loads
 # from its cache, while an uncached callee is compiled again in each process and optimised again
-# inside each caller (the lanes kernels then took about 28 s each to compile, against 12-16 s).
+# inside each caller (the lanes kernels then took about 28 s each to compile; cached, 10-20 s).
 @njit(cache=True, nogil=True, error_model="numpy")
 def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the pair has
     duration: float,
