@@ -941,21 +941,24 @@ def _advance_pair(
 # whatever block it shares.  The start and the end of the interval (saving for a roll-back, the
 # velocity synchronisation, the energy books) are the scalar pieces, run per cluster.
 
-#: Clusters per block of :func:`_advance_lanes`: 64 measured best on the tetrahedron and on the
-#: beaded tetrahedron at N = 1 024 (docs/speed.md, the roofline).
+#: Clusters per block of :func:`_advance_lanes`: on the tetrahedron at N = 1 024 (one thread, 0.1 s
+#: intervals) blocks of 64 and 32 ran alike, 128 about 10 % slower, and 16 at the pairs' rate (the
+#: vector loops, 8 lanes of AVX-512 with 4 loops interleaved, need 32 iterations to run at all).
 LANE_WIDTH = 64
 #: The fewest lane-ready clusters a call integrates in lanes; fewer go in pairs, which have no
-#: gather and scatter to pay and no partly filled vectors.
+#: gather and scatter to pay (from 8 to 31 the lanes run their loops' scalar remainder, at about
+#: the pairs' rate).
 LANE_MIN_CLUSTERS = 8
 #: The smallest batch the simulator and the vector env advance in lanes (with
 #: :func:`advance_parallel_in_lanes`): chunks of at least 32 clusters on two threads, which fill the
 #: vector loops (AVX-512 runs 8 lanes, 4 loops interleaved); smaller batches gain little.
 LANE_MIN_BATCH = 128
 
-# The block's numbers live in three flat arrays, a row of LANE_WIDTH lanes per number.  Every
-# offset within a node's, a cable's or the lanes' own rows is a compile-time constant, so LLVM
-# sees that two rows never overlap and vectorises the loops without run-time alias checks
-# (with a separate array per number it gave up on the cable loop: too many checks).
+# The block's numbers live in three arrays (per node, per cable, per lane), a row of LANE_WIDTH
+# lanes per number, and the loops read them through 1-D views of those rows, indexed by the lane
+# alone.  Two layouts measured slower: one flat array indexed by computed offsets (numba's check
+# for negative indices on each access kept LLVM from vectorising), and an array per number with
+# `and` in the selects (the cable loop stayed scalar; its selects now combine with `&`).
 # A node's rows: position (3), half-step velocity (3), internal force (3), applied force (3),
 # the previous interval's applied force (3), mass, damping.
 _L_POSITION, _L_VELOCITY, _L_FORCE, _L_APPLIED, _L_PREVIOUS, _L_MASS, _L_DAMPING = 0, 3, 6, 9, 12, 15, 16
