@@ -1319,7 +1319,7 @@ def _compile_parallel_advance(in_lanes: bool) -> Callable[..., Any]:  # a numba 
     """Compile the integrator on all threads: :func:`advance_serial`'s driver on a chunk of
     clusters per thread, or with ``in_lanes`` :func:`_advance_clusters_in_lanes` on the chunks of
     :func:`parallel_chunks` (for batches of :data:`LANE_MIN_BATCH` or more: a kernel apart, so
-    that smaller batches do not compile the lanes, about 30 s once on a 2-core machine).  The same
+    that smaller batches do not compile the lanes, 15-20 s once on a 2-core machine).  The same
     bits either way, whatever the chunks.  ``in_lanes`` is a constant of the closure: numba
     compiles only the driver it picks (a dispatcher held in the closure instead kept numba from
     finding the kernel in its cache again)."""

@@ -669,30 +669,22 @@ def _compile_parallel_task(foreign_layout: tuple, in_lanes: bool) -> Callable[..
             else:
                 chunk = (nodes[lo:hi], cables[lo:hi], clusters[lo:hi], counters[lo:hi])
                 task_chunk = (task_nodes[lo:hi], task_clusters[lo:hi], propellant[lo:hi], end_reason[lo:hi])
+                arguments = (
+                    duration,
+                    actions[lo:hi],
+                    active[lo:hi],
+                    settings,
+                    indices,
+                    chunk,
+                    task_chunk,
+                    step_record[lo:hi],
+                )
                 # A branch on a constant of the closure, not a dispatcher held in it: numba could
                 # not find a kernel that holds a dispatcher in its cache again.
                 if in_lanes:
-                    step_in_lanes(
-                        duration,
-                        actions[lo:hi],
-                        active[lo:hi],
-                        settings,
-                        indices,
-                        chunk,
-                        task_chunk,
-                        step_record[lo:hi],
-                    )
+                    step_in_lanes(*arguments)
                 else:
-                    step_serial(
-                        duration,
-                        actions[lo:hi],
-                        active[lo:hi],
-                        settings,
-                        indices,
-                        chunk,
-                        task_chunk,
-                        step_record[lo:hi],
-                    )
+                    step_serial(*arguments)
 
     if in_lanes:
         parallel_task.__qualname__ += "_in_lanes"
