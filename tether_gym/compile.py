@@ -75,10 +75,13 @@ def _initial_states_and_actions() -> None:
         _kernels.all_finite(np.zeros(shape))
 
 
-def _parallel_task() -> None:
-    task = DampingTask(make_cluster(_CLUSTER), PARALLEL_MIN_BATCH, TaskConfig())
-    task.evaluate()  # a vector env's reset
-    task.step(np.zeros((PARALLEL_MIN_BATCH, task.action_size)), rngs=[np.random.default_rng(0)] * PARALLEL_MIN_BATCH)
+def _parallel_task(batch: int) -> Callable[[], None]:
+    def build() -> None:
+        task = DampingTask(make_cluster(_CLUSTER), batch, TaskConfig())
+        task.evaluate()  # a vector env's reset
+        task.step(np.zeros((batch, task.action_size)), rngs=[np.random.default_rng(0)] * batch)
+
+    return build
 
 
 def _lanes() -> None:
@@ -87,11 +90,6 @@ def _lanes() -> None:
     members = np.zeros(1, dtype=np.int64)
     tables = (sim.node_table, sim.cable_table, sim.cluster_table, sim.counter_table)
     _kernels._advance_lanes(1e-3, sim.kernel_settings, sim.cables, *tables, np.zeros((1, 0)), members)
-
-
-def _parallel_task_in_lanes() -> None:
-    task = DampingTask(make_cluster(_CLUSTER), LANE_MIN_BATCH, TaskConfig())
-    task.step(np.zeros((LANE_MIN_BATCH, task.action_size)), rngs=[np.random.default_rng(0)] * LANE_MIN_BATCH)
 
 
 #: What to compile, in order: (kernel, its qualified name, by which ``tether_gym._compilation``
@@ -114,13 +112,13 @@ KERNELS: tuple[tuple[str, str, Callable[[], None], str], ...] = (
         "last",
     ),
     ("step_serial", "_compile_step.<locals>.step_clusters", _task(1, step=True), "last"),
-    ("parallel_task", "_compile_parallel_task.<locals>.parallel_task", _parallel_task, "last"),
+    ("parallel_task", "_compile_parallel_task.<locals>.parallel_task", _parallel_task(PARALLEL_MIN_BATCH), "last"),
     ("advance_lanes", "_advance_lanes", _lanes, "alongside"),
     ("advance_parallel_in_lanes", "advance_parallel_in_lanes", _advance(LANE_MIN_BATCH), "here"),
     (
         "parallel_task_in_lanes",
         "_compile_parallel_task.<locals>.parallel_task_in_lanes",
-        _parallel_task_in_lanes,
+        _parallel_task(LANE_MIN_BATCH),
         "last",
     ),
 )
