@@ -61,7 +61,10 @@ if "NUMBA_THREADING_LAYER" not in os.environ and "NUMBA_THREADING_LAYER_PRIORITY
 #   100 000                499 k (1.17 M)       3.0 k
 #   1 000                  397 k (1.13 M)       71 k
 #   passive waiting        214-263 k (0.8-1.0 M) 105 k
-# 1 000 keeps most of the quiet speed and avoids the collapse under load. libgomp reads it when
+# 1 000 keeps most of the quiet speed and avoids the collapse under load. It costs the quiet
+# machine's second thread 25-50 us per parallel region, when the worker has gone to sleep during
+# the Python between two steps: 30 000 spins ran 1.0-1.3x faster at N = 1 024 quiet, and up to
+# 4.5x slower at N = 64 beside two busy processes (docs/speed.md, "Two threads"). libgomp reads it when
 # numba first loads it (at the first parallel call), so setting it here takes effect; a user's
 # own OMP_WAIT_POLICY or GOMP_SPINCOUNT wins.
 if "OMP_WAIT_POLICY" not in os.environ:
