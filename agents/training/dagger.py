@@ -98,6 +98,7 @@ __all__ = [
     "student_controller",
     "student_loss",
     "train_dagger",
+    "teacher_of",
     "training_seeds",
 ]
 
@@ -142,6 +143,11 @@ class DAggerSettings:
     held-out episodes' states (the previous weights if no epoch improves on them), ``epochs``
     being the most passes. 0: no episode held out, every fit runs all ``epochs`` (the runs before
     this setting existed)."""
+    teacher_samples: int | None = None
+    """The teacher's sampled trajectories per planning step, instead of its ceiling settings'
+    (ceiling.yml); None: those. Fewer samples make each label cheaper (the planner's cost is about
+    proportional to them), so a run of the same length labels more states; the teacher is then
+    weaker than the ceiling by what the id's measurements in dagger.yml say."""
 
     def __post_init__(self) -> None:
         if self.residual_on is not None and self.residual_on not in BASELINES:
@@ -169,6 +175,10 @@ class DAggerSettings:
         decay = self.beta_decay
         if isinstance(decay, bool) or not isinstance(decay, int | float) or not 0.0 <= decay < 1.0:
             raise ValueError(f"dagger setting beta_decay must be a number in [0, 1); got {decay!r}")
+        if self.teacher_samples is not None:
+            object.__setattr__(
+                self, "teacher_samples", check_int("dagger setting teacher_samples", self.teacher_samples, 1, 100_000)
+            )
         if self.validation_every == 1:
             raise ValueError(
                 "dagger setting validation_every must be 0 (off) or at least 2: 1 would hold out every episode"
@@ -192,6 +202,14 @@ def load_dagger_settings(env_id: str | None, path: str | Path | None = None, **o
     keyword ``overrides`` on top."""
     file = Path(path) if path is not None else DAGGER_SETTINGS_FILE
     return load_settings(DAggerSettings, file, env_id, "DAgger", overrides, run_algo="dagger")
+
+
+def teacher_of(env_id: str, settings: DAggerSettings) -> MPCSettings:
+    """The teacher of a run on ``env_id``: the id's ceiling planner (ceiling.yml), with the
+    ``teacher_samples`` of ``settings`` where they are set."""
+    if settings.teacher_samples is None:
+        return load_ceiling_settings(env_id)
+    return load_ceiling_settings(env_id, samples=settings.teacher_samples)
 
 
 def training_seeds(seed: int, iteration: int, episodes: int) -> list[int]:
@@ -556,7 +574,8 @@ def train_dagger(
             beta mixture, and picks the block of training seeds.
         out: parent of the run directory ``<out>/<env_id>/dagger_seed<seed>``.
         settings: default: ``load_dagger_settings(env_id)``.
-        teacher: the planner's settings (default: the id's ceiling settings).
+        teacher: the planner's settings (default: the id's ceiling settings, with the settings'
+            ``teacher_samples`` where it is set).
         force: replace an earlier run in the same directory.
         progress: print a line per iteration.
         command: the command line recorded in ``config.yml``.
@@ -574,7 +593,7 @@ def train_dagger(
     seed = check_int("seed", seed, 0, 999)
     kwargs = dict(env_kwargs or {})
     s = settings if settings is not None else load_dagger_settings(env_id)
-    teacher_settings = teacher if teacher is not None else load_ceiling_settings(env_id)
+    teacher_settings = teacher if teacher is not None else teacher_of(env_id, s)
     if not isinstance(teacher_settings, MPCSettings):
         raise TypeError(f"teacher must be MPCSettings; got {type(teacher_settings).__name__}")
     if s.residual_on is None:

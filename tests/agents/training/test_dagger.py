@@ -6,6 +6,7 @@ A tiny planner (3 samples over 2 steps) and episodes of 40 steps keep it to seco
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from hypothesis import strategies as st
 from agents.common.reading import json_hooks
 from agents.controllers.mpc import MPCController, MPCSettings
 from agents.controllers.registry import make_baseline
+from agents.evaluation.ceiling import load_ceiling_settings
 from agents.policies import TrainedPolicy
 from agents.policies.format import read_metadata
 from agents.policies.loaded import make_controller
@@ -36,6 +38,7 @@ from agents.training.dagger import (
     observation_statistics,
     save_student,
     student_controller,
+    teacher_of,
     train_dagger,
     training_seeds,
 )
@@ -297,11 +300,21 @@ def test_the_same_seed_trains_the_same_bits(run: Path, tmp_path: Path) -> None:
         ({"net_arch": "64"}, "net_arch must be a list"),
         ({"validation_every": 1}, "validation_every must be 0 .off. or at least 2"),
         ({"validation_every": -1}, "validation_every must be an integer in 0..800"),
+        ({"teacher_samples": 0}, "teacher_samples must be an integer in 1..100000"),
+        ({"teacher_samples": 1.5}, "teacher_samples must be an integer"),
     ],
 )
 def test_bad_settings_are_named(overrides: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         DAggerSettings(**overrides)
+
+
+def test_teacher_samples_change_only_the_teachers_samples() -> None:
+    ceiling = load_ceiling_settings(ENV_ID)
+    assert teacher_of(ENV_ID, DAggerSettings()) == ceiling
+    cheaper = teacher_of(ENV_ID, DAggerSettings(teacher_samples=16))
+    assert cheaper.samples == 16 != ceiling.samples
+    assert dataclasses.replace(cheaper, samples=ceiling.samples) == ceiling
 
 
 def test_settings_files_and_runs_without_a_teacher_are_refused(tmp_path: Path) -> None:
