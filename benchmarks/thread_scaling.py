@@ -18,8 +18,8 @@ efficiency against the hardware of that round.
 Then it takes the two-thread advance apart: the time per call inside the compiled kernel and in
 the Python around it (argument checks, copying the force in, the result's copies), for one and
 two threads; and the cost of a parallel region with no work, back to back and after 100 µs in
-Python (libgomp's worker sleeps after ``GOMP_SPINCOUNT`` spins, and waking it costs that much
-again). It prints the CPU model and numba's threading layer with the numbers. Run it on a quiet
+Python (libgomp's worker sleeps after ``GOMP_SPINCOUNT`` spins, and the next region waits for
+it to wake). It prints the CPU model and numba's threading layer with the numbers. Run it on a quiet
 machine: about 10 s per round plus 15 s.
 """
 

@@ -97,8 +97,8 @@ __all__ = [
     "save_student",
     "student_controller",
     "student_loss",
-    "train_dagger",
     "teacher_of",
+    "train_dagger",
     "training_seeds",
 ]
 
