@@ -22,7 +22,10 @@ dynamics. At every control step, for each environment of the batch it controls:
    the MPPI average weighted by ``exp(-cost / (temperature * spread))``, where ``spread`` is
    the standard deviation of the costs. This repeats for ``iterations`` refinements around the
    new nominal, with the noise halved each time;
-5. it applies the plan's first action, and shifts the plan.
+5. it applies the plan's first action, and shifts the plan. Without ``warm_start`` it forgets
+   the plan instead, and the next step plans again from the zero plan (the prior alone): each
+   action is then a function of the state and the step's samples, with no plan carried between
+   steps.
 
 With a thrust delay the planner's rollouts carry the delay line (the commands in flight) as the
 env does. Its prior acts on the state it is given, without the scripted laws' prediction over the
@@ -92,6 +95,9 @@ class MPCSettings:
             (:class:`agents.controllers.base.DelayPredictor`; the env must observe its commands in
             flight) instead of on the state it is given; 3.3 times the planning time per step on
             the delayed tetrahedron.
+        warm_start: start each step's search from the previous plan, shifted (the default); false:
+            from the zero plan, so that no plan is carried from step to step (a teacher whose
+            action a memoryless student can learn from the state).
         seed: seed of the controller's own noise.
     """
 
@@ -106,6 +112,7 @@ class MPCSettings:
     terminal_weight: float = 0.0
     prior: str = "none"
     predicting_prior: bool = False
+    warm_start: bool = True
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -125,8 +132,9 @@ class MPCSettings:
 
         if self.prior != "none" and self.prior not in BASELINES:
             raise ValueError(f"mpc setting prior must be 'none' or one of {sorted(BASELINES)}; got {self.prior!r}")
-        if not isinstance(self.predicting_prior, bool):
-            raise ValueError(f"mpc setting predicting_prior must be true or false; got {self.predicting_prior!r}")
+        for name in ("predicting_prior", "warm_start"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"mpc setting {name} must be true or false; got {getattr(self, name)!r}")
         if self.predicting_prior and self.prior == "none":
             raise ValueError("mpc setting predicting_prior needs a prior to predict with; name one, or drop it")
         real = {"noise": (0.0, 10.0), "temperature": (0.0, 1e6), "discount": (0.0, 1.0), "terminal_weight": (0.0, 1e6)}
@@ -252,9 +260,12 @@ class MPCController:
             self.plan = self._update(candidates, costs)
             noise *= 0.5
         action = self._actions(self.task, self.plan[:, 0]).astype(np.float32)
-        # Shift: the last planned command is held for the new last planned step.
-        self.plan = np.concatenate([self.plan[:, 1:], self.plan[:, -1:]], axis=1)
-        self.plan[:, self.planned_steps :] = 0.0
+        if self.settings.warm_start:
+            # Shift: the last planned command is held for the new last planned step.
+            self.plan = np.concatenate([self.plan[:, 1:], self.plan[:, -1:]], axis=1)
+            self.plan[:, self.planned_steps :] = 0.0
+        else:
+            self.plan[:] = 0.0
         self.compute_seconds += time.perf_counter() - start
         self.env_steps += self.batch
         return (action[0] if single else action), None

@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 #: Each runs a whole script in a fresh interpreter (figures, videos, benchmarks): minutes in all.
@@ -104,3 +105,33 @@ def test_student_compute_benchmark_runs() -> None:
     assert len(rows) == 1 and "CPU:" in out, out
     speedups = [float(cell.strip().rstrip("x").replace(",", "")) for cell in rows[0].split("|")[4:7:2]]
     assert all(speedup > 1.0 for speedup in speedups), rows  # the student is faster than the planner
+
+
+def test_planner_memory_benchmark_runs(tmp_path: Path) -> None:
+    """The planner's memory variants and the random correction run, and the predictability
+    table reads a dataset: a correction that follows its own last value (and not the observation)
+    is predicted from that value and not from the observation."""
+    rng = np.random.default_rng(0)
+    episodes, steps = 8, 50
+    targets = np.zeros((steps, episodes, 3))
+    for t in range(1, steps):
+        targets[t] = 0.95 * targets[t - 1] + 0.1 * rng.standard_normal((episodes, 3))
+    # Stored step by step, as a DAgger run stores its states.
+    np.savez(
+        tmp_path / "dataset.npz",
+        observations=rng.standard_normal((steps * episodes, 5)).astype(np.float32),
+        targets=targets.reshape(-1, 3).astype(np.float32),
+        episode=np.tile(np.arange(episodes), steps),
+        held_out=np.tile(np.arange(episodes) % 4 == 0, steps),
+    )
+    out = run(
+        "benchmarks/planner_memory.py",
+        *("--env", "TetherTetrahedron-v0", "--seeds", "1", "--random", "0.1"),
+        *("--plans", "2,none,1", "2,action,1", "--dataset", str(tmp_path / "dataset.npz")),
+    )
+    r2 = {
+        line.split("|")[1].strip(): float(line.split("|")[2]) for line in out.splitlines() if line.startswith("| y[t]")
+    }
+    assert r2["y[t] from y[t-1]"] > 0.7 and r2["y[t] from the observation"] < 0.1, out
+    for expected in ("CPU:", "(the prior)", "random correction, std 0.1", "memory: none", "memory: action"):
+        assert expected in out, out

@@ -3,6 +3,8 @@ leaves the controlled env untouched, is reproducible, and beats doing nothing on
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -89,6 +91,21 @@ def test_an_episode_gets_the_same_plans_in_any_batch() -> None:
     assert together.rewards[2].tobytes() == alone.rewards[0].tobytes()
 
 
+def test_without_warm_start_every_step_searches_from_the_prior_alone() -> None:
+    """``warm_start: false`` carries no plan between steps: the next search's nominal candidate
+    is the zero plan, where the default carries the shifted best plan."""
+    env = gym.make_vec("TetherTriangle-v0", num_envs=2)
+    observation, _ = env.reset(seed=[7, 8])
+    settings = MPCSettings(samples=8, horizon=6, knots=3, noise=0.5, prior="lqr")
+    warm = MPCController(env, settings)
+    cold = MPCController(env, MPCSettings(**{**dataclasses.asdict(settings), "warm_start": False}))
+    warm_action, _ = warm.predict(observation)
+    cold_action, _ = cold.predict(observation)
+    assert np.array_equal(warm_action, cold_action)  # the same search from the same state
+    assert np.any(warm._candidates(0.5)[:, 0] != 0.0)
+    assert np.all(cold._candidates(0.5)[:, 0] == 0.0)
+
+
 def test_mpc_is_refused_clearly() -> None:
     with pytest.raises(ValueError, match="samples"):
         MPCSettings(samples=1)
@@ -100,6 +117,8 @@ def test_mpc_is_refused_clearly() -> None:
         MPCSettings(horizon=30, control_horizon=2, knots=3)
     with pytest.raises(ValueError, match="prior"):
         MPCSettings(prior="oracle")
+    with pytest.raises(ValueError, match="warm_start must be true or false"):
+        MPCSettings(warm_start="no")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="unknown mpc setting"):
         load_mpc_settings("TetherTetrahedron-v0", samplez=3)
     envs = gym.make_vec("TetherTetrahedron-v0", num_envs=2)
