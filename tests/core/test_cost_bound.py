@@ -304,6 +304,7 @@ def test_bad_arguments_are_refused() -> None:
     thrusters=st.sampled_from([None, [0], [1, 3], [0, 1, 2]]),
     max_thrust=st.floats(0.05, 3.0),
     thrust_limit=st.sampled_from(["per_axis", "magnitude"]),
+    thrust_mode=st.sampled_from(["continuous", "on_off"]),
     thrust_delay=st.integers(0, 2),
     damping_rate=st.sampled_from([0.0, 0.1, 0.5]),
     policy=st.sampled_from(["against", "random", "full"]),
@@ -313,11 +314,12 @@ def test_no_controller_gets_below_the_envelope(
     thrusters: list[int] | None,
     max_thrust: float,
     thrust_limit: str,
+    thrust_mode: str,
     thrust_delay: int,
     damping_rate: float,
     policy: str,
 ) -> None:
-    """Property: on the tetrahedron with any thruster layout, limit, delay and damping, thrust
+    """Property: on the tetrahedron with any thruster layout, limit, mode, delay and damping, thrust
     against each satellite's velocity, random thrust or full thrust never brings the vibration
     energy below the envelope at any step, nor the cost below the bound."""
     kwargs: dict[str, Any] = {
@@ -325,6 +327,7 @@ def test_no_controller_gets_below_the_envelope(
         "thrusters": thrusters,
         "max_thrust": max_thrust,
         "thrust_limit": thrust_limit,
+        "thrust_mode": thrust_mode,
         "thrust_delay": thrust_delay,
     }
     steps = 30

@@ -237,6 +237,7 @@ FLAT_ARGUMENTS = {
     "thrusters": (0, 2),
     "max_thrust": 0.5,
     "thrust_limit": "magnitude",
+    "thrust_mode": "on_off",
     "initial_displacement": 0.02,
     "initial_velocity": 0.05,
     "vibration_weight": 2.0,
@@ -269,7 +270,8 @@ def test_task_config_groups_hold_every_setting_of_their_concern() -> None:
 
     config = TaskConfig(**FLAT_ARGUMENTS)
     grouped = {name for group in TASK_CONFIG_GROUPS.values() for name in group.__dataclass_fields__}
-    top_level = {"control_interval", "thrusters", "max_thrust", "thrust_limit", "max_deviation", "observe_tensions"}
+    top_level = {"control_interval", "thrusters", "max_thrust", "thrust_limit", "thrust_mode", "max_deviation"}
+    top_level |= {"observe_tensions"}
     top_level |= {"observation_noise", "observed_satellites", "safety_factor", "allow_unstable_safety_factor"}
     top_level |= {"difficulty", "observe_commands"}
     assert grouped | top_level == set(FLAT_ARGUMENTS) == set(TaskConfig.__dataclass_fields__)

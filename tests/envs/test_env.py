@@ -258,6 +258,26 @@ def test_thrust_limits() -> None:
     assert env.task.propellant[0] == pytest.approx(0.1 * (math.sqrt(4 + 1 + 0.25) + math.sqrt(0.5)))
 
 
+def test_on_off_thrusters_fire_each_axis_fully_or_not_at_all() -> None:
+    """A component of 0.5 or more in magnitude fires its axis along its sign; the impulse, the
+    propellant and the magnitude limit act on the fired vector."""
+    env = TetherClusterEnv(max_thrust=2.0, thrust_mode="on_off")
+    forces = commanded_thrust(env, [0.5, -0.49, 0.2, -0.5, 0.7, -3.0, 0.0, 0.0, 0.0, 0.49, -0.51, 1.0])
+    assert np.array_equal(forces[0], [2.0, 0.0, 0.0])
+    assert np.array_equal(forces[1], [-2.0, 2.0, -2.0])
+    assert np.array_equal(forces[2], [0.0, 0.0, 0.0])
+    assert np.array_equal(forces[3], [0.0, -2.0, 2.0])
+    expected = 0.1 * 2.0 * (1.0 + math.sqrt(3.0) + 0.0 + math.sqrt(2.0))
+    assert env.task.propellant[0] == pytest.approx(expected)
+    env = TetherClusterEnv(max_thrust=2.0, thrust_mode="on_off", thrust_limit="magnitude")
+    forces = commanded_thrust(env, [0.6, 0.8, 0.0] + [0.0] * 9)
+    assert np.allclose(forces[0], [math.sqrt(2.0), math.sqrt(2.0), 0.0])  # both axes fire, scaled back
+    # The continuous mode at the same commands is unchanged: the setting defaults to it.
+    assert np.allclose(
+        commanded_thrust(TetherClusterEnv(max_thrust=2.0), [0.6, 0.8, 0.0] + [0.0] * 9)[0], [1.2, 1.6, 0]
+    )
+
+
 def test_observation_is_order_one_at_reset() -> None:
     env = gym.make("TetherTetrahedron-v0")
     observations = np.array([env.reset(seed=s)[0] for s in range(200)])
@@ -292,6 +312,7 @@ def test_render_rgb_array_and_video(tmp_path: Path) -> None:
         ({"max_thrust": [1.0, 2.0]}, ValueError, "one value per thruster"),
         ({"control_interval": 0.0}, ValueError, "control_interval must be"),
         ({"thrust_limit": "cone"}, ValueError, "thrust_limit must be"),
+        ({"thrust_mode": "pwm"}, ValueError, "thrust_mode must be"),
         ({"randomize": {"colour": 0.1}}, ValueError, "randomize keys"),
         ({"speed": 3}, TypeError, r"unknown argument\(s\) \['speed'\]"),
         ({"render_mode": "ascii"}, ValueError, "render_mode must be"),

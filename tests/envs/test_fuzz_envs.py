@@ -124,6 +124,7 @@ PLAUSIBLE: dict[str, st.SearchStrategy[Any]] = {
     "thrusters": indices,
     "max_thrust": st.one_of(floats(1e-9, 1e6), st.lists(floats(1e-3, 10), min_size=1, max_size=5)),
     "thrust_limit": st.sampled_from(["per_axis", "magnitude"]),
+    "thrust_mode": st.sampled_from(["continuous", "on_off"]),
     "initial_displacement": st.one_of(floats(0, 12), st.sampled_from([0.0, 1e-7, 10.0])),
     "initial_velocity": st.one_of(floats(0, 200), st.sampled_from([0.0, 1e-6, 173.0])),
     "vibration_weight": floats(0, 1e6),

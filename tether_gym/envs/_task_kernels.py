@@ -100,7 +100,10 @@ TENSION_RATIO_AT = 13  # -1 when the tension ratios are not observed
 SATELLITES = 14
 # The leading cables observed one by one (the rest are tether segments, observed per tether).
 OBSERVED_CABLES = 15
-TASK_SETTINGS = 16
+ON_OFF = 16  # 1.0: each command component fires its axis at full thrust or not at all (thrust_mode="on_off")
+TASK_SETTINGS = 17
+#: With on/off thrust, a command component at or beyond this (in magnitude) fires its axis.
+ON_OFF_THRESHOLD = 0.5
 
 #: Observations are clipped to +-this (it is reached only far beyond a lost formation).
 OBSERVATION_LIMIT = 1e4
@@ -193,6 +196,17 @@ def _bounded(value: float) -> float:
 
 
 @njit(inline="always", error_model="numpy")
+def _pulse(command: float) -> float:
+    """An on/off thruster axis: full thrust along the command's sign (+-1) where the command
+    reaches :data:`ON_OFF_THRESHOLD` in magnitude, else off (0)."""
+    if command >= ON_OFF_THRESHOLD:
+        return 1.0
+    if command <= -ON_OFF_THRESHOLD:
+        return -1.0
+    return 0.0
+
+
+@njit(inline="always", error_model="numpy")
 def _command_cluster(
     settings: np.ndarray,
     actions: np.ndarray,
@@ -205,6 +219,7 @@ def _command_cluster(
     """One cluster's thrust (``THRUST``), applied force ``BIAS + THRUST`` (the simulator's
     ``APPLIED_FORCE``) and thrust impulse (``IMPULSE``) from its normalised actions (3k,)."""
     magnitude_limit = settings[MAGNITUDE_LIMIT] != 0.0
+    on_off = settings[ON_OFF] != 0.0
     for i in range(task_nodes.shape[0]):
         for d in range(3):
             task_nodes[i, THRUST + d] = 0.0
@@ -213,6 +228,8 @@ def _command_cluster(
         a0 = min(max(actions[3 * k], -1.0), 1.0)
         a1 = min(max(actions[3 * k + 1], -1.0), 1.0)
         a2 = min(max(actions[3 * k + 2], -1.0), 1.0)
+        if on_off:
+            a0, a1, a2 = _pulse(a0), _pulse(a1), _pulse(a2)
         norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
         scale = max_thrust[k]
         if magnitude_limit and norm > 1.0:

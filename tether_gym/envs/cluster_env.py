@@ -49,7 +49,10 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     thruster's ``max_thrust`` (N) and held constant over the control interval. With
     ``thrust_limit="per_axis"`` (the default), each component lies within ``+-max_thrust``.
     With ``"magnitude"``, a command longer than 1 is scaled back to length 1, which bounds the
-    force's norm. Commands outside [-1, 1] are clipped. A NaN or infinite command, one of the
+    force's norm. Commands outside [-1, 1] are clipped. With ``thrust_mode="on_off"`` each axis
+    of a thruster fires at full thrust or not at all over the interval: a component of 0.5 or
+    more in magnitude fires it along its sign (minimum impulse bit ``max_thrust *
+    control_interval``). A NaN or infinite command, one of the
     wrong shape, or one that is not made of real numbers (strings, booleans, complex numbers)
     raises :class:`~tether_gym.envs.EnvArgumentError` (a ``ValueError``).
 
@@ -169,7 +172,8 @@ class TetherClusterEnv(gym.Env[np.ndarray, np.ndarray]):
     | ``**task`` | | any :class:`~tether_gym.envs.TaskConfig` field (listed below) |
 
     The task fields and their defaults: ``control_interval`` (0.1 s), ``thrusters`` (all),
-    ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``initial_displacement`` (0.05 m),
+    ``max_thrust`` (1 N), ``thrust_limit`` (``"per_axis"``), ``thrust_mode`` (``"continuous"``),
+    ``initial_displacement`` (0.05 m),
     ``initial_velocity`` (0.1 m/s), ``vibration_weight`` (1), ``propellant_weight`` (0.1),
     ``slack_weight`` (0), ``failure_penalty`` (100), ``max_deviation`` (30 % of the shortest
     cable), ``observe_tensions``, ``observe_commands``, ``observation_noise``,

@@ -57,9 +57,11 @@ __all__ = [
     "RewardConfig",
     "TaskConfig",
     "ThrustLimit",
+    "ThrustMode",
 ]
 
 ThrustLimit = Literal["per_axis", "magnitude"]
+ThrustMode = Literal["continuous", "on_off"]
 
 #: The cluster parameters domain randomisation may draw.
 RANDOMISABLE = ("masses", "EA", "damping", "N0", "axial_damping")
@@ -237,6 +239,13 @@ class TaskConfig:
         max_thrust: largest thruster force, N; a scalar or one value per thruster.
         thrust_limit: ``"per_axis"`` (each component within +-max_thrust) or ``"magnitude"`` (the
             force vector's norm within max_thrust; a longer command is scaled back).
+        thrust_mode: ``"continuous"`` (any thrust within the limit) or ``"on_off"``: each axis of
+            a thruster fires at full thrust or not at all for the whole control interval, as
+            cold-gas and resistojet thrusters do. A command component of 0.5 or more in
+            magnitude fires that axis along its sign; the control interval is the shortest
+            firing, so each axis's minimum impulse bit is ``max_thrust * control_interval``.
+            The limit then applies to the fired vector (``"magnitude"``: scaled back to
+            ``max_thrust``).
         max_deviation: a satellite farther than this from its nominal place in the cluster
             frame ends the episode (formation lost), m; None: 30 % of the shortest cable; inf:
             never.
@@ -275,6 +284,7 @@ class TaskConfig:
     thrusters: tuple[int, ...] | None = None
     max_thrust: float | tuple[float, ...] = 1.0
     thrust_limit: ThrustLimit = "per_axis"
+    thrust_mode: ThrustMode = "continuous"
     initial_displacement: float = InitialStateConfig.initial_displacement
     initial_velocity: float = InitialStateConfig.initial_velocity
     vibration_weight: float = RewardConfig.vibration_weight
@@ -311,6 +321,7 @@ class TaskConfig:
             "thrusters": check_satellites("thrusters", self.thrusters),
             "max_thrust": self._checked_thrust(),
             "thrust_limit": check_choice("thrust_limit", self.thrust_limit, ("per_axis", "magnitude")),
+            "thrust_mode": check_choice("thrust_mode", self.thrust_mode, ("continuous", "on_off")),
             "observe_tensions": check_bool("observe_tensions", self.observe_tensions),
             "observe_commands": check_bool("observe_commands", self.observe_commands),
             "observation_noise": number("observation_noise", self.observation_noise, 0.0, MAX_OBSERVATION_NOISE),

@@ -445,6 +445,7 @@ class DampingTask:
         for column, value in (
             (tk.CONTROL_INTERVAL, config.control_interval),
             (tk.MAGNITUDE_LIMIT, config.thrust_limit == "magnitude"),
+            (tk.ON_OFF, config.thrust_mode == "on_off"),
             (tk.LENGTH_SCALE, self.length_scale),
             (tk.SPEED_SCALE, self.speed_scale),
             (tk.DEVIATION_LIMIT, self.max_deviation),
@@ -824,8 +825,9 @@ class DampingTask:
         """Apply (B, action_size) float64 actions for one control interval (bias thrust added) to
         the ``active`` clusters (default all), then evaluate observation, reward and end flags.
 
-        Commands are clipped to [-1, 1]; with the magnitude limit a command longer than 1 is
-        scaled back to length 1; then they are multiplied by each thruster's ``max_thrust``.
+        Commands are clipped to [-1, 1]; with on/off thrust each component becomes -1, 0 or +1
+        (off below 0.5 in magnitude); with the magnitude limit a command longer than 1 is scaled
+        back to length 1; then they are multiplied by each thruster's ``max_thrust``.
         With a thrust delay the actions applied are those given ``thrust_delay`` steps earlier.
         Disturbances and thrust noise of cluster b draw from ``rngs[b]`` (needed only when they
         are configured).
