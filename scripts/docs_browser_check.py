@@ -137,6 +137,11 @@ def check_page(context: Any, base: str, page_path: str, out: Path) -> list[str]:
         response = page.goto(base + page_path, wait_until="load")
         if response is None or not response.ok:
             problems.append(f"{page_path}: the page itself did not load")
+        # The env pages' viewers are lazy iframes: "load" does not wait for them, and closing the
+        # page while one is still arriving aborts its request (net::ERR_ABORTED), a failure of
+        # this check's timing and not of the site. Waiting for the network to go quiet lets them
+        # finish, so their own errors are still seen.
+        page.wait_for_load_state("networkidle")
         broken = page.evaluate(BROKEN_IMAGES)
         problems += [f"{page_path}: image did not load or decode: {source}" for source in broken]
         overflow = page.evaluate(OVERFLOW)
