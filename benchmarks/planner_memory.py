@@ -115,33 +115,37 @@ def random_correction_returns(env_id: str, law_name: str, sigma: float, seeds: l
     deviation ``sigma`` (normalised thrust) and lag-1 autocorrelation 0.95 (generator seed 0)."""
     import gymnasium as gym
     from tether_gym_agents.controllers.registry import make_baseline
+    from tether_gym_agents.evaluation.rollout import rollout
 
-    envs = gym.make_vec(env_id, num_envs=len(seeds))
-    law = make_baseline(law_name, envs)
-    observation, _ = envs.reset(seed=seeds)
+    probe = gym.make_vec(env_id, num_envs=len(seeds))
+    law = make_baseline(law_name, probe)
+    probe.close()
     rng = np.random.default_rng(0)
     rho = RANDOM_AUTOCORRELATION
-    correction = np.zeros((len(seeds),) + envs.single_action_space.shape)
-    returns, alive = np.zeros(len(seeds)), np.ones(len(seeds), dtype=bool)
-    while alive.any():
-        action, _ = law.predict(observation)
-        correction = rho * correction + np.sqrt(1.0 - rho**2) * sigma * rng.standard_normal(correction.shape)
-        observation, reward, terminated, truncated, _ = envs.step(
-            np.clip(action + correction, -1, 1).astype(np.float32)
-        )
-        returns += np.where(alive, reward, 0.0)
-        alive &= ~(terminated | truncated)
-    envs.close()
-    return returns
+    correction = np.zeros((len(seeds), law.action_size))
+
+    class RandomlyCorrectedLaw:
+        def predict(self, observation: np.ndarray, *args: Any, **kwargs: Any) -> tuple[np.ndarray, None]:
+            nonlocal correction
+            action, _ = law.predict(observation)
+            correction = rho * correction + np.sqrt(1.0 - rho**2) * sigma * rng.standard_normal(correction.shape)
+            return np.clip(action + correction, -1, 1).astype(np.float32), None
+
+    return rollout(RandomlyCorrectedLaw(), env_id, seeds).rewards.sum(axis=1)
+
+
+def _design(features: np.ndarray) -> np.ndarray:
+    """The features with a column of ones: the linear models' intercept."""
+    return np.c_[features, np.ones(len(features))]
 
 
 def _ridge(features: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    design = np.c_[features, np.ones(len(features))]
+    design = _design(features)
     return np.linalg.solve(design.T @ design + RIDGE * np.eye(design.shape[1]), design.T @ targets)
 
 
 def _apply(features: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    return np.c_[features, np.ones(len(features))] @ weights
+    return _design(features) @ weights
 
 
 def _r2(targets: np.ndarray, predictions: np.ndarray) -> float:
