@@ -40,6 +40,7 @@ ENV_IDS: dict[str, tuple[str, int, dict[str, Any]]] = {
     "TetherBeadedChain-v0": ("beaded_chain", 300, {}),
     "TetherDelayedTetrahedron-v0": ("tetrahedron", 300, {"thrust_delay": 2, "observe_commands": True}),
     "TetherCoarseBeadedTetrahedron-v0": ("beaded_tetrahedron", 300, {"preset_kwargs": {"segments": 4}}),
+    "TetherOnOffTetrahedron-v0": ("tetrahedron", 300, {"thrust_mode": "on_off"}),
 }
 
 #: The hard track: ids where the best scripted law, its gains re-tuned for the id, costs at least
@@ -107,6 +108,7 @@ _DELAYED_V0 = (
     "predicted the state their command meets over the delay.",
 )
 _COARSE_BEADED_V0 = ("v0: initial release, on the hard track.",)
+_ON_OFF_V0 = ("v0: initial release, on the hard track.",)
 _TURNING_FRAME_V0 = ("v0: initial release, with the turning frames (commit `4490cf3`).", _NEXT_STEP_DEFAULT)
 
 #: id -> its documentation beyond the class docstring (see :class:`EnvDoc`); one entry per id of
@@ -269,6 +271,26 @@ ENV_DOCS: dict[str, EnvDoc] = {
             "track (the numbers are below, in agents/hyperparams/laws.yml and in ceiling.yml)."
         ),
         version_history=_COARSE_BEADED_V0,
+    ),
+    "TetherOnOffTetrahedron-v0": EnvDoc(
+        summary=(
+            "The paper's tetrahedron with on/off thrusters: each axis fires at full thrust or not at all "
+            "over a control interval. On the hard track."
+        ),
+        description=(
+            "The tetrahedron of the paper's case, with thrusters as cold-gas and small chemical thrusters "
+            "are: a valve per axis that is open or shut. Over each control interval every axis of every "
+            "thruster fires at its full thrust along the sign of its command, or not at all; a command "
+            "component of magnitude 0.5 or more fires it. The smallest impulse an axis can give, its "
+            "minimum impulse bit, is the full thrust times the control interval, so the last of the "
+            "motion cannot be braked smoothly: a thruster overshoots it or leaves it.\n\n"
+            "A law that commands a thrust in proportion to a velocity thrusts in bursts instead; its gains "
+            "have to be re-tuned for the quantised thrust, and even then it fires where a planner that "
+            "knows the pulses holds off. Every scripted law, its gains re-tuned for this id, leaves at "
+            "least the hard track's margin of cost to the reference ceiling (the numbers are in "
+            "agents/hyperparams/laws.yml and ceiling.yml)."
+        ),
+        version_history=_ON_OFF_V0,
     ),
 }
 
