@@ -281,7 +281,7 @@ ENV_DOCS: dict[str, EnvDoc] = {
             "The tetrahedron of the paper's case, with thrusters as cold-gas and small chemical thrusters "
             "are: a valve per axis that is open or shut. Over each control interval every axis of every "
             "thruster fires at its full thrust along the sign of its command, or not at all; a command "
-            "component of magnitude 0.5 or more fires it. The smallest impulse an axis can give, its "
+            "component of at least half of full scale fires it (the glance table above). The smallest impulse an axis can give, its "
             "minimum impulse bit, is the full thrust times the control interval, so the last of the "
             "motion cannot be braked smoothly: a thruster overshoots it or leaves it.\n\n"
             "A law that commands a thrust in proportion to a velocity thrusts in bursts instead; its gains "

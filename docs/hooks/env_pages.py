@@ -57,6 +57,7 @@ REPORTED_SETTINGS = (
     "control_interval",
     "max_thrust",
     "thrust_limit",
+    "thrust_mode",
     "initial_displacement",
     "initial_velocity",
     "observed_satellites",
@@ -294,14 +295,21 @@ def discretisation_text(cluster: tether_gym.Cluster) -> str:
 
 
 def thrust_text(facts: EnvFacts) -> str:
-    """The thrusters: how many, on which satellites where not all carry one, their limit, and
-    their delay where there is one."""
+    """The thrusters: how many, on which satellites where not all carry one, their limit, whether
+    they are on/off valves, and their delay where there is one."""
     settings = facts.settings
     text = f"{facts.thrusters}"
     if settings["thrusters"] is not None:
         on = ", ".join(map(str, settings["thrusters"]))
         text += f" (on satellites {on}; the other {facts.cluster.num_satellites - facts.thrusters} passive)"
     text += f", up to {values(settings['max_thrust'], 'N')} each ({settings['thrust_limit']!s} limit)"
+    if settings["thrust_mode"] == "on_off":
+        interval = number(settings["control_interval"])
+        text += (
+            f"; on/off: each axis fires at full thrust or not at all for each {interval} s interval (a command "
+            "component of magnitude 0.5 or more fires it along its sign), so its minimum impulse bit is the full "
+            f"thrust times {interval} s"
+        )
     if settings["thrust_delay"]:
         delay = settings["thrust_delay"]
         text += f", each command acting {delay} control interval{'s' if delay > 1 else ''} after it is given"
@@ -468,7 +476,9 @@ def env_page(env_id: str) -> str:
         ),
         "Action Space": (
             f"Here: `{facts.action_space}`: {facts.thrusters} thrusters, 3 axes each, "
-            f"{values(settings['max_thrust'], 'N')} full scale, held for {interval} s.\n"
+            f"{values(settings['max_thrust'], 'N')} full scale, held for {interval} s"
+            + (", each axis on (|command| >= 0.5) or off" if settings["thrust_mode"] == "on_off" else "")
+            + ".\n"
         ),
         "Observation Space": (
             f"Here: `{facts.observation_space}`:\n\n"

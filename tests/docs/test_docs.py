@@ -77,7 +77,7 @@ def test_slug_matches_the_headings_linked_from_the_docs() -> None:
 
 def test_readme_table_of_ids_matches_the_registry() -> None:
     id_row = re.compile(
-        r"\| `(Tether\w+-v\d+)`[^|]*\| `(\w+)`[^|]*\| (\d+) \| (\d+) \| (\d+) (?:steps of|×) ([\d.]+) s \|"
+        r"\| `(Tether\w+-v\d+)`[^|]*\| `(\w+)`[^|]*\| (\d+) \| (\d+) \| (\d+) (?:steps of|×) ([\d.]+) s \|$"
     )
     table = {}
     for line in README.read_text(encoding="utf-8").splitlines():
@@ -85,6 +85,7 @@ def test_readme_table_of_ids_matches_the_registry() -> None:
         if row:
             env_id, preset, action, observation, steps, interval = row.groups()
             table[env_id] = (preset, int(action), int(observation), int(steps), float(interval))
+    # A row with a cell past the episode column (a headline column pasted into the wrong table) fails to match.
     assert list(table) == list(ENV_IDS), "the README's table of ids must list every registered id, in order"
     for env_id, preset, action, observation, steps, interval in load_hook().ids_table_rows():
         assert table[env_id] == (preset, action, observation, steps, pytest.approx(interval)), env_id
@@ -133,12 +134,16 @@ def test_an_env_page_says_its_track_and_a_hard_page_what_the_track_means(env_id:
     assert ("### On the hard track" in page) == hard
     threshold = f"at least {hook.number(100 * HARD_TRACK_MIN_EXCESS_COST)} % more than the reference ceiling"
     assert (threshold in page) == hard, env_id
-    # The glance table says which satellites thrust where not all do, and how late a delayed id acts.
+    # The glance table says which satellites thrust where not all do, how late a delayed id acts,
+    # and whether the thrusters are on/off valves.
     task = ENV_IDS[env_id][2]
     row = next(line for line in page.splitlines() if line.startswith("| Thrusters |"))
     thrusters, delay = task.get("thrusters"), task.get("thrust_delay", 0)
     assert ("on satellites " + ", ".join(map(str, thrusters or ())) + ";" in row) == (thrusters is not None), row
     assert (f"each command acting {delay} control interval" in row) == bool(delay), row
+    on_off = task.get("thrust_mode") == "on_off"
+    assert ("on/off: each axis fires at full thrust or not at all" in row) == on_off, row
+    assert ("each axis on (|command| >= 0.5) or off" in page) == on_off, env_id
 
 
 def test_the_environments_page_explains_the_hard_track_and_lists_its_ids() -> None:
