@@ -200,10 +200,10 @@ def main() -> None:
         type=parse_plan,
         default=[(16, "plan", 1), (16, "none", 1), (16, "action", 1), (32, "none", 4), (128, "none", 1)],
         help="planner variants samples,memory,iterations (default: 16,plan,1 16,none,1 16,action,1 32,none,4 "
-        "128,none,1; none to skip)",
+        "128,none,1; --plans alone skips them)",
     )
     parser.add_argument(
-        "--random", nargs="*", type=float, default=[0.1, 0.19], help="std of random corrections (default 0.1 0.19)"
+        "--random", nargs="*", type=float, default=[0.1, 0.19], help="std of random corrections (default 0.1 0.19; --random alone skips them)"
     )
     parser.add_argument("--seeds", type=int, default=len(TUNING_SEEDS), help="tuning seeds, 3000 up (default 4)")
     parser.add_argument("--dataset", type=Path, help="a DAgger run's dataset.npz: test how predictable its labels are")

@@ -122,7 +122,9 @@ class CeilingTable:
             :func:`~.stats.aggregate_excess_costs` or :func:`~.stats.aggregate_scores` (IQM,
             mean, their interval ends, ``ids``, ``env_ids``, ``episodes``); empty when
             ``aggregate_note`` says why there is none.
-        aggregate_note: "" or why there is no aggregate.
+        aggregate_note: "" or a note on the aggregate: over which seeds it runs where the ids'
+            ceilings hold different numbers of seeds (each id's lowest seeds, as many as the
+            fewest), or why part of it is missing.
         ids_total: the number of ids the aggregate is over.
         skipped: ids of the ceiling data that the reference scores do not hold, with why.
         bootstrap: the aggregate's ``{"reps": ..., "seed": ...}``.
@@ -233,31 +235,35 @@ def ceiling_table(
     }
     aggregate: dict[str, dict[str, dict[str, Any]]] = {}
     counts = {len(item.seeds) for item in ids}
+    common = min(counts)
     note = ""
     if len(counts) != 1:
+        # The stratified bootstrap draws as many seeds within every id, so the aggregate keeps each
+        # id's lowest `common` ceiling seeds: the held-out seeds every id's ceiling holds.
         note = (
-            f"no aggregate: the ids' ceilings have different seed counts ({sorted(counts)}), and the stratified "
-            "bootstrap draws as many seeds within every id"
+            f"aggregate over each id's first {common} ceiling seeds, the most every id holds (the ids' ceilings "
+            f"hold {sorted(counts)}); the per-id rows use all of each id's"
         )
-    else:
-        returns: dict[str, dict[str, np.ndarray]] = {}
-        zero: dict[str, np.ndarray] = {}
-        ceilings: dict[str, np.ndarray] = {}
-        for item in ids:
-            values = {row.controller: row.returns for row in item.rows}
-            zero[item.env_id] = values[reference["zero"]]
-            ceilings[item.env_id] = values[CEILING]
-            for name, on_seeds in values.items():
-                returns.setdefault(name, {})[item.env_id] = on_seeds
-            returns.setdefault(BEST_LAW_ROW, {})[item.env_id] = values[item.best_law]
-        scaled = all(ceilings[env_id].mean() > zero[env_id].mean() for env_id in ceilings)
-        excess = aggregate_excess_costs(returns, ceilings, reps=bootstrap["reps"], seed=bootstrap["seed"])
-        scores = (
-            aggregate_scores(returns, zero, ceilings, reps=bootstrap["reps"], seed=bootstrap["seed"]) if scaled else {}
-        )
-        if not scaled:
-            note = "no aggregate of the normalised scores: on some id the ceiling's mean return is not above passive's"
-        aggregate = {name: {"excess": excess[name], "score": scores.get(name, {})} for name in returns}
+    returns: dict[str, dict[str, np.ndarray]] = {}
+    zero: dict[str, np.ndarray] = {}
+    ceilings: dict[str, np.ndarray] = {}
+    for item in ids:
+        kept = np.sort(np.argsort(np.asarray(item.seeds), kind="stable")[:common])
+        values = {row.controller: row.returns[kept] for row in item.rows}
+        zero[item.env_id] = values[reference["zero"]]
+        ceilings[item.env_id] = values[CEILING]
+        for name, on_seeds in values.items():
+            returns.setdefault(name, {})[item.env_id] = on_seeds
+        returns.setdefault(BEST_LAW_ROW, {})[item.env_id] = values[item.best_law]
+    scaled = all(ceilings[env_id].mean() > zero[env_id].mean() for env_id in ceilings)
+    excess = aggregate_excess_costs(returns, ceilings, reps=bootstrap["reps"], seed=bootstrap["seed"])
+    scores = (
+        aggregate_scores(returns, zero, ceilings, reps=bootstrap["reps"], seed=bootstrap["seed"]) if scaled else {}
+    )
+    if not scaled:
+        unscaled = "no aggregate of the normalised scores: on some id the ceiling's mean return is not above passive's"
+        note = f"{note}; {unscaled}" if note else unscaled
+    aggregate = {name: {"excess": excess[name], "score": scores.get(name, {})} for name in returns}
     return CeilingTable(ids, aggregate, note, len(ids), skipped, bootstrap)
 
 

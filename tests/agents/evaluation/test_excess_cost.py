@@ -396,10 +396,23 @@ def test_the_table_refuses_a_ceiling_it_cannot_pair() -> None:
         ceiling_table(reference, {"idA": ceiling_run(returns=[-20.0, -10.0])}, reps=100)
     with pytest.raises(ReferenceDataError, match="hold none of the reference's ids"):
         ceiling_table(reference, {"idZ": ceiling_run()}, reps=100)
-    # Ceilings of different seed counts: every id is tabled, the aggregate says why it is absent.
-    table = ceiling_table(reference, {"idA": ceiling_run(), "idB": ceiling_run([10, 11, 12], [-20.0, -10.0, -16.0])})
-    assert table.aggregate == {} and "different seed counts ([3, 4])" in table.aggregate_note
-    assert "(no aggregate: the ids' ceilings have different seed counts" in ceiling_markdown(table)
+
+
+def test_ceilings_of_different_seed_counts_aggregate_over_the_seeds_every_id_holds() -> None:
+    """Every id is tabled on all of its ceiling's seeds; the aggregate keeps each id's lowest seeds,
+    as many as the fewest, so it equals the aggregate of ceilings cut to those seeds."""
+    reference = synthetic_reference()
+    short = ceiling_run([10, 11, 12], [-20.0, -10.0, -16.0])
+    table = ceiling_table(reference, {"idA": ceiling_run(), "idB": short}, reps=200)
+    assert [len(item.seeds) for item in table.ids] == [4, 3]
+    assert "each id's first 3 ceiling seeds" in table.aggregate_note and "[3, 4]" in table.aggregate_note
+    assert f"({table.aggregate_note}.)" in ceiling_markdown(table)
+    cut = ceiling_run()
+    cut_table = ceiling_table(
+        reference, {"idA": ceiling_run(cut.seeds[:3].tolist(), cut.returns[:3].tolist()), "idB": short}, reps=200
+    )
+    assert table.aggregate and table.aggregate == cut_table.aggregate
+    assert table.aggregate["model"]["excess"]["episodes"] == 3  # per id
 
 
 # ---------------------------------------------------------------------------------------- the command
