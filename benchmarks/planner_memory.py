@@ -203,7 +203,11 @@ def main() -> None:
         "128,none,1; --plans alone skips them)",
     )
     parser.add_argument(
-        "--random", nargs="*", type=float, default=[0.1, 0.19], help="std of random corrections (default 0.1 0.19; --random alone skips them)"
+        "--random",
+        nargs="*",
+        type=float,
+        default=[0.1, 0.19],
+        help="std of random corrections (default 0.1 0.19; --random alone skips them)",
     )
     parser.add_argument("--seeds", type=int, default=len(TUNING_SEEDS), help="tuning seeds, 3000 up (default 4)")
     parser.add_argument("--dataset", type=Path, help="a DAgger run's dataset.npz: test how predictable its labels are")

@@ -257,9 +257,7 @@ def ceiling_table(
         returns.setdefault(BEST_LAW_ROW, {})[item.env_id] = values[item.best_law]
     scaled = all(ceilings[env_id].mean() > zero[env_id].mean() for env_id in ceilings)
     excess = aggregate_excess_costs(returns, ceilings, reps=bootstrap["reps"], seed=bootstrap["seed"])
-    scores = (
-        aggregate_scores(returns, zero, ceilings, reps=bootstrap["reps"], seed=bootstrap["seed"]) if scaled else {}
-    )
+    scores = aggregate_scores(returns, zero, ceilings, reps=bootstrap["reps"], seed=bootstrap["seed"]) if scaled else {}
     if not scaled:
         unscaled = "no aggregate of the normalised scores: on some id the ceiling's mean return is not above passive's"
         note = f"{note}; {unscaled}" if note else unscaled

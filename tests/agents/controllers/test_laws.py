@@ -23,7 +23,7 @@ from tether_gym.envs.task import DampingTask
 #: 10 000 and up and the training evaluation seeds 1 000 000 and up).
 SEEDS = list(range(2000, 2008))
 #: The ids whose laws were re-tuned (the registered hard-track candidates, on the track or not).
-RETUNED = ("TetherDelayedTetrahedron-v0", "TetherCoarseBeadedTetrahedron-v0")
+RETUNED = ("TetherDelayedTetrahedron-v0", "TetherCoarseBeadedTetrahedron-v0", "TetherOnOffTetrahedron-v0")
 DELAYED = "TetherDelayedTetrahedron-v0"
 
 
