@@ -37,6 +37,7 @@ import numpy as np
 import tether_gym
 from tether_gym.analysis import tether_mode_errors
 from tether_gym.envs import TetherClusterEnv
+from tether_gym.envs._task_kernels import ON_OFF_THRESHOLD
 from tether_gym.envs.contract import TETHER_FEATURE_MEANINGS, TETHER_FEATURES
 from tether_gym.presets import PRESETS
 from tether_gym.registration import ENV_DOCS, ENV_IDS, HARD_TRACK, HARD_TRACK_MIN_EXCESS_COST, track_of
@@ -307,8 +308,8 @@ def thrust_text(facts: EnvFacts) -> str:
         interval = number(settings["control_interval"])
         text += (
             f"; on/off: each axis fires at full thrust or not at all for each {interval} s interval (a command "
-            "component of magnitude 0.5 or more fires it along its sign), so its minimum impulse bit is the full "
-            f"thrust times {interval} s"
+            f"component of magnitude {number(ON_OFF_THRESHOLD)} or more fires it along its sign), so its minimum "
+            f"impulse bit is the full thrust times {interval} s"
         )
     if settings["thrust_delay"]:
         delay = settings["thrust_delay"]
@@ -477,7 +478,11 @@ def env_page(env_id: str) -> str:
         "Action Space": (
             f"Here: `{facts.action_space}`: {facts.thrusters} thrusters, 3 axes each, "
             f"{values(settings['max_thrust'], 'N')} full scale, held for {interval} s"
-            + (", each axis on (|command| >= 0.5) or off" if settings["thrust_mode"] == "on_off" else "")
+            + (
+                f", each axis on (|command| >= {number(ON_OFF_THRESHOLD)}) or off"
+                if settings["thrust_mode"] == "on_off"
+                else ""
+            )
             + ".\n"
         ),
         "Observation Space": (
