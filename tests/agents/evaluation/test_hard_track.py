@@ -19,8 +19,6 @@ from agents.evaluation.scoring import load_reference
 from agents.evaluation.stats import excess_cost
 from tether_gym.registration import ENV_IDS, HARD_TRACK, HARD_TRACK_MIN_EXCESS_COST
 
-
-
 #: The hard-track candidates: the ids whose laws were re-tuned for them and that have a shipped ceiling.
 CANDIDATES = [env_id for env_id in ENV_IDS if load_law_settings(env_id) and env_id in load_ceiling()]
 
