@@ -120,8 +120,8 @@ class CeilingTable:
         aggregate: per controller (and ``best law (per id)``), over the ids where it ran:
             ``{"excess": ..., "score": ...}``, each an entry of
             :func:`~.stats.aggregate_excess_costs` or :func:`~.stats.aggregate_scores` (IQM,
-            mean, their interval ends, ``ids``, ``env_ids``, ``episodes``); empty when
-            ``aggregate_note`` says why there is none.
+            mean, their interval ends, ``ids``, ``env_ids``, ``episodes``); ``score`` is empty
+            where ``aggregate_note`` says why.
         aggregate_note: "" or a note on the aggregate: over which seeds it runs where the ids'
             ceilings hold different numbers of seeds (each id's lowest seeds, as many as the
             fewest), or why part of it is missing.
@@ -327,24 +327,23 @@ def ceiling_markdown(table: CeilingTable, title: str = "Against the reference ce
             f"{_seconds(item.seconds_per_step)}{machine} | {item.best_law} | {_percent(item.room_left)} |"
         )
     lines.append("")
-    if table.aggregate:
-        lines += [
-            f"Over the {table.ids_total} id{'s' if table.ids_total != 1 else ''} (rliable's IQM and mean, "
-            "95 % stratified-bootstrap intervals over seeds "
-            f"within ids, {table.bootstrap['reps']} replications, seed {table.bootstrap['seed']}; a row over fewer ids "
-            "is not comparable with the others):",
-            "",
-            "| controller | ids | excess cost IQM | excess cost mean | normalised score IQM | normalised score mean |",
-            "|---|---|---|---|---|---|",
-        ]
-        for name, entry in table.aggregate.items():
-            excess, score = entry["excess"], entry["score"]
-            lines.append(
-                f"| {name} | {excess['ids']}/{table.ids_total} | {_aggregate_cell(excess, 'iqm', True)} | "
-                f"{_aggregate_cell(excess, 'mean', True)} | {_aggregate_cell(score, 'iqm', False)} | "
-                f"{_aggregate_cell(score, 'mean', False)} |"
-            )
-        lines.append("")
+    lines += [
+        f"Over the {table.ids_total} id{'s' if table.ids_total != 1 else ''} (rliable's IQM and mean, "
+        "95 % stratified-bootstrap intervals over seeds "
+        f"within ids, {table.bootstrap['reps']} replications, seed {table.bootstrap['seed']}; a row over fewer ids "
+        "is not comparable with the others):",
+        "",
+        "| controller | ids | excess cost IQM | excess cost mean | normalised score IQM | normalised score mean |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, entry in table.aggregate.items():
+        excess, score = entry["excess"], entry["score"]
+        lines.append(
+            f"| {name} | {excess['ids']}/{table.ids_total} | {_aggregate_cell(excess, 'iqm', True)} | "
+            f"{_aggregate_cell(excess, 'mean', True)} | {_aggregate_cell(score, 'iqm', False)} | "
+            f"{_aggregate_cell(score, 'mean', False)} |"
+        )
+    lines.append("")
     if table.aggregate_note:
         lines += [f"({table.aggregate_note}.)", ""]
     for item in table.ids:
