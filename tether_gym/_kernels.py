@@ -969,11 +969,22 @@ _L_NODE_ROWS = 17
 # A cable's rows.
 _L_STIFFNESS, _L_REST, _L_PRETENSION, _L_INVERSE_MASS, _L_BREAKING, _L_INTACT, _L_TENSION, _L_PEAK = range(8)
 _L_CABLE_ROWS = 8
+# The tables' column behind each row of a node's and a cable's block (each peak starts at the tension).
+_NODE_SOURCE = np.array(
+    [POSITION + d for d in range(3)]
+    + [HALF_STEP_VELOCITY + d for d in range(3)]
+    + [INTERNAL_FORCE + d for d in range(3)]
+    + [APPLIED_FORCE + d for d in range(3)]
+    + [PREVIOUS_FORCE + d for d in range(3)]
+    + [MASS, DAMPING]
+)
+_CABLE_SOURCE = np.array([STIFFNESS, REST_LENGTH, PRETENSION, INV_SPLIT_MASS_SUM, BREAKING_LOAD, INTACT, TENSION, TENSION])
 # The lanes' own rows: the sub-step and its books, and the cable loop's per-lane results.
 _L_H, _L_H_LAST, _L_H_DAMPING, _L_ELAPSED, _L_BLEND, _L_INVERSE_H_MID, _L_OMEGA2 = range(7)
 _L_WORK, _L_DISSIPATED, _L_H_LO, _L_H_HI, _L_INVERSE_LHS, _L_RHS_FACTOR, _L_SPEED2, _L_OMEGA2_MAX = range(7, 15)
 _L_RELEASED, _L_LENGTH_SUM, _L_SHORTEST, _L_PULL, _L_FROM_REST = 15, 16, 17, 18, 21  # _L_PULL: 3 rows
-_L_LANE_ROWS = 22
+_L_KICK, _L_BROKEN, _L_NON_FINITE = 22, 23, 24
+_L_LANE_ROWS = 25
 
 
 @njit(inline="always", error_model="numpy")
@@ -1037,6 +1048,9 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
     speed2_row, omega2_max_row, released_row = lane[_L_SPEED2], lane[_L_OMEGA2_MAX], lane[_L_RELEASED]
     length_sum_row, shortest_row, from_rest_row = lane[_L_LENGTH_SUM], lane[_L_SHORTEST], lane[_L_FROM_REST]
     pull_x, pull_y, pull_z = lane[_L_PULL], lane[_L_PULL + 1], lane[_L_PULL + 2]
+    kick_row, broken_row, non_finite_row = lane[_L_KICK], lane[_L_BROKEN], lane[_L_NON_FINITE]
+    safety_factor, max_step = settings[SAFETY_FACTOR], settings[MAX_STEP]
+    max_substeps = np.int64(settings[MAX_SUBSTEPS])
     for start in range(0, members.shape[0], w):
         lanes = min(w, members.shape[0] - start)
         for k in range(lanes):
@@ -1052,41 +1066,61 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                 clusters[b, LAST_STEP],
             )
             running[k] = True
-            for i in range(n):
-                node_lanes[i, _L_MASS, k], node_lanes[i, _L_DAMPING, k] = nodes[b, i, MASS], nodes[b, i, DAMPING]
-                for d in range(3):
-                    node_lanes[i, _L_POSITION + d, k] = nodes[b, i, POSITION + d]
-                    node_lanes[i, _L_VELOCITY + d, k] = nodes[b, i, HALF_STEP_VELOCITY + d]
-                    node_lanes[i, _L_FORCE + d, k] = nodes[b, i, INTERNAL_FORCE + d]
-                    node_lanes[i, _L_APPLIED + d, k] = nodes[b, i, APPLIED_FORCE + d]
-                    node_lanes[i, _L_PREVIOUS + d, k] = nodes[b, i, PREVIOUS_FORCE + d]
-            for c in range(m):
-                cable_lanes[c, _L_STIFFNESS, k] = cables[b, c, STIFFNESS]
-                cable_lanes[c, _L_REST, k] = cables[b, c, REST_LENGTH]
-                cable_lanes[c, _L_PRETENSION, k] = cables[b, c, PRETENSION]
-                cable_lanes[c, _L_INVERSE_MASS, k] = cables[b, c, INV_SPLIT_MASS_SUM]
-                cable_lanes[c, _L_BREAKING, k] = cables[b, c, BREAKING_LOAD]
-                cable_lanes[c, _L_INTACT, k] = cables[b, c, INTACT]
-                cable_lanes[c, _L_TENSION, k] = cables[b, c, TENSION]
-                cable_lanes[c, _L_PEAK, k] = cables[b, c, TENSION]  # each peak starts at the tension
+        # Row by row, the lanes innermost: contiguous stores into the block.
+        for i in range(n):
+            for row in range(_L_NODE_ROWS):
+                column, target = _NODE_SOURCE[row], node_lanes[i, row]
+                for k in range(lanes):
+                    target[k] = nodes[members[start + k], i, column]
+        for c in range(m):
+            for row in range(_L_CABLE_ROWS):
+                column, target = _CABLE_SOURCE[row], cable_lanes[c, row]
+                for k in range(lanes):
+                    target[k] = cables[members[start + k], c, column]
         active = lanes
+        # Only the interval's first sub-step can start from rest (h_last = 0 after a reset) or
+        # blend the previous interval's force in (count = 0): every lane of a block starts its
+        # interval together, so later sub-steps skip the blend's division and the kick from rest
+        # (four divisions per node), which the selects below would otherwise compute and discard.
+        first = True
+        from_rest_lanes = 0
         while active > 0:
-            # Step sizes, lane by lane (the scalar _step_size); h = 0 marks a lane that does not step.
+            # Step sizes, branch-free across the lanes (the scalar _step_size's operations, in its
+            # order); h = 0 marks a lane that does not step.
+            refused = 0
             for k in range(lanes):
-                if not running[k]:
-                    h_row[k] = 0.0
-                    continue
-                h_last = h_last_row[k]
-                h, last[k] = _step_size(omega2_row[k], h_damping_row[k], settings, duration - elapsed_row[k], count[k])
+                omega2, taken = omega2_row[k], count[k]
+                h_stable = safety_factor * 2.0 / math.sqrt(omega2) if omega2 > 0.0 else math.inf
+                h_stable = h_damping_row[k] if h_stable > h_damping_row[k] else h_stable
+                h_stable = max_step if h_stable > max_step else h_stable
+                remaining = duration - elapsed_row[k]
+                steps_wanted = remaining / h_stable - 1e-9
+                refuse = running[k] & ((taken >= max_substeps) | (steps_wanted > np.float64(max_substeps - taken)))
+                steps_left = np.ceil(steps_wanted)
+                ends = steps_left <= 1.0
+                h = remaining if ends else remaining / steps_left
+                h = h if running[k] & (not refuse) else 0.0
                 h_row[k] = h
-                if h == 0.0:
-                    counters[members[start + k], STATUS] = STATUS_TOO_MANY_SUBSTEPS
-                    running[k] = False
-                    active -= 1
-                    continue
-                from_rest_row[k] = 1.0 if h_last == 0.0 else 0.0
-                blend_row[k] = h_last / (h_last + h) if count[k] == 0 else 0.0
-                inverse_h_mid_row[k] = 1.0 / (0.5 * (h_last + h))
+                last[k] = ends
+                inverse_h_mid_row[k] = 1.0 / (0.5 * (h_last_row[k] + h))
+                refused += refuse
+            if refused > 0:  # rare: each refused lane is flagged and stops
+                for k in range(lanes):
+                    if running[k] and h_row[k] == 0.0:
+                        counters[members[start + k], STATUS] = STATUS_TOO_MANY_SUBSTEPS
+                        running[k] = False
+                        active -= 1
+            if first:
+                for k in range(lanes):
+                    h_last, h = h_last_row[k], h_row[k]
+                    from_rest_row[k] = 1.0 if h_last == 0.0 else 0.0
+                    blend_row[k] = h_last / (h_last + h) if h > 0.0 else 0.0
+                    from_rest_lanes += (h > 0.0) & (h_last == 0.0)
+            elif from_rest_lanes >= 0:
+                blend_row[:lanes] = 0.0
+                from_rest_lanes = -1  # the blend is zero from here on
+            from_rest = first and from_rest_lanes > 0
+            first = False
             # Kick and drift, node by node (each node's update reads that node only), with the
             # drift's work and damping losses; the internal forces are zeroed for the cables'.
             for i in range(n):
@@ -1100,14 +1134,17 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                     velocity, force = node_lanes[i, _L_VELOCITY + d], node_lanes[i, _L_FORCE + d]
                     applied, previous = node_lanes[i, _L_APPLIED + d], node_lanes[i, _L_PREVIOUS + d]
                     position = node_lanes[i, _L_POSITION + d]
+                    if from_rest:  # the first half step from a fresh state: uniformly accelerated motion
+                        for k in range(lanes):
+                            h, v_old, f, p = h_row[k], velocity[k], force[k], applied[k]
+                            accelerated = v_old + 0.5 * h * ((p - f - damping_row[k] * v_old) / mass_row[k])
+                            kick_row[k] = accelerated if from_rest_row[k] != 0.0 else math.nan
                     for k in range(lanes):
                         h = h_row[k]
                         v_old, f, p = velocity[k], force[k], applied[k]
                         p_dual = p + blend_row[k] * (previous[k] - p)
                         kicked = (rhs_factor_row[k] * v_old + p_dual - f) * inverse_lhs_row[k]
-                        # The first half step from a fresh state: uniformly accelerated motion.
-                        accelerated = v_old + 0.5 * h * ((p - f - damping_row[k] * v_old) / mass_row[k])
-                        kicked = accelerated if from_rest_row[k] != 0.0 else kicked
+                        kicked = kick_row[k] if from_rest and from_rest_row[k] != 0.0 else kicked
                         v_new = kicked if h > 0.0 else v_old
                         dx = h * v_new
                         velocity[k] = v_new
@@ -1120,6 +1157,7 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                     dissipated_row[k] = dissipated_row[k] + lost if h_row[k] > 0.0 else dissipated_row[k]
             # Cable forces at the new positions (the undamped cable_forces, breaking included):
             # tensions and their books, then the forces on the cable's two nodes.
+            breaking_lanes = 0
             for k in range(lanes):
                 omega2_max_row[k] = 0.0
                 released_row[k] = 0.0
@@ -1163,9 +1201,10 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                     omega2_max_row[k] = w2 if counted & (w2 > omega2_max_row[k]) else omega2_max_row[k]
                     peak[k] = n_cable if stepping & (n_cable > peak[k]) else peak[k]
                     breaks = counted & (n_cable > breaking[k])
-                    elastic = n_taut if n_taut > 0.0 else 0.0
-                    freed = 0.5 * elastic * elastic / stiffness[k]
-                    released_row[k] = released_row[k] + freed if breaks else released_row[k]
+                    # The strain energy a break frees is booked after the loop, for the lanes that
+                    # broke: a division per cable that every other sub-step would discard.
+                    broken_row[k] = n_taut if breaks else -1.0
+                    breaking_lanes += breaks
                     intact[k] = 0.0 if breaks else intact[k]
                     n_cable = 0.0 if breaks else n_cable
                     tension[k] = n_cable if stepping else tension[k]
@@ -1173,6 +1212,13 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                     pull_x[k] = n_cable * (dx * inverse_length) if pulls else 0.0
                     pull_y[k] = n_cable * (dy * inverse_length) if pulls else 0.0
                     pull_z[k] = n_cable * (dz * inverse_length) if pulls else 0.0
+                if breaking_lanes > 0:  # rare
+                    for k in range(lanes):
+                        n_taut = broken_row[k]
+                        if n_taut >= 0.0:
+                            elastic = n_taut if n_taut > 0.0 else 0.0
+                            released_row[k] = released_row[k] + 0.5 * elastic * elastic / stiffness[k]
+                    breaking_lanes = 0
                 for d in range(3):
                     pull = lane[_L_PULL + d]
                     force_i, force_j = node_lanes[i, _L_FORCE + d], node_lanes[j, _L_FORCE + d]
@@ -1180,29 +1226,34 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                         pulls = (tension[k] != 0.0) & (h_row[k] > 0.0)
                         force_i[k] = force_i[k] - pull[k] if pulls else force_i[k]
                         force_j[k] = force_j[k] + pull[k] if pulls else force_j[k]
-            # The sub-step's books, lane by lane (the scalar _substep's).
+            # The sub-step's books (the scalar _substep's), branch-free across the lanes.
+            if recorded > 0:
+                for k in range(lanes):
+                    if h_row[k] > 0.0 and count[k] < recorded:
+                        step_record[members[start + k], count[k]] = h_row[k]
+            ended, flagged = 0, 0
             for k in range(lanes):
                 h = h_row[k]
-                if h == 0.0:
-                    continue
-                b = members[start + k]
-                if count[k] < recorded:
-                    step_record[b, count[k]] = h
-                count[k] += 1
-                h_last_row[k] = h
-                h_lo_row[k] = min(h_lo_row[k], h)
-                h_hi_row[k] = max(h_hi_row[k], h)
-                omega2_row[k] = omega2_max_row[k]
-                dissipated_row[k] += h * 0.0 + released_row[k]  # no viscous power in these lanes
-                if not (math.isfinite(length_sum_row[k]) and shortest_row[k] > 0.0):
-                    counters[b, STATUS] = STATUS_NON_FINITE
-                    running[k] = False
-                    active -= 1
-                elif last[k]:
-                    running[k] = False
-                    active -= 1
-                else:
-                    elapsed_row[k] += h
+                stepping = h > 0.0
+                count[k] = count[k] + 1 if stepping else count[k]
+                h_last_row[k] = h if stepping else h_last_row[k]
+                h_lo_row[k] = min(h_lo_row[k], h) if stepping else h_lo_row[k]
+                h_hi_row[k] = max(h_hi_row[k], h) if stepping else h_hi_row[k]
+                omega2_row[k] = omega2_max_row[k] if stepping else omega2_row[k]
+                # no viscous power in these lanes
+                dissipated_row[k] = dissipated_row[k] + (h * 0.0 + released_row[k]) if stepping else dissipated_row[k]
+                bad = stepping & (not ((abs(length_sum_row[k]) < math.inf) & (shortest_row[k] > 0.0)))
+                ends = stepping & (bad | last[k])
+                elapsed_row[k] = elapsed_row[k] + h if stepping & (not ends) else elapsed_row[k]
+                running[k] = running[k] & (not ends)
+                non_finite_row[k] = 1.0 if bad else 0.0
+                ended += ends
+                flagged += bad
+            active -= ended
+            if flagged > 0:  # rare
+                for k in range(lanes):
+                    if non_finite_row[k] != 0.0:
+                        counters[members[start + k], STATUS] = STATUS_NON_FINITE
         for k in range(lanes):
             b = members[start + k]
             if counters[b, STATUS] == STATUS_TOO_MANY_SUBSTEPS:  # refused: the tables hold its start
@@ -1306,8 +1357,11 @@ def _advance_clusters_in_lanes(
     if lane_count >= LANE_MIN_CLUSTERS:
         in_pairs[in_lanes[:lane_count]] = False
     # First the pairs, which hold every cluster they do not advance: the lanes then write all
-    # that holding wrote (sub-step counts, step sizes, peak tensions) for theirs.
-    _advance_clusters(duration, in_pairs, settings, topology, nodes, cables, clusters, counters, step_record)
+    # that holding wrote (sub-step counts, step sizes, peak tensions) for theirs.  With every
+    # cluster in the lanes there is nothing for the pairs to do (a pass that cost about 10 ns
+    # per cluster and interval, a sixtieth of the lanes' interval).
+    if lane_count < LANE_MIN_CLUSTERS or lane_count < batch:
+        _advance_clusters(duration, in_pairs, settings, topology, nodes, cables, clusters, counters, step_record)
     if lane_count >= LANE_MIN_CLUSTERS:
         _advance_lanes(
             duration, settings, topology, nodes, cables, clusters, counters, step_record, in_lanes[:lane_count]
