@@ -969,7 +969,8 @@ _L_NODE_ROWS = 17
 # A cable's rows.
 _L_STIFFNESS, _L_REST, _L_PRETENSION, _L_INVERSE_MASS, _L_BREAKING, _L_INTACT, _L_TENSION, _L_PEAK = range(8)
 _L_CABLE_ROWS = 8
-# The tables' column behind each row of a node's and a cable's block (each peak starts at the tension).
+# The tables' column behind each row of a node's and a cable's block, but the peak tension's (a copy
+# of the tension's row).
 _NODE_SOURCE = np.array(
     [POSITION + d for d in range(3)]
     + [HALF_STEP_VELOCITY + d for d in range(3)]
@@ -978,7 +979,7 @@ _NODE_SOURCE = np.array(
     + [PREVIOUS_FORCE + d for d in range(3)]
     + [MASS, DAMPING]
 )
-_CABLE_SOURCE = np.array([STIFFNESS, REST_LENGTH, PRETENSION, INV_SPLIT_MASS_SUM, BREAKING_LOAD, INTACT, TENSION, TENSION])
+_CABLE_SOURCE = np.array([STIFFNESS, REST_LENGTH, PRETENSION, INV_SPLIT_MASS_SUM, BREAKING_LOAD, INTACT, TENSION])
 # The lanes' own rows: the sub-step and its books, and the cable loop's per-lane results.
 _L_H, _L_H_LAST, _L_H_DAMPING, _L_ELAPSED, _L_BLEND, _L_INVERSE_H_MID, _L_OMEGA2 = range(7)
 _L_WORK, _L_DISSIPATED, _L_H_LO, _L_H_HI, _L_INVERSE_LHS, _L_RHS_FACTOR, _L_SPEED2, _L_OMEGA2_MAX = range(7, 15)
@@ -1073,10 +1074,11 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                 for k in range(lanes):
                     target[k] = nodes[members[start + k], i, column]
         for c in range(m):
-            for row in range(_L_CABLE_ROWS):
+            for row in range(_L_PEAK):
                 column, target = _CABLE_SOURCE[row], cable_lanes[c, row]
                 for k in range(lanes):
                     target[k] = cables[members[start + k], c, column]
+            cable_lanes[c, _L_PEAK, :lanes] = cable_lanes[c, _L_TENSION, :lanes]  # each peak starts at the tension
         active = lanes
         # Only the interval's first sub-step can start from rest (h_last = 0 after a reset) or
         # blend the previous interval's force in (count = 0): every lane of a block starts its
