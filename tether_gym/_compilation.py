@@ -28,7 +28,7 @@ LOGGER = logging.getLogger("tether_gym")
 #: in one group (a test checks it).
 GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("the cable forces of resets and queries", ("evaluate_forces",)),
-    ("the initial states and the action check", ("remove_rigid_velocity", "all_finite")),
+    ("the initial states and the input checks", ("remove_rigid_velocity", "all_finite", "all_within")),
     ("the observation and reward", ("_compile_cluster_evaluation.<locals>.evaluate_clusters",)),
     (
         "a whole task step, one thread",

@@ -203,6 +203,17 @@ def all_finite(values: np.ndarray) -> bool:
     return True
 
 
+@njit(cache=True, nogil=True)
+def all_within(values: np.ndarray, limit: float) -> bool:
+    """Whether every entry of the float64 array ``values`` (any shape) is finite with magnitude
+    at most ``limit``: one compiled pass where numpy's checks of a batch's force took about ten
+    (NaN, infinities, the magnitude, each a pass and an array), some 40 us at 1 024 clusters."""
+    for value in values.flat:
+        if not (math.isfinite(value) and abs(value) <= limit):
+            return False
+    return True
+
+
 # ---------------------------------------------------------------------------------------------
 # Cable forces
 def _make_cable_forces(viscous: bool) -> Callable[..., Any]:  # a numba dispatcher

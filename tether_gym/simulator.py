@@ -364,6 +364,12 @@ _CONSISTENCY_FLOOR = 1e-300
 def _check_array(name: str, value: ArrayLike, shape: tuple[int, ...], unit: str, limit: float = math.inf) -> np.ndarray:
     """A float64 C-contiguous copy of ``value`` with exactly ``shape`` and finite entries of
     magnitude at most ``limit`` (see :mod:`tether_gym.limits`)."""
+    if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.shape == shape:
+        # The common case, checked in one compiled pass over the copy (C-contiguous and writable:
+        # one compiled variant per dimension); the checks below name what is wrong.
+        array = np.array(value, order="C")
+        if _kernels.all_within(array, limit):
+            return array
     array = np.ascontiguousarray(real_array(name, value), dtype=np.float64)
     if array.shape != shape:
         raise ValueError(f"{name} must have shape {shape} ({unit}); got shape {array.shape}")

@@ -39,6 +39,7 @@ from tether_gym import _kernels
 from tether_gym.envs import _task_kernels
 _task_kernels.remove_rigid_velocity(np.ones((1, 2, 3)), np.zeros((1, 2, 3)), np.ones((1, 2)))
 _kernels.all_finite(np.zeros(3))
+_kernels.all_within(np.zeros((1, 2, 3)), 1.0)
 _kernels._solve_gyroscopic(1.0, 0.5, 1.0, 2.0)
 """
 
