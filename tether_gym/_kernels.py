@@ -1252,7 +1252,7 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                 for k in range(lanes):
                     if h_row[k] > 0.0 and count[k] < recorded:
                         step_record[members[start + k], count[k]] = h_row[k]
-            ended, flagged = 0, 0
+            finished, flagged = 0, 0
             for k in range(lanes):
                 h = h_row[k]
                 stepping = h > 0.0
@@ -1268,9 +1268,9 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                 elapsed_row[k] = elapsed_row[k] + h if stepping & (not ends) else elapsed_row[k]
                 running[k] = running[k] & (not ends)
                 non_finite_row[k] = 1.0 if bad else 0.0
-                ended += ends
+                finished += ends
                 flagged += bad
-            active -= ended
+            active -= finished
             if flagged > 0:  # rare
                 for k in range(lanes):
                     if non_finite_row[k] != 0.0:

@@ -213,15 +213,16 @@ def print_roofline(repeats: int) -> None:
                 rates.append(rate)
                 limit_ns.append(substep_limit_ns(cluster, limits))
                 fractions.append(limit_ns[-1] * rate / 1e9)
-            best = max(rates)
+            best, limit, fraction = max(rates), float(np.median(limit_ns)), float(np.median(fractions))
             print(
-                f"{env_id:<34}{kernel:<11}{batch:>6}{best:>14,.0f}{1e9 / best:>13.1f}{float(np.median(limit_ns)):>11.1f}"
-                f"{100 * float(np.median(fractions)):>12.1f} % ({100 * min(fractions):.1f}-{100 * max(fractions):.1f} %)"
+                f"{env_id:<34}{kernel:<11}{batch:>6}{best:>14,.0f}{1e9 / best:>13.1f}{limit:>11.1f}"
+                f"{100 * fraction:>12.1f} % ({100 * min(fractions):.1f}-{100 * max(fractions):.1f} %)"
             )
     if limits is not None:
         print(
             f"(the last round's limits: undamped cable {limits.cable_ns:.2f} ns, damped cable "
-            f"{limits.viscous_cable_ns:.2f} ns, node {limits.node_ns:.2f} ns; {limits.simd} doubles per SIMD instruction)"
+            f"{limits.viscous_cable_ns:.2f} ns, node {limits.node_ns:.2f} ns; {limits.simd} doubles per SIMD "
+            "instruction)"
         )
 
 

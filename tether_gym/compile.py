@@ -73,8 +73,8 @@ def _initial_states_and_actions() -> None:
     _initial_states()
     for shape in ((3,), (1, 3)):  # a single env's action and a vector env's
         _kernels.all_finite(np.zeros(shape))
-    for shape in ((4, 3), (1, 4, 3)):  # the simulators' checks of positions, velocities and forces
-        _kernels.all_within(np.zeros(shape), 1.0)
+    for checked in (np.zeros((4, 3)), np.zeros((1, 4, 3))):  # the simulators' checks of their inputs
+        _kernels.all_within(checked, 1.0)
 
 
 def _parallel_task(batch: int) -> Callable[[], None]:
