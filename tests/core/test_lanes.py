@@ -15,7 +15,7 @@ from tether_gym import _kernels as k
 BATCH = k.LANE_WIDTH + 21  # a full block and a partial one
 
 
-def mixed_batch(preset: str, seed: int, **settings: float) -> tg.BatchSimulator:
+def mixed_batch(preset: str, seed: int, **settings: float | bool) -> tg.BatchSimulator:
     """``BATCH`` clusters of ``preset`` with every third one stiffer, every fourth with cables that
     break, every seventh with axial damping, from large random displacements and velocities."""
     cluster = tg.make_cluster(preset)
@@ -66,9 +66,11 @@ def advance_alone(sim: tg.BatchSimulator, duration: float, active: np.ndarray, r
         ("hub", {"safety_factor": 0.2}),
         ("tetrahedron", {"max_substeps": 12}),  # intervals refused for their budget, and rolled back
         ("beaded_chain", {}),
+        # A tolerance the coarse step breaks: energy runaways flagged by the lanes' books.
+        ("tetrahedron", {"energy_tolerance": 1e-3, "safety_factor": 0.9, "allow_unstable_safety_factor": True}),
     ],
 )
-def test_the_lanes_reproduce_the_pairs_bit_for_bit(preset: str, settings: dict[str, float]) -> None:
+def test_the_lanes_reproduce_the_pairs_bit_for_bit(preset: str, settings: dict[str, float | bool]) -> None:
     together, alone = mixed_batch(preset, seed=3, **settings), mixed_batch(preset, seed=3, **settings)
     ready = [k._lane_ready(together.cable_table[b], together.cluster_table[b]) for b in range(BATCH)]
     assert k.LANE_MIN_CLUSTERS <= sum(ready) < BATCH, "the batch must take both paths"
@@ -91,6 +93,8 @@ def test_the_lanes_reproduce_the_pairs_bit_for_bit(preset: str, settings: dict[s
     assert (together.cable_table[:, :, k.INTACT] == 0.0).any(), "some cable should have broken"
     if "max_substeps" in settings:
         assert k.STATUS_TOO_MANY_SUBSTEPS in seen
+    if "energy_tolerance" in settings:
+        assert k.STATUS_ENERGY_RUNAWAY in seen
 
 
 def test_a_collapsed_cable_is_flagged_in_its_lane_alone() -> None:
