@@ -1120,7 +1120,6 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
         # interval together, so later sub-steps skip the blend's division and the kick from rest
         # (four divisions per node), which the selects below would otherwise compute and discard.
         first = True
-        from_rest_lanes = 0
         while active > 0:
             # Step sizes, branch-free across the lanes (the scalar _step_size's operations, in its
             # order); h = 0 marks a lane that does not step.
@@ -1147,17 +1146,15 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                         counters[members[start + k], STATUS] = STATUS_TOO_MANY_SUBSTEPS
                         running[k] = False
                         active -= 1
+            from_rest = False
             if first:
+                from_rest_lanes = 0
                 for k in range(lanes):
                     h_last, h = h_last_row[k], h_row[k]
                     from_rest_row[k] = 1.0 if h_last == 0.0 else 0.0
                     blend_row[k] = h_last / (h_last + h) if h > 0.0 else 0.0
                     from_rest_lanes += (h > 0.0) & (h_last == 0.0)
-            elif from_rest_lanes >= 0:
-                blend_row[:lanes] = 0.0
-                from_rest_lanes = -1  # the blend is zero from here on
-            from_rest = first and from_rest_lanes > 0
-            first = False
+                from_rest = from_rest_lanes > 0
             # Kick and drift, node by node (each node's update reads that node only), with the
             # drift's work and damping losses; the internal forces are zeroed for the cables'.
             for i in range(n):
@@ -1192,6 +1189,9 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                 for k in range(lanes):
                     lost = h_row[k] * damping_row[k] * speed2_row[k]
                     dissipated_row[k] = dissipated_row[k] + lost if h_row[k] > 0.0 else dissipated_row[k]
+            if first:  # the blend belongs to the interval's first sub-step
+                blend_row[:lanes] = 0.0
+                first = False
             # Cable forces at the new positions (the undamped cable_forces, breaking included):
             # tensions and their books, then the forces on the cable's two nodes.
             breaking_lanes = 0
@@ -1510,7 +1510,8 @@ def _advance_clusters_in_lanes(
     # that holding wrote (sub-step counts, step sizes, peak tensions) for theirs.  With every
     # cluster in the lanes there is nothing for the pairs to do (a pass that cost about 10 ns
     # per cluster and interval, a sixtieth of the lanes' interval).
-    if lane_count < LANE_MIN_CLUSTERS or lane_count < batch:
+    every_cluster_in_lanes = lane_count >= LANE_MIN_CLUSTERS and lane_count == batch
+    if not every_cluster_in_lanes:
         _advance_clusters(duration, in_pairs, settings, topology, nodes, cables, clusters, counters, step_record)
     if lane_count >= LANE_MIN_CLUSTERS:
         _advance_lanes(
