@@ -989,17 +989,6 @@ _L_NODE_ROWS = 17
 # A cable's rows.
 _L_STIFFNESS, _L_REST, _L_PRETENSION, _L_INVERSE_MASS, _L_BREAKING, _L_INTACT, _L_TENSION, _L_PEAK = range(8)
 _L_CABLE_ROWS = 8
-# The tables' column behind each row of a node's and a cable's block, but the peak tension's (a copy
-# of the tension's row).
-_NODE_SOURCE = np.array(
-    [POSITION + d for d in range(3)]
-    + [HALF_STEP_VELOCITY + d for d in range(3)]
-    + [INTERNAL_FORCE + d for d in range(3)]
-    + [APPLIED_FORCE + d for d in range(3)]
-    + [PREVIOUS_FORCE + d for d in range(3)]
-    + [MASS, DAMPING]
-)
-_CABLE_SOURCE = np.array([STIFFNESS, REST_LENGTH, PRETENSION, INV_SPLIT_MASS_SUM, BREAKING_LOAD, INTACT, TENSION])
 # The lanes' own rows: the sub-step and its books, and the cable loop's per-lane results.
 _L_H, _L_H_LAST, _L_H_DAMPING, _L_ELAPSED, _L_BLEND, _L_INVERSE_H_MID, _L_OMEGA2 = range(7)
 _L_WORK, _L_DISSIPATED, _L_H_LO, _L_H_HI, _L_INVERSE_LHS, _L_RHS_FACTOR, _L_SPEED2, _L_OMEGA2_MAX = range(7, 15)
@@ -1074,9 +1063,6 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
     kick_row, broken_row, non_finite_row = lane[_L_KICK], lane[_L_BROKEN], lane[_L_NON_FINITE]
     safety_factor, max_step = settings[SAFETY_FACTOR], settings[MAX_STEP]
     max_substeps = np.int64(settings[MAX_SUBSTEPS])
-    flat_nodes, flat_cables = nodes.reshape(-1), cables.reshape(-1)  # views: the tables are C-contiguous
-    node_stride, cable_stride = np.uint64(n * NODE_COLUMNS), np.uint64(m * CABLE_COLUMNS)
-    node_offset, cable_offset = np.zeros(w, dtype=np.uint64), np.zeros(w, dtype=np.uint64)
     end_velocity = np.zeros((n, 3, w))
     tolerance = settings[ENERGY_TOLERANCE_SETTING]
     for start in range(0, members.shape[0], w):
@@ -1097,23 +1083,23 @@ def _advance_lanes(  # noqa: C901 - the kernel: one loop body per stage, as the 
                 lane[_L_TIDAL + d, k] = clusters[b, FRAME_TIDAL + d]
             lane[_L_INITIAL, k], lane[_L_SCALE, k] = clusters[b, INITIAL_ENERGY], clusters[b, ENERGY_SCALE]
             running[k] = True
-        # Row by row, the lanes innermost (contiguous stores into the block), from the flat tables
-        # at unsigned offsets: with the tables' three signed indices (numba wraps negative ones)
-        # the gather took about 1.5 times as long.
-        for k in range(lanes):
-            node_offset[k] = np.uint64(members[start + k]) * node_stride
-            cable_offset[k] = np.uint64(members[start + k]) * cable_stride
-        for i in range(n):
-            for row in range(_L_NODE_ROWS):
-                column, target = np.uint64(i * NODE_COLUMNS + _NODE_SOURCE[row]), node_lanes[i, row]
-                for k in range(lanes):
-                    target[k] = flat_nodes[node_offset[k] + column]
-        for c in range(m):
-            for row in range(_L_PEAK):
-                column, target = np.uint64(c * CABLE_COLUMNS + _CABLE_SOURCE[row]), cable_lanes[c, row]
-                for k in range(lanes):
-                    target[k] = flat_cables[cable_offset[k] + column]
-            cable_lanes[c, _L_PEAK, :lanes] = cable_lanes[c, _L_TENSION, :lanes]  # each peak starts at the tension
+            for i in range(n):
+                node_lanes[i, _L_MASS, k], node_lanes[i, _L_DAMPING, k] = nodes[b, i, MASS], nodes[b, i, DAMPING]
+                for d in range(3):
+                    node_lanes[i, _L_POSITION + d, k] = nodes[b, i, POSITION + d]
+                    node_lanes[i, _L_VELOCITY + d, k] = nodes[b, i, HALF_STEP_VELOCITY + d]
+                    node_lanes[i, _L_FORCE + d, k] = nodes[b, i, INTERNAL_FORCE + d]
+                    node_lanes[i, _L_APPLIED + d, k] = nodes[b, i, APPLIED_FORCE + d]
+                    node_lanes[i, _L_PREVIOUS + d, k] = nodes[b, i, PREVIOUS_FORCE + d]
+            for c in range(m):
+                cable_lanes[c, _L_STIFFNESS, k] = cables[b, c, STIFFNESS]
+                cable_lanes[c, _L_REST, k] = cables[b, c, REST_LENGTH]
+                cable_lanes[c, _L_PRETENSION, k] = cables[b, c, PRETENSION]
+                cable_lanes[c, _L_INVERSE_MASS, k] = cables[b, c, INV_SPLIT_MASS_SUM]
+                cable_lanes[c, _L_BREAKING, k] = cables[b, c, BREAKING_LOAD]
+                cable_lanes[c, _L_INTACT, k] = cables[b, c, INTACT]
+                cable_lanes[c, _L_TENSION, k] = cables[b, c, TENSION]
+                cable_lanes[c, _L_PEAK, k] = cables[b, c, TENSION]  # each peak starts at the tension
         active = lanes
         # Only the interval's first sub-step can start from rest (h_last = 0 after a reset) or
         # blend the previous interval's force in (count = 0): every lane of a block starts its
