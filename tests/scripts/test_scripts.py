@@ -138,3 +138,23 @@ def test_planner_memory_benchmark_runs(tmp_path: Path) -> None:
     assert r2["y[t] from y[t-1]"] > 0.7 and r2["y[t] from the observation"] < 0.1, out
     for expected in ("CPU:", "(the prior)", "random correction, std 0.1", "memory: none", "memory: action"):
         assert expected in out, out
+
+
+def test_specialised_substep_benchmark_matches_the_lanes() -> None:
+    out = run("benchmarks/specialised_substep.py", "--batch", "64", "--rounds", "1")
+    assert "against _advance_lanes: the same bits" in out, out
+    rows = [line for line in out.splitlines() if line.rstrip().endswith(" %")]
+    assert len(rows) == 4, out  # both kernels, both intervals
+    for row in rows:
+        assert 0 < float(row.split()[-2]) < 100, row
+
+
+def test_specialised_substep_benchmark_refuses_large_clusters() -> None:
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks/specialised_substep.py"), "--env-id", "TetherBeadedTetrahedron-v0"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
+    assert result.returncode == 2 and "46 nodes" in result.stderr, result.stderr
