@@ -24,10 +24,11 @@ and sub-step counts, to the bit, as ``_advance_lanes``. Then, in rounds on one t
 the generated kernel and the integrator's lane driver (``advance_parallel_in_lanes``, gather,
 scatter and the interval's end included) over intervals of 0.1 s and 1 s, each round after
 measuring the roofline's limit (``tether_gym.roofline``). It prints the CPU model with the
-numbers. Run it on a quiet machine: about 30 s to compile, then about 5 s per round.
+numbers. Run it on a quiet machine: about 40 s with the default three rounds.
 
 Only small clusters: the straight-line body grows with the cables, and numba's SSA pass ran out
-of recursion depth after 8 minutes on the beaded tetrahedron (46 nodes, 48 cables).
+of recursion depth on the beaded tetrahedron (46 nodes, 48 cables), after 84 s of compiling with
+one lane per pass and 8 minutes with two.
 """
 
 from __future__ import annotations
