@@ -49,6 +49,8 @@ from typing import Any
 
 import numpy as np
 
+from tether_gym import _kernels as k
+
 #: Clusters per block, as the integrator's lanes (``_kernels.LANE_WIDTH``).
 WIDTH = 64
 #: The most nodes a generated sub-step takes (see the module docstring).
@@ -83,6 +85,33 @@ _STATE = (
     ("inverse_mass", "cable"),
     ("breaking", "cable"),
 )
+
+
+#: Which table column each of a block's rows comes from (and, for the results, goes back to):
+#: the node table's three columns from each, per axis; the cable table's; the cluster table's.
+_NODE_COLUMNS = {
+    "position": k.POSITION,
+    "velocity": k.HALF_STEP_VELOCITY,
+    "force": k.INTERNAL_FORCE,
+    "applied": k.APPLIED_FORCE,
+    "previous": k.PREVIOUS_FORCE,
+}
+_CABLE_PARAMETERS = {
+    "stiffness": k.STIFFNESS,
+    "rest": k.REST_LENGTH,
+    "pretension": k.PRETENSION,
+    "inverse_mass": k.INV_SPLIT_MASS_SUM,
+    "breaking": k.BREAKING_LOAD,
+}
+_CABLE_STATE = {"tension": k.TENSION, "intact": k.INTACT, "peak": k.PEAK_TENSION}
+_CLUSTER_BOOKS = {
+    "last_step": k.LAST_STEP,
+    "work": k.WORK,
+    "dissipated": k.DISSIPATED,
+    "omega2": k.OMEGA2,
+    "step_min": k.STEP_MIN,
+    "step_max": k.STEP_MAX,
+}
 
 
 @dataclass(frozen=True)
@@ -269,39 +298,21 @@ def compile_block(topology: np.ndarray, interleave: int, directory: Path) -> tup
 
 def gather(sim: Any, start: int, layout: Layout) -> np.ndarray:
     """The block of clusters ``start`` to ``start + WIDTH`` of ``sim``'s tables in ``layout``."""
-    from tether_gym import _kernels as k
-
     nodes, cables, clusters = sim.node_table, sim.cable_table, sim.cluster_table
     members = slice(start, start + WIDTH)
     block = np.zeros((layout.rows, WIDTH))
     for i in range(layout.nodes):
         for d in range(3):
-            axis = 3 * i + d
-            for name, column in (
-                ("position", k.POSITION),
-                ("velocity", k.HALF_STEP_VELOCITY),
-                ("force", k.INTERNAL_FORCE),
-                ("applied", k.APPLIED_FORCE),
-                ("previous", k.PREVIOUS_FORCE),
-            ):
-                block[layout.row(name, axis)] = nodes[members, i, column + d]
+            for name, column in _NODE_COLUMNS.items():
+                block[layout.row(name, 3 * i + d)] = nodes[members, i, column + d]
         block[layout.row("mass", i)] = nodes[members, i, k.MASS]
         block[layout.row("damping", i)] = nodes[members, i, k.DAMPING]
     for c in range(layout.cables):
-        for name, column in (
-            ("stiffness", k.STIFFNESS),
-            ("rest", k.REST_LENGTH),
-            ("pretension", k.PRETENSION),
-            ("inverse_mass", k.INV_SPLIT_MASS_SUM),
-            ("breaking", k.BREAKING_LOAD),
-            ("tension", k.TENSION),
-            ("intact", k.INTACT),
-            ("peak", k.TENSION),  # each peak starts at the tension, as in the lanes
-        ):
-            block[layout.row(name, c)] = cables[members, c, column]
-    for name, column in (("last_step", k.LAST_STEP), ("work", k.WORK), ("dissipated", k.DISSIPATED)):
+        for name, column in (_CABLE_PARAMETERS | _CABLE_STATE).items():
+            # Each peak starts at the tension, as in the lanes.
+            block[layout.row(name, c)] = cables[members, c, k.TENSION if name == "peak" else column]
+    for name, column in _CLUSTER_BOOKS.items():
         block[layout.row(name)] = clusters[members, column]
-    block[layout.row("omega2")] = clusters[members, k.OMEGA2]
     safety_factor = sim.kernel_settings[k.SAFETY_FACTOR]
     block[layout.row("damping_step")] = [k._damping_step(nodes[b], safety_factor) for b in range(start, start + WIDTH)]
     return block.reshape(-1)
@@ -323,8 +334,6 @@ def _simulator(env_id: str, batch: int) -> tuple[Any, float]:
     force (so the first sub-step's blend changes nothing) and small random forces applied."""
     import gymnasium as gym
 
-    from tether_gym import _kernels as k
-
     envs = gym.make_vec(env_id, num_envs=batch)
     envs.reset(seed=0)
     envs.step(np.zeros(envs.action_space.shape, dtype=envs.action_space.dtype))
@@ -336,11 +345,15 @@ def _simulator(env_id: str, batch: int) -> tuple[Any, float]:
     return sim, float(task.config.control_interval)
 
 
+def _topology_and_tables(sim: Any) -> tuple[np.ndarray, ...]:
+    """The integrator kernels' arguments after the settings: the cables' node pairs, then the
+    node, cable, cluster and counter tables."""
+    return sim.cables, sim.node_table, sim.cable_table, sim.cluster_table, sim.counter_table
+
+
 def check_bits(advance_block: Callable[..., None], layout: Layout, env_id: str) -> list[str]:
     """One interval of the id's first block, generated kernel against ``_advance_lanes`` from the
     same state: the numbers that differ in any bit (an empty list when none does)."""
-    from tether_gym import _kernels as k
-
     sim, interval = _simulator(env_id, WIDTH)
     settings = sim.kernel_settings
     block = gather(sim, 0, layout)
@@ -348,41 +361,21 @@ def check_bits(advance_block: Callable[..., None], layout: Layout, env_id: str) 
     block.reshape(layout.rows, WIDTH)[layout.row("blend")] = 0.5  # any blend: previous == applied
     advance_block(interval, settings[k.SAFETY_FACTOR], settings[k.MAX_STEP], settings[k.MAX_SUBSTEPS], block)
     members = np.arange(WIDTH, dtype=np.int64)
-    k._advance_lanes(
-        interval,
-        settings,
-        sim.cables,
-        sim.node_table,
-        sim.cable_table,
-        sim.cluster_table,
-        sim.counter_table,
-        np.empty((WIDTH, 0)),
-        members,
-    )
+    k._advance_lanes(interval, settings, *_topology_and_tables(sim), np.empty((WIDTH, 0)), members)
     rows = block.reshape(layout.rows, WIDTH)
-    node_columns = (("position", k.POSITION), ("velocity", k.HALF_STEP_VELOCITY), ("force", k.INTERNAL_FORCE))
+    outputs = ("position", "velocity", "force")
     pairs = [
-        (f"{name} {i}.{d}", rows[layout.row(name, 3 * i + d)], sim.node_table[:, i, column + d])
-        for name, column in node_columns
+        (f"{name} {i}.{d}", rows[layout.row(name, 3 * i + d)], sim.node_table[:, i, _NODE_COLUMNS[name] + d])
+        for name in outputs
         for i in range(layout.nodes)
         for d in range(3)
     ]
     pairs += [
         (f"{name} {c}", rows[layout.row(name, c)], sim.cable_table[:, c, column])
-        for name, column in (("tension", k.TENSION), ("peak", k.PEAK_TENSION), ("intact", k.INTACT))
+        for name, column in _CABLE_STATE.items()
         for c in range(layout.cables)
     ]
-    pairs += [
-        (name, rows[layout.row(name)], sim.cluster_table[:, column])
-        for name, column in (
-            ("work", k.WORK),
-            ("dissipated", k.DISSIPATED),
-            ("omega2", k.OMEGA2),
-            ("last_step", k.LAST_STEP),
-            ("step_min", k.STEP_MIN),
-            ("step_max", k.STEP_MAX),
-        )
-    ]
+    pairs += [(name, rows[layout.row(name)], sim.cluster_table[:, column]) for name, column in _CLUSTER_BOOKS.items()]
     pairs.append(("substeps", rows[layout.row("substeps")], sim.counter_table[:, k.SUBSTEPS].astype(float)))
     return [name for name, generated, lanes in pairs if generated.tobytes() != lanes.tobytes()]
 
@@ -404,7 +397,6 @@ def main(argv: list[str] | None = None) -> None:
     import numba
 
     import tether_gym
-    from tether_gym import _kernels as k
     from tether_gym.bench import cpu_model
     from tether_gym.roofline import measure_limits, substep_limit_ns
 
@@ -458,17 +450,7 @@ def main(argv: list[str] | None = None) -> None:
 
         def lanes(duration: float) -> Callable[[], int]:
             def advance() -> int:
-                k.advance_parallel_in_lanes(
-                    duration,
-                    every_cluster,
-                    settings,
-                    sim.cables,
-                    sim.node_table,
-                    sim.cable_table,
-                    sim.cluster_table,
-                    sim.counter_table,
-                    no_record,
-                )
+                k.advance_parallel_in_lanes(duration, every_cluster, settings, *_topology_and_tables(sim), no_record)
                 return int(sim.counter_table[:, k.SUBSTEPS].sum())
 
             return advance
