@@ -398,9 +398,12 @@ def main(argv: list[str] | None = None) -> None:
 
     import tether_gym
     from tether_gym.bench import cpu_model
+    from tether_gym.registration import ENV_IDS
     from tether_gym.roofline import measure_limits, substep_limit_ns
 
     env_id = args.env_id or tether_gym.DEFAULT_ENV_ID
+    if env_id not in ENV_IDS:
+        parser.error(f"unknown id {env_id!r}: use one of {', '.join(ENV_IDS)}")
     if args.batch <= 0 or args.batch % WIDTH:
         parser.error(f"--batch must be a positive multiple of {WIDTH}, got {args.batch}")
     sim, interval = _simulator(env_id, args.batch)

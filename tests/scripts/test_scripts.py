@@ -149,12 +149,20 @@ def test_specialised_substep_benchmark_matches_the_lanes() -> None:
         assert 0 < float(row.split()[-2]) < 100, row
 
 
-def test_specialised_substep_benchmark_refuses_large_clusters() -> None:
+@pytest.mark.parametrize(
+    ("env_id", "reason"),
+    [
+        ("TetherBeadedTetrahedron-v0", "46 nodes"),
+        ("TetherSpinningTriangle-v0", "turning frame"),
+        ("TetherNope-v0", "unknown id 'TetherNope-v0'"),
+    ],
+)
+def test_specialised_substep_benchmark_refuses_what_it_cannot_generate(env_id: str, reason: str) -> None:
     result = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks/specialised_substep.py"), "--env-id", "TetherBeadedTetrahedron-v0"],
+        [sys.executable, str(ROOT / "benchmarks/specialised_substep.py"), "--env-id", env_id, "--batch", "64"],
         capture_output=True,
         text=True,
         timeout=600,
         cwd=ROOT,
     )
-    assert result.returncode == 2 and "46 nodes" in result.stderr, result.stderr
+    assert result.returncode == 2 and reason in result.stderr, result.stderr
