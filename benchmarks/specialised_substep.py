@@ -241,6 +241,8 @@ def substep_source(topology: np.ndarray, interleave: int) -> tuple[str, Layout]:
     add(f"{at('step_min')} = min({at('step_min')}, h) if stepping else {at('step_min')}")
     add(f"{at('step_max')} = max({at('step_max')}, h) if stepping else {at('step_max')}")
     add(f"{at('omega2')} = omega2_max if stepping else omega2")
+    # The lanes' books add the cables' viscous power times h (none in the lanes) and the energy
+    # breaking cables free (none here: a break raises); the same additions keep the same bits.
     add(f"{at('dissipated')} = dissipated + (h * 0.0 + 0.0) if stepping else dissipated")
     add("bad = stepping & (not ((abs(length_sum) < math.inf) & (shortest > 0.0)))")
     add("done = stepping & (bad | ends)")
@@ -300,6 +302,8 @@ def gather(sim: Any, start: int, layout: Layout) -> np.ndarray:
     """The block of clusters ``start`` to ``start + WIDTH`` of ``sim``'s tables in ``layout``."""
     nodes, cables, clusters = sim.node_table, sim.cable_table, sim.cluster_table
     members = slice(start, start + WIDTH)
+    if np.any(clusters[members, k.LAST_STEP] == 0.0):
+        raise ValueError("a cluster starts from rest (just reset): the generated sub-step has no kick from rest")
     block = np.zeros((layout.rows, WIDTH))
     for i in range(layout.nodes):
         for d in range(3):
