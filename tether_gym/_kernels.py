@@ -720,17 +720,46 @@ def _energy_runaway(
             _elastic_tension(nodes, cable, topology[c, 0], topology[c, 1], linearised) if viscous else cable[TENSION]
         )
         strain += 0.5 * elastic * elastic / cable[STIFFNESS]
-    initial, work, dissipated = cluster[INITIAL_ENERGY], cluster[WORK], cluster[DISSIPATED]
-    residual = kinetic + strain + frame_potential - initial + dissipated - work
-    scale = max(
+    scale, runaway = _energy_verdict(
+        kinetic,
+        strain,
+        frame_potential,
+        internal,
+        drift,
+        cluster[INITIAL_ENERGY],
+        cluster[WORK],
+        cluster[DISSIPATED],
         cluster[ENERGY_SCALE],
-        internal + strain + abs(frame_potential),
-        abs(work),
-        dissipated,
-        DRIFT_ROUND_OFF * drift,
+        tolerance,
     )
     cluster[ENERGY_SCALE] = scale
-    return not abs(residual) <= tolerance * scale
+    return runaway
+
+
+@njit(inline="always", error_model="numpy")
+def _energy_verdict(
+    kinetic: float,
+    strain: float,
+    frame_potential: float,
+    internal: float,
+    drift: float,
+    initial: float,
+    work: float,
+    dissipated: float,
+    scale: float,
+    tolerance: float,
+) -> tuple[float, bool]:
+    """The runaway guard's verdict on one cluster from its energies, J (see
+    :func:`_energy_runaway`): the new energy scale, and whether the balance's residual exceeds
+    ``tolerance`` times it (a NaN residual does).  The lanes call it per lane, so that both
+    paths keep the same bits."""
+    residual = kinetic + strain + frame_potential - initial + dissipated - work
+    # max()'s reduction as numba compiles it (each argument replaces the running value when
+    # greater), written out because the lanes' loop vectorises this form.
+    largest = scale
+    for candidate in (internal + strain + abs(frame_potential), abs(work), dissipated, DRIFT_ROUND_OFF * drift):
+        largest = candidate if candidate > largest else largest
+    return largest, not abs(residual) <= tolerance * largest
 
 
 @njit(inline="always", error_model="numpy")
@@ -996,8 +1025,8 @@ _L_RELEASED, _L_LENGTH_SUM, _L_SHORTEST, _L_PULL, _L_FROM_REST = 15, 16, 17, 18,
 _L_KICK, _L_BROKEN, _L_NON_FINITE = 22, 23, 24
 # The interval's end: the frame's tidal diagonal (3 rows), the energy books and their results.
 _L_TIDAL, _L_INITIAL, _L_SCALE, _L_KINETIC, _L_FRAME_POTENTIAL, _L_DRIFT, _L_INTERNAL = 25, 28, 29, 30, 31, 32, 33
-_L_STRAIN, _L_TOTAL_MASS, _L_MOMENTUM, _L_RUNAWAY = 34, 35, 36, 37
-_L_LANE_ROWS = 38
+_L_STRAIN, _L_TOTAL_MASS, _L_MOMENTUM, _L_CENTRE, _L_RUNAWAY = 34, 35, 36, 37, 38
+_L_LANE_ROWS = 39
 
 
 @njit(inline="always", error_model="numpy")
@@ -1352,7 +1381,7 @@ def _energy_runaway_in_lanes(
     n, m = node_lanes.shape[0], cable_lanes.shape[0]
     kinetic, frame_potential = lane[_L_KINETIC], lane[_L_FRAME_POTENTIAL]
     drift, internal, strain = lane[_L_DRIFT], lane[_L_INTERNAL], lane[_L_STRAIN]
-    total_mass, momentum = lane[_L_TOTAL_MASS], lane[_L_MOMENTUM]
+    total_mass, momentum, centre = lane[_L_TOTAL_MASS], lane[_L_MOMENTUM], lane[_L_CENTRE]
     kinetic[:lanes] = 0.0
     frame_potential[:lanes] = 0.0
     drift[:lanes] = 0.0
@@ -1378,13 +1407,12 @@ def _energy_runaway_in_lanes(
                 total_mass[k] += mass_row[k]
                 momentum[k] += mass_row[k] * velocity[k]
         for k in range(lanes):
-            centre = momentum[k] / total_mass[k]
-            drift[k] += 0.5 * total_mass[k] * centre * centre
-            momentum[k] = centre  # the centre's velocity, for the loop below
+            centre[k] = momentum[k] / total_mass[k]
+            drift[k] += 0.5 * total_mass[k] * centre[k] * centre[k]
         for i in range(n):
             mass_row, velocity = node_lanes[i, _L_MASS], end_velocity[i, d]
             for k in range(lanes):
-                relative = velocity[k] - momentum[k]
+                relative = velocity[k] - centre[k]
                 internal[k] += 0.5 * mass_row[k] * relative * relative
     for c in range(m):
         intact, tension, stiffness = (
@@ -1398,18 +1426,19 @@ def _energy_runaway_in_lanes(
     initial, scale, runaway = lane[_L_INITIAL], lane[_L_SCALE], lane[_L_RUNAWAY]
     work, dissipated = lane[_L_WORK], lane[_L_DISSIPATED]
     for k in range(lanes):
-        residual = kinetic[k] + strain[k] + frame_potential[k] - initial[k] + dissipated[k] - work[k]
-        # max()'s reduction as numba compiles it: each argument replaces the running value when greater.
-        largest = scale[k]
-        for candidate in (
-            internal[k] + strain[k] + abs(frame_potential[k]),
-            abs(work[k]),
+        scale[k], runs_away = _energy_verdict(
+            kinetic[k],
+            strain[k],
+            frame_potential[k],
+            internal[k],
+            drift[k],
+            initial[k],
+            work[k],
             dissipated[k],
-            DRIFT_ROUND_OFF * drift[k],
-        ):
-            largest = candidate if candidate > largest else largest
-        scale[k] = largest
-        runaway[k] = 0.0 if abs(residual) <= tolerance * largest else 1.0
+            scale[k],
+            tolerance,
+        )
+        runaway[k] = 1.0 if runs_away else 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
